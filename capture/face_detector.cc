@@ -1,0 +1,149 @@
+#include "capture/face_detector.h"
+
+#include <dlib/image_processing/frontal_face_detector.h>
+#include <dlib/opencv.h>
+
+#include <algorithm>
+#include <cmath>
+#include <opencv2/dnn.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/fs.h"
+
+namespace headforge {
+
+Status FaceDetectorOptions::Check() const {
+  if (detector != "ultraface" && detector != "ultraface-640" && detector != "dlib-hog")
+    return Status::InvalidArgument("detector must be ultraface, ultraface-640 or dlib-hog, not '" +
+                                   detector + "'");
+  if (!(score_threshold > 0.0 && score_threshold < 1.0))
+    return Status::InvalidArgument("detector threshold must be in (0, 1)");
+  return Status::Ok();
+}
+
+std::string FaceDetectorOptions::UltraFaceModelPath() const {
+  if (detector == "ultraface") return (fs::path(ultraface_dir) / "version-RFB-320.onnx").string();
+  if (detector == "ultraface-640") return (fs::path(ultraface_dir) / "version-RFB-640.onnx").string();
+  return "";
+}
+
+namespace {
+
+class HogDetector {
+ public:
+  HogDetector() : detector_(dlib::get_frontal_face_detector()) {}
+
+  std::vector<FaceDetection> Detect(const cv::Mat& bgr) {
+    // HOG needs faces of at least ~80 px: upsample small images once.
+    cv::Mat image = bgr;
+    double scale = 1.0;
+    if (std::max(bgr.cols, bgr.rows) < 640) {
+      scale = 2.0;
+      cv::resize(bgr, image, cv::Size(), scale, scale, cv::INTER_LINEAR);
+    }
+    dlib::cv_image<dlib::bgr_pixel> view(image);
+    std::vector<dlib::rect_detection> found;
+    detector_(view, found, 0.0);
+    std::vector<FaceDetection> faces;
+    for (const auto& d : found) {
+      FaceDetection face;
+      face.box = cv::Rect2f(d.rect.left() / scale, d.rect.top() / scale, d.rect.width() / scale,
+                            d.rect.height() / scale);
+      face.score = static_cast<float>(1.0 / (1.0 + std::exp(-d.detection_confidence)));
+      face.from_fallback = true;
+      faces.push_back(face);
+    }
+    return faces;
+  }
+
+ private:
+  dlib::frontal_face_detector detector_;
+};
+
+// UltraFace outputs boxes already decoded to corner form, normalised to [0, 1],
+// and softmax scores [background, face] for every prior.
+class UltraFaceDetector : public FaceDetector {
+ public:
+  UltraFaceDetector(cv::dnn::Net net, cv::Size input, const FaceDetectorOptions& options)
+      : net_(std::move(net)), input_(input), options_(options) {}
+
+  std::vector<FaceDetection> Detect(const cv::Mat& bgr) override {
+    cv::Mat blob = cv::dnn::blobFromImage(bgr, 1.0 / 128.0, input_, cv::Scalar(127, 127, 127),
+                                          /*swapRB=*/true, /*crop=*/false);
+    net_.setInput(blob);
+    std::vector<cv::Mat> outputs;
+    net_.forward(outputs, std::vector<cv::String>{"scores", "boxes"});
+    const cv::Mat scores = outputs[0].reshape(1, outputs[0].total() / 2);
+    const cv::Mat boxes = outputs[1].reshape(1, outputs[1].total() / 4);
+    std::vector<cv::Rect> rects;
+    std::vector<float> confidences;
+    for (int i = 0; i < scores.rows; ++i) {
+      const float p = scores.at<float>(i, 1);
+      if (p < options_.score_threshold) continue;
+      const float x0 = boxes.at<float>(i, 0) * bgr.cols, y0 = boxes.at<float>(i, 1) * bgr.rows;
+      const float x1 = boxes.at<float>(i, 2) * bgr.cols, y1 = boxes.at<float>(i, 3) * bgr.rows;
+      rects.emplace_back(cv::Point(cvRound(x0), cvRound(y0)), cv::Point(cvRound(x1), cvRound(y1)));
+      confidences.push_back(p);
+    }
+    std::vector<int> keep;
+    cv::dnn::NMSBoxes(rects, confidences, static_cast<float>(options_.score_threshold), 0.3f, keep);
+    std::vector<FaceDetection> faces;
+    for (int k : keep) {
+      FaceDetection face;
+      face.box = cv::Rect2f(rects[k]);
+      face.score = confidences[k];
+      faces.push_back(face);
+    }
+    std::sort(faces.begin(), faces.end(),
+              [](const FaceDetection& a, const FaceDetection& b) { return a.score > b.score; });
+    if (faces.empty() && options_.hog_fallback) faces = hog_.Detect(bgr);
+    return faces;
+  }
+
+ private:
+  cv::dnn::Net net_;
+  cv::Size input_;
+  FaceDetectorOptions options_;
+  HogDetector hog_;
+};
+
+class HogOnlyDetector : public FaceDetector {
+ public:
+  std::vector<FaceDetection> Detect(const cv::Mat& bgr) override {
+    auto faces = hog_.Detect(bgr);
+    for (auto& f : faces) f.from_fallback = false;
+    std::sort(faces.begin(), faces.end(),
+              [](const FaceDetection& a, const FaceDetection& b) { return a.score > b.score; });
+    return faces;
+  }
+
+ private:
+  HogDetector hog_;
+};
+
+}  // namespace
+
+Status FaceDetector::Create(const FaceDetectorOptions& options,
+                            std::unique_ptr<FaceDetector>* detector) {
+  HF_RETURN_IF_ERROR(options.Check());
+  if (options.detector == "dlib-hog") {
+    *detector = std::make_unique<HogOnlyDetector>();
+    return Status::Ok();
+  }
+  const std::string path = options.UltraFaceModelPath();
+  HF_RETURN_IF_ERROR(CheckReadableFile(path, "UltraFace model"));
+  cv::dnn::Net net;
+  try {
+    net = cv::dnn::readNetFromONNX(path);
+  } catch (const cv::Exception& e) {
+    return Status::DataError("cannot load the UltraFace model " + path + ": " + e.what());
+  }
+  if (net.empty()) return Status::DataError("cannot load the UltraFace model " + path);
+  net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
+  net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
+  const cv::Size input = options.detector == "ultraface" ? cv::Size(320, 240) : cv::Size(640, 480);
+  *detector = std::make_unique<UltraFaceDetector>(std::move(net), input, options);
+  return Status::Ok();
+}
+
+}  // namespace headforge

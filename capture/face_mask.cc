@@ -1,0 +1,84 @@
+#include "capture/face_mask.h"
+
+#include <algorithm>
+#include <opencv2/imgproc.hpp>
+#include <vector>
+
+namespace headforge {
+
+cv::Mat HeadMaskSeeds(cv::Size size, const Landmarks68& lm) {
+  cv::Mat seeds(size, CV_8U, cv::Scalar(cv::GC_BGD));
+  const cv::Rect2f face = LandmarkBounds(lm);
+  const float w = face.width, h = face.height;
+  const cv::Point2f centre(face.x + 0.5f * w, face.y + 0.5f * h);
+  // Head region: wider than the jaw (ears, hair), up to the top of the skull,
+  // down past the chin for the neck.
+  const cv::Point head_centre(cvRound(centre.x), cvRound(centre.y - 0.15f * h));
+  cv::ellipse(seeds, head_centre, cv::Size(cvRound(0.95f * w), cvRound(1.15f * h)), 0, 0, 360,
+              cv::Scalar(cv::GC_PR_BGD), cv::FILLED);
+  cv::ellipse(seeds, head_centre, cv::Size(cvRound(0.62f * w), cvRound(0.85f * h)), 0, 0, 360,
+              cv::Scalar(cv::GC_PR_FGD), cv::FILLED);
+  cv::rectangle(seeds, cv::Point(cvRound(centre.x - 0.3f * w), cvRound(face.y + 0.8f * h)),
+                cv::Point(cvRound(centre.x + 0.3f * w), cvRound(face.y + 1.35f * h)),
+                cv::Scalar(cv::GC_PR_FGD), cv::FILLED);
+  // Sure foreground: the landmark hull, shrunk towards its centre.
+  std::vector<cv::Point> hull_points;
+  for (const auto& p : lm) hull_points.emplace_back(cvRound(centre.x + 0.85f * (p.x - centre.x)),
+                                                     cvRound(centre.y + 0.85f * (p.y - centre.y)));
+  std::vector<cv::Point> hull;
+  cv::convexHull(hull_points, hull);
+  cv::fillConvexPoly(seeds, hull, cv::Scalar(cv::GC_FGD));
+  return seeds;
+}
+
+cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks68& landmarks, const HeadMaskOptions& options,
+                 uint64_t seed) {
+  const double scale =
+      std::min(1.0, static_cast<double>(options.work_size) / std::max(bgr.cols, bgr.rows));
+  cv::Mat small;
+  cv::resize(bgr, small, cv::Size(), scale, scale, cv::INTER_AREA);
+  Landmarks68 scaled = landmarks;
+  for (auto& p : scaled) p *= static_cast<float>(scale);
+  cv::Mat labels = HeadMaskSeeds(small.size(), scaled);
+
+  const bool has_background = cv::countNonZero(labels == cv::GC_BGD) > 0 ||
+                              cv::countNonZero(labels == cv::GC_PR_BGD) > 0;
+  const bool has_foreground = cv::countNonZero(labels == cv::GC_FGD) > 0;
+  if (has_background && has_foreground) {
+    cv::theRNG().state = seed ? seed : 0x5eedULL;  // GrabCut's k-means draws from it
+    cv::Mat bgd_model, fgd_model;
+    cv::grabCut(small, labels, cv::Rect(), bgd_model, fgd_model, options.iterations,
+                cv::GC_INIT_WITH_MASK);
+  }
+  cv::Mat foreground = (labels == cv::GC_FGD) | (labels == cv::GC_PR_FGD);
+
+  // Keep the component that holds the face, then fill its holes (eyes, mouth).
+  cv::Mat components;
+  const int count = cv::connectedComponents(foreground, components, 8, CV_32S);
+  if (count > 2) {
+    const cv::Rect2f face = LandmarkBounds(scaled);
+    const cv::Point centre(std::clamp(cvRound(face.x + 0.5f * face.width), 0, small.cols - 1),
+                           std::clamp(cvRound(face.y + 0.5f * face.height), 0, small.rows - 1));
+    const int keep = components.at<int>(centre);
+    if (keep > 0) foreground = components == keep;
+  }
+  // Background pixels reachable from the border are true background; the rest
+  // of the background (holes inside the head) becomes foreground.
+  const cv::Mat inverted = ~foreground;
+  cv::Mat reach(foreground.rows + 2, foreground.cols + 2, CV_8U, cv::Scalar(0));
+  inverted.copyTo(reach(cv::Rect(1, 1, foreground.cols, foreground.rows)));
+  reach.row(0).setTo(255);
+  reach.row(reach.rows - 1).setTo(255);
+  reach.col(0).setTo(255);
+  reach.col(reach.cols - 1).setTo(255);
+  cv::floodFill(reach, cv::Point(0, 0), cv::Scalar(128));
+  const cv::Mat outside = reach(cv::Rect(1, 1, foreground.cols, foreground.rows)) == 128;
+  const cv::Mat filled = ~outside;
+
+  cv::Mat mask;
+  cv::resize(filled, mask, bgr.size(), 0, 0, cv::INTER_LINEAR);
+  cv::threshold(mask, mask, 127, 255, cv::THRESH_BINARY);
+  return mask;
+}
+
+}  // namespace headforge

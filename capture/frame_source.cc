@@ -1,0 +1,142 @@
+#include "capture/frame_source.h"
+
+#include <algorithm>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "core/image_io.h"
+
+namespace headforge {
+
+const std::vector<std::string>& ImageExtensions() {
+  static const std::vector<std::string> extensions = {".png", ".jpg", ".jpeg", ".bmp", ".tif",
+                                                      ".tiff", ".webp"};
+  return extensions;
+}
+
+namespace {
+
+cv::Mat ToBgr8(const cv::Mat& image) {
+  cv::Mat out = image;
+  if (out.depth() != CV_8U) out.convertTo(out, CV_8U, out.depth() == CV_16U ? 1.0 / 257.0 : 1.0);
+  if (out.channels() == 1) cv::cvtColor(out, out, cv::COLOR_GRAY2BGR);
+  if (out.channels() == 4) cv::cvtColor(out, out, cv::COLOR_BGRA2BGR);
+  return out;
+}
+
+class VideoFrameSource : public FrameSource {
+ public:
+  Status OpenVideo(const fs::path& path) {
+    path_ = path.string();
+    if (!capture_.open(path_, cv::CAP_FFMPEG))
+      return Status::DataError("cannot decode " + path_ +
+                               ": ffmpeg does not recognise it as a video (corrupt, truncated or an "
+                               "unsupported format? try re-encoding it with ffmpeg)");
+    fps_ = capture_.get(cv::CAP_PROP_FPS);
+    if (!(fps_ > 0.0 && fps_ < 1000.0)) fps_ = 25.0;
+    frame_count_hint_ = std::max<int64_t>(0, static_cast<int64_t>(capture_.get(cv::CAP_PROP_FRAME_COUNT)));
+    // Decode the first frame now so a file without decodable frames fails early.
+    if (!capture_.read(first_) || first_.empty())
+      return Status::DataError(path_ + " holds no decodable video frame (corrupt or empty file?)");
+    first_ = ToBgr8(first_);
+    size_ = first_.size();
+    return Status::Ok();
+  }
+
+  Status Read(cv::Mat* bgr, bool* end) override {
+    *end = false;
+    if (!first_.empty()) {
+      *bgr = first_;
+      first_.release();
+      return Status::Ok();
+    }
+    cv::Mat frame;
+    if (!capture_.read(frame) || frame.empty()) {
+      *end = true;
+      return Status::Ok();
+    }
+    *bgr = ToBgr8(frame);
+    if (bgr->size() != size_)
+      return Status::DataError(path_ + ": frame size changed mid-stream");
+    return Status::Ok();
+  }
+
+  bool Skip() override {
+    if (!first_.empty()) {
+      first_.release();
+      return true;
+    }
+    return capture_.grab();
+  }
+
+ private:
+  cv::VideoCapture capture_;
+  cv::Mat first_;  // decoded by OpenVideo, handed out by the first Read
+};
+
+class FolderFrameSource : public FrameSource {
+ public:
+  Status OpenFolder(const fs::path& path, double fps) {
+    path_ = path.string();
+    is_folder_ = true;
+    fps_ = fps;
+    files_ = ListFiles(path, ImageExtensions());
+    if (files_.empty())
+      return Status::DataError("folder " + path_ + " holds no images (.png, .jpg, ...)");
+    cv::Mat first;
+    HF_RETURN_IF_ERROR(ReadImage(files_[0], &first, cv::IMREAD_UNCHANGED));
+    size_ = first.size();
+    frame_count_hint_ = static_cast<int64_t>(files_.size());
+    return Status::Ok();
+  }
+
+  Status Read(cv::Mat* bgr, bool* end) override {
+    *end = next_ >= files_.size();
+    if (*end) return Status::Ok();
+    cv::Mat image;
+    HF_RETURN_IF_ERROR(ReadImage(files_[next_++], &image, cv::IMREAD_UNCHANGED));
+    *bgr = ToBgr8(image);
+    if (bgr->size() != size_)
+      return Status::DataError(files_[next_ - 1].string() + " differs in size from the folder's first image");
+    return Status::Ok();
+  }
+
+  bool Skip() override {
+    if (next_ >= files_.size()) return false;
+    ++next_;
+    return true;
+  }
+
+  std::string FrameName(int64_t index) const override {
+    return index >= 0 && static_cast<size_t>(index) < files_.size() ? files_[index].filename().string()
+                                                                     : "";
+  }
+
+ private:
+  std::vector<fs::path> files_;
+  size_t next_ = 0;
+};
+
+}  // namespace
+
+Status FrameSource::Open(const fs::path& path, double folder_fps,
+                         std::unique_ptr<FrameSource>* source) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) return Status::NotFound("input not found: " + path.string());
+  if (fs::is_directory(path, ec)) {
+    auto folder = std::make_unique<FolderFrameSource>();
+    HF_RETURN_IF_ERROR(folder->OpenFolder(path, folder_fps));
+    *source = std::move(folder);
+    return Status::Ok();
+  }
+  HF_RETURN_IF_ERROR(CheckReadableFile(path, "video"));
+  if (fs::file_size(path, ec) == 0) return Status::DataError("video file " + path.string() + " is empty");
+  auto video = std::make_unique<VideoFrameSource>();
+  HF_RETURN_IF_ERROR(video->OpenVideo(path));
+  *source = std::move(video);
+  return Status::Ok();
+}
+
+}  // namespace headforge

@@ -1,0 +1,53 @@
+// Frames of one camera, from a video file (decoded by OpenCV's ffmpeg backend)
+// or a folder of images (sorted by name), read in order.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/fs.h"
+#include "core/status.h"
+
+namespace headforge {
+
+class FrameSource {
+ public:
+  virtual ~FrameSource() = default;
+
+  // Opens `path` and decodes its first frame to prove it is usable. A missing
+  // or unreadable path, a file that is not a video, a video with no decodable
+  // frame or a folder without images each give a Status naming the path.
+  // `folder_fps` is the frame rate assumed for image folders.
+  static Status Open(const fs::path& path, double folder_fps, std::unique_ptr<FrameSource>* source);
+
+  // Reads the next frame (BGR, 8-bit). `*end` becomes true past the last frame.
+  virtual Status Read(cv::Mat* bgr, bool* end) = 0;
+  // Skips the next frame without converting it; false past the last frame.
+  virtual bool Skip() = 0;
+
+  const std::string& path() const { return path_; }
+  double fps() const { return fps_; }
+  cv::Size size() const { return size_; }
+  bool is_folder() const { return is_folder_; }
+  // Number of frames as the container states it (exact for folders; for videos
+  // an estimate, 0 when unknown). Used for progress only.
+  int64_t frame_count_hint() const { return frame_count_hint_; }
+  // Source file of frame `index` for image folders ("" for videos).
+  virtual std::string FrameName(int64_t index) const { return ""; }
+
+ protected:
+  std::string path_;
+  double fps_ = 0.0;
+  cv::Size size_;
+  bool is_folder_ = false;
+  int64_t frame_count_hint_ = 0;
+};
+
+// Image extensions an image folder may hold.
+const std::vector<std::string>& ImageExtensions();
+
+}  // namespace headforge

@@ -1,0 +1,657 @@
+#include "capture/ingest.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <set>
+
+#include "capture/crop.h"
+#include "capture/frame_source.h"
+#include "capture/landmarks.h"
+#include "capture/sharpness.h"
+#include "core/hash.h"
+#include "core/image_io.h"
+#include "core/json_io.h"
+#include "core/log.h"
+#include "core/parallel.h"
+#include "core/paths.h"
+
+namespace headforge {
+
+// Bumped when the stage's outputs change for the same inputs and options.
+constexpr const char* kIngestVersion = "ingest-1";
+
+Status IngestOptions::Check() const {
+  if (inputs.empty())
+    return Status::InvalidArgument("no input: give one video file or image folder per camera with --video");
+  if (fps < 0.0) return Status::InvalidArgument("--fps must be >= 0 (0 keeps the source rate)");
+  if (max_frames < 0) return Status::InvalidArgument("--max-frames must be >= 0 (0: no bound)");
+  if (start < 0.0) return Status::InvalidArgument("--start must be >= 0 seconds");
+  if (end < 0.0) return Status::InvalidArgument("--end must be >= 0 seconds (0: to the end)");
+  if (end > 0.0 && end <= start)
+    return Status::InvalidArgument("empty time range: --end (" + std::to_string(end) +
+                                   " s) must be after --start (" + std::to_string(start) + " s)");
+  if (resolution <= 0)
+    return Status::InvalidArgument("--resolution must be a positive number of pixels, not " +
+                                   std::to_string(resolution));
+  if (resolution > 8192) return Status::InvalidArgument("--resolution above 8192 is not supported");
+  if (crop != "sequence" && crop != "frame" && crop != "none")
+    return Status::InvalidArgument("--crop must be sequence, frame or none, not '" + crop + "'");
+  if (!(crop_scale >= 1.0 && crop_scale <= 10.0))
+    return Status::InvalidArgument("--crop-scale must be in [1, 10]");
+  if (blur_ratio < 0.0 || blur_ratio >= 1.0)
+    return Status::InvalidArgument("--blur-ratio must be in [0, 1) (0 keeps every frame)");
+  if (!offsets.empty() && offsets.size() != inputs.size())
+    return Status::InvalidArgument("--offsets needs one value per input (" +
+                                   std::to_string(inputs.size()) + "), got " +
+                                   std::to_string(offsets.size()));
+  if (!(folder_fps > 0.0)) return Status::InvalidArgument("--folder-fps must be positive");
+  if (mask.work_size < 32) return Status::InvalidArgument("--mask-size must be at least 32");
+  if (mask.iterations < 1) return Status::InvalidArgument("--mask-iterations must be at least 1");
+  if (min_face_fraction < 0.0 || min_face_fraction > 1.0)
+    return Status::InvalidArgument("--min-face-fraction must be in [0, 1]");
+  return detector.Check();
+}
+
+void AddIngestOptions(OptionSet* o, IngestOptions* in) {
+  o->Add("ingest.video", &in->inputs, "Video file or image folder, one per camera.", "video");
+  o->Add("ingest.fps", &in->fps, "Frames per second to sample; 0 keeps every source frame.", "fps");
+  o->Add("ingest.max_frames", &in->max_frames, "Most frames to sample; 0 for no bound.",
+         "max-frames");
+  o->Add("ingest.start", &in->start, "Start of the time range to sample, seconds.", "start");
+  o->Add("ingest.end", &in->end, "End of the time range, seconds; 0 means the end of the video.",
+         "end");
+  o->Add("ingest.resolution", &in->resolution, "Side of the square output frames, pixels.",
+         "resolution");
+  o->Add("ingest.crop", &in->crop,
+         "sequence: one crop per camera holding the head in every frame (fixed intrinsics); "
+         "frame: a crop following the head; none: the whole frame.",
+         "crop");
+  o->Add("ingest.crop_scale", &in->crop_scale, "Crop side as a multiple of the face size.",
+         "crop-scale");
+  o->Add("ingest.blur_ratio", &in->blur_ratio,
+         "Drop frames whose sharpness (Laplacian variance) is below this fraction of the "
+         "camera's median; 0 keeps all.",
+         "blur-ratio");
+  o->Add("ingest.detector", &in->detector.detector,
+         "Face detector: ultraface, ultraface-640 (small faces) or dlib-hog.", "detector");
+  o->Add("ingest.detector_threshold", &in->detector.score_threshold,
+         "Minimum UltraFace face probability.", "detector-threshold");
+  o->Add("ingest.hog_fallback", &in->detector.hog_fallback,
+         "Try dlib's HOG detector on frames where UltraFace finds no face.", "hog-fallback");
+  o->Add("ingest.ultraface_dir", &in->detector.ultraface_dir,
+         "Folder with the UltraFace ONNX models (default: DATA/models/ultraface).", "ultraface-dir",
+         OptionSet::Effect::kRuntime);
+  o->Add("ingest.landmark_model", &in->landmark_model,
+         "dlib 68-point landmark model (Debian package libdlib-data; trained on iBUG 300-W, "
+         "non-commercial).",
+         "landmark-model", OptionSet::Effect::kRuntime);
+  o->Add("ingest.masks", &in->masks,
+         "Folder of your own masks, one per source frame in name order (a sub-folder per camera "
+         "name, cam0, cam1..., for several cameras); replaces the automatic head mask.",
+         "masks", OptionSet::Effect::kRuntime);
+  o->Add("ingest.mask_size", &in->mask.work_size, "Working resolution of the automatic mask.",
+         "mask-size");
+  o->Add("ingest.mask_iterations", &in->mask.iterations, "GrabCut iterations of the automatic mask.",
+         "mask-iterations");
+  o->Add("ingest.offsets", &in->offsets,
+         "Per-camera offsets in source frames for synchronisation (comma-separated, one per "
+         "input; default all 0).",
+         "offsets");
+  o->Add("ingest.folder_fps", &in->folder_fps, "Frame rate assumed for image folders.",
+         "folder-fps");
+  o->Add("ingest.min_face_fraction", &in->min_face_fraction,
+         "Warn when the face is found in fewer than this fraction of a camera's frames.",
+         "min-face-fraction");
+  o->Add("ingest.seed", &in->seed, "Seed of the automatic mask's random initialisation.", "seed");
+}
+
+void ResolveIngestDefaults(const std::string& data_dir, IngestOptions* in) {
+  if (in->detector.ultraface_dir.empty())
+    in->detector.ultraface_dir = (fs::path(data_dir) / "models" / "ultraface").string();
+  if (in->landmark_model.empty()) in->landmark_model = DefaultLandmarkModel();
+}
+
+Status IngestFingerprint(const IngestOptions& options, const std::string& options_ini,
+                         std::string* fingerprint) {
+  Hasher h;
+  h.Add(std::string(kIngestVersion)).Add(options_ini);
+  for (const auto& input : options.inputs) {
+    std::error_code ec;
+    if (fs::is_directory(input, ec)) {
+      HF_RETURN_IF_ERROR(h.AddTreeContents(input));
+    } else {
+      HF_RETURN_IF_ERROR(h.AddFileContents(input).WithContext("input"));
+    }
+  }
+  if (!options.masks.empty()) HF_RETURN_IF_ERROR(h.AddTreeContents(options.masks));
+  // Model files by stamp: hashing 100 MB on every run is not worth it.
+  if (fs::exists(options.landmark_model)) HF_RETURN_IF_ERROR(h.AddFileStamp(options.landmark_model));
+  const std::string detector_model = options.detector.UltraFaceModelPath();
+  if (!detector_model.empty() && fs::exists(detector_model))
+    HF_RETURN_IF_ERROR(h.AddFileStamp(detector_model));
+  *fingerprint = h.Hex();
+  return Status::Ok();
+}
+
+std::string IngestSummary::OneLine() const {
+  char text[256];
+  std::snprintf(text, sizeof(text),
+                "%d of %d frames kept (%d blurred, %d missing in a camera), %d camera(s), "
+                "landmarks on %d, face lost on %d",
+                kept, sampled, dropped_blur, dropped_missing, cameras, with_landmarks, face_lost);
+  return text;
+}
+
+namespace {
+
+struct FaceCandidate {
+  FaceDetection detection;
+  Landmarks68 landmarks;
+  bool plausible = false;
+};
+
+struct FrameAnalysis {
+  int64_t source_index = -1;
+  double sharpness = 0.0;
+  std::vector<FaceCandidate> faces;
+};
+
+// Per camera: source, offset, and the analysis of each sampled frame by sample index.
+struct Camera {
+  std::string name;
+  std::unique_ptr<FrameSource> source;
+  int offset = 0;
+  std::map<int, FrameAnalysis> analysis;  // sample index k -> analysis
+  double median_sharpness = 0.0;
+};
+
+// The source frame index of sample k in the reference (first) camera.
+class SamplePlan {
+ public:
+  SamplePlan(const IngestOptions& options, double source_fps) {
+    step_ = options.fps > 0.0 ? std::max(1.0, source_fps / options.fps) : 1.0;
+    first_ = options.start * source_fps;
+    last_ = options.end > 0.0 ? options.end * source_fps : 1e300;
+    max_frames_ = options.max_frames > 0 ? options.max_frames : (1 << 30);
+  }
+  // -1 when sample k lies outside the range.
+  int64_t SourceIndex(int k) const {
+    if (k >= max_frames_) return -1;
+    const double index = std::ceil(first_ + k * step_ - 1e-9);
+    if (index >= last_) return -1;
+    return static_cast<int64_t>(index);
+  }
+  int max_frames() const { return max_frames_; }
+
+ private:
+  double step_, first_, last_;
+  int max_frames_;
+};
+
+std::string CameraName(int index) { return "cam" + std::to_string(index); }
+
+std::string FrameFile(int index) {
+  char name[32];
+  std::snprintf(name, sizeof(name), "%06d.png", index);
+  return name;
+}
+
+// Workers' own detectors; the landmark predictor is shared (thread-safe).
+struct Analysers {
+  std::vector<std::unique_ptr<FaceDetector>> detectors;
+  std::unique_ptr<LandmarkPredictor> landmarks;
+};
+
+FrameAnalysis Analyse(const cv::Mat& frame, FaceDetector* detector,
+                      const LandmarkPredictor& predictor) {
+  constexpr int kMaxCandidates = 3;
+  FrameAnalysis a;
+  a.sharpness = LaplacianVariance(frame);
+  const auto detections = detector->Detect(frame);
+  for (size_t i = 0; i < detections.size() && static_cast<int>(i) < kMaxCandidates; ++i) {
+    FaceCandidate c;
+    c.detection = detections[i];
+    c.landmarks = predictor.Predict(frame, detections[i].box);
+    c.plausible = PlausibleFaceLayout(c.landmarks);
+    a.faces.push_back(c);
+  }
+  return a;
+}
+
+// Decodes camera `cam` and analyses every frame the plan samples.
+Status AnalyseCamera(Camera* cam, const SamplePlan& plan, int threads, Analysers* analysers,
+                     Progress* progress) {
+  std::map<int64_t, int> wanted;  // own source frame -> sample index, built lazily
+  int next_k = 0;
+  auto extend = [&](int64_t up_to) {
+    while (next_k < plan.max_frames()) {
+      const int64_t s = plan.SourceIndex(next_k);
+      if (s < 0) {
+        next_k = plan.max_frames();
+        break;
+      }
+      const int64_t own = s + cam->offset;
+      if (own > up_to) break;
+      if (own >= 0) wanted[own] = next_k;
+      ++next_k;
+    }
+  };
+
+  constexpr int kBatch = 16;
+  std::vector<std::pair<int, cv::Mat>> batch;  // (k, frame)
+  std::vector<std::pair<int64_t, int>> batch_sources;
+  auto flush = [&]() {
+    std::vector<FrameAnalysis> results(batch.size());
+    ParallelFor(static_cast<int>(batch.size()), threads, [&](int i, int worker) {
+      results[i] = Analyse(batch[i].second, analysers->detectors[worker].get(), *analysers->landmarks);
+    });
+    for (size_t i = 0; i < batch.size(); ++i) {
+      results[i].source_index = batch_sources[i].first;
+      cam->analysis[batch[i].first] = std::move(results[i]);
+    }
+    progress->Advance(static_cast<int64_t>(batch.size()));
+    batch.clear();
+    batch_sources.clear();
+  };
+
+  for (int64_t j = 0;; ++j) {
+    extend(j);
+    const auto it = wanted.find(j);
+    if (it == wanted.end()) {
+      if (next_k >= plan.max_frames() && (wanted.empty() || j > wanted.rbegin()->first)) break;
+      if (!cam->source->Skip()) break;
+      continue;
+    }
+    cv::Mat frame;
+    bool end = false;
+    HF_RETURN_IF_ERROR(cam->source->Read(&frame, &end));
+    if (end) break;
+    batch.emplace_back(it->second, frame);
+    batch_sources.emplace_back(j, it->second);
+    if (static_cast<int>(batch.size()) >= kBatch) flush();
+  }
+  if (!batch.empty()) flush();
+  return Status::Ok();
+}
+
+float Iou(const cv::Rect2f& a, const cv::Rect2f& b) {
+  const float inter = (a & b).area();
+  const float uni = a.area() + b.area() - inter;
+  return uni > 0 ? inter / uni : 0.0f;
+}
+
+// Picks one face per frame, following the previous frame's face when several
+// are visible; nullptr when none is usable.
+std::vector<const FaceCandidate*> SelectFaces(const std::vector<const FrameAnalysis*>& frames) {
+  std::vector<const FaceCandidate*> chosen(frames.size(), nullptr);
+  const FaceCandidate* previous = nullptr;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const FaceCandidate* best = nullptr;
+    float best_score = -1.0f;
+    for (const auto& c : frames[i]->faces) {
+      if (!c.plausible) continue;
+      const cv::Rect2f box = LandmarkBounds(c.landmarks);
+      float score = c.detection.score * std::sqrt(box.area());
+      if (previous) score *= 0.1f + Iou(box, LandmarkBounds(previous->landmarks));
+      if (score > best_score) {
+        best_score = score;
+        best = &c;
+      }
+    }
+    chosen[i] = best;
+    if (best) previous = best;
+  }
+  return chosen;
+}
+
+nlohmann::json PointsJson(const Landmarks68& points) {
+  nlohmann::json array = nlohmann::json::array();
+  for (const auto& p : points)
+    array.push_back({std::round(p.x * 100.0f) / 100.0f, std::round(p.y * 100.0f) / 100.0f});
+  return array;
+}
+
+nlohmann::json CropJson(const CropWindow& c) {
+  return {{"x0", c.x0}, {"y0", c.y0}, {"width", c.width}, {"height", c.height},
+          {"scale", c.scale}, {"output", {c.output.width, c.output.height}}};
+}
+
+Status LoadUserMasks(const IngestOptions& options, const std::string& camera, int cameras,
+                     std::vector<fs::path>* files) {
+  fs::path dir = options.masks;
+  std::error_code ec;
+  if (fs::is_directory(dir / camera, ec)) {
+    dir = dir / camera;
+  } else if (cameras > 1) {
+    return Status::NotFound("--masks " + options.masks + " needs a sub-folder " + camera +
+                            " when there are several cameras");
+  }
+  if (!fs::is_directory(dir, ec)) return Status::NotFound("mask folder not found: " + dir.string());
+  *files = ListFiles(dir, ImageExtensions());
+  if (files->empty()) return Status::DataError("mask folder " + dir.string() + " holds no images");
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int threads,
+                 Progress* progress, IngestSummary* summary) {
+  HF_RETURN_IF_ERROR(options.Check());
+  threads = std::max(1, threads);
+  *summary = IngestSummary();
+
+  // Open every input first so a bad one fails before any work.
+  std::vector<Camera> cameras(options.inputs.size());
+  for (size_t c = 0; c < options.inputs.size(); ++c) {
+    cameras[c].name = CameraName(static_cast<int>(c));
+    cameras[c].offset = options.offsets.empty() ? 0 : options.offsets[c];
+    HF_RETURN_IF_ERROR(FrameSource::Open(options.inputs[c], options.folder_fps, &cameras[c].source));
+    if (c > 0 && std::abs(cameras[c].source->fps() - cameras[0].source->fps()) >
+                     0.01 * cameras[0].source->fps())
+      HF_LOG(Warning) << cameras[c].source->path() << " runs at " << cameras[c].source->fps()
+                      << " fps, the first input at " << cameras[0].source->fps()
+                      << " fps; cameras are paired by frame index (plus --offsets)";
+  }
+  const double source_fps = cameras[0].source->fps();
+  if (options.fps > source_fps * 1.001)
+    HF_LOG(Warning) << "--fps " << options.fps << " exceeds the source's " << source_fps
+                    << " fps; every source frame is used";
+  const SamplePlan plan(options, source_fps);
+
+  Analysers analysers;
+  HF_RETURN_IF_ERROR(LandmarkPredictor::Load(options.landmark_model, &analysers.landmarks));
+  for (int w = 0; w < threads; ++w) {
+    std::unique_ptr<FaceDetector> detector;
+    HF_RETURN_IF_ERROR(FaceDetector::Create(options.detector, &detector));
+    analysers.detectors.push_back(std::move(detector));
+  }
+
+  // OpenCV's own threads would compete with ours.
+  const int opencv_threads = cv::getNumThreads();
+  cv::setNumThreads(1);
+  struct RestoreThreads {
+    int n;
+    ~RestoreThreads() { cv::setNumThreads(n); }
+  } restore{opencv_threads};
+
+  // Pass 1: sharpness, faces and landmarks of every sampled frame.
+  for (auto& cam : cameras) {
+    int64_t expected = 0;
+    const int64_t hint = cam.source->frame_count_hint();
+    for (int k = 0; k < plan.max_frames(); ++k) {
+      const int64_t s = plan.SourceIndex(k);
+      if (s < 0 || (hint > 0 && s + cam.offset >= hint)) break;
+      ++expected;
+    }
+    progress->Start("ingest: analysing " + cam.name, expected);
+    HF_RETURN_IF_ERROR(AnalyseCamera(&cam, plan, threads, &analysers, progress)
+                           .WithContext(cam.source->path()));
+    progress->Finish(std::to_string(cam.analysis.size()) + " frames");
+    if (cam.analysis.empty()) {
+      const double length = hint > 0 ? hint / cam.source->fps() : 0.0;
+      return Status::DataError("the time range holds no frame of " + cam.source->path() +
+                               (length > 0 ? " (about " + std::to_string(length).substr(0, 5) +
+                                                 " s long)"
+                                           : std::string()) +
+                               "; check --start, --end and --offsets");
+    }
+  }
+
+  // Synchronise: a sample is kept when every camera has it and none is blurred.
+  std::set<int> all_samples;
+  for (const auto& cam : cameras)
+    for (const auto& [k, a] : cam.analysis) all_samples.insert(k);
+  for (auto& cam : cameras) {
+    std::vector<double> values;
+    for (const auto& [k, a] : cam.analysis) values.push_back(a.sharpness);
+    BlurredFrames(values, 0.0, &cam.median_sharpness);
+  }
+  nlohmann::json dropped = nlohmann::json::array();
+  std::vector<int> kept;
+  for (int k : all_samples) {
+    std::string reason, detail;
+    for (const auto& cam : cameras) {
+      const auto it = cam.analysis.find(k);
+      if (it == cam.analysis.end()) {
+        reason = "missing";
+        detail = cam.name + " has no frame for this sample (its video ended, or offsets)";
+        break;
+      }
+      if (options.blur_ratio > 0.0 && it->second.sharpness < options.blur_ratio * cam.median_sharpness) {
+        reason = "blur";
+        char text[160];
+        std::snprintf(text, sizeof(text), "%s sharpness %.1f < %.2f x median %.1f", cam.name.c_str(),
+                      it->second.sharpness, options.blur_ratio, cam.median_sharpness);
+        detail = text;
+        break;
+      }
+    }
+    if (reason.empty()) {
+      kept.push_back(k);
+      continue;
+    }
+    nlohmann::json sources = nlohmann::json::object();
+    for (const auto& cam : cameras) {
+      const auto it = cam.analysis.find(k);
+      if (it != cam.analysis.end()) sources[cam.name] = it->second.source_index;
+    }
+    dropped.push_back({{"sample", k}, {"source_frames", sources}, {"reason", reason}, {"detail", detail}});
+    (reason == "blur" ? summary->dropped_blur : summary->dropped_missing)++;
+  }
+  summary->sampled = static_cast<int>(all_samples.size());
+  summary->kept = static_cast<int>(kept.size());
+  summary->cameras = static_cast<int>(cameras.size());
+  if (kept.empty())
+    return Status::DataError("all " + std::to_string(all_samples.size()) +
+                             " sampled frames were dropped (" + std::to_string(summary->dropped_blur) +
+                             " blurred, " + std::to_string(summary->dropped_missing) +
+                             " missing in a camera); try --blur-ratio 0 or check --offsets");
+  HF_LOG(Info) << "ingest: " << kept.size() << " of " << all_samples.size() << " frames kept, "
+               << summary->dropped_blur << " dropped as blurred, " << summary->dropped_missing
+               << " missing in a camera";
+
+  // Faces per camera over the kept frames; lost frames borrow the nearest face for cropping.
+  struct CameraPlan {
+    std::vector<const FaceCandidate*> faces;
+    std::vector<CropWindow> crops;
+    std::vector<fs::path> user_masks;
+  };
+  std::vector<CameraPlan> plans(cameras.size());
+  for (size_t c = 0; c < cameras.size(); ++c) {
+    auto& cam = cameras[c];
+    std::vector<const FrameAnalysis*> frames;
+    for (int k : kept) frames.push_back(&cam.analysis.at(k));
+    plans[c].faces = SelectFaces(frames);
+    const int found = static_cast<int>(
+        std::count_if(plans[c].faces.begin(), plans[c].faces.end(), [](auto* f) { return f != nullptr; }));
+    if (found == 0)
+      return Status::DataError(
+          "no face found in " + cam.source->path() + " (" + std::to_string(kept.size()) +
+          " frames examined). Try: --detector dlib-hog or ultraface-640 (small faces), a lower "
+          "--detector-threshold, a video where the face is frontal and well lit, or a higher "
+          "resolution source");
+    summary->face_lost += static_cast<int>(kept.size()) - found;
+    summary->with_landmarks += found;
+    if (found < options.min_face_fraction * kept.size())
+      HF_LOG(Warning) << "face found in only " << found << " of " << kept.size() << " frames of "
+                      << cam.source->path() << "; the others are kept and marked lost";
+
+    std::vector<FaceFrame> face_frames(kept.size());
+    for (size_t i = 0; i < kept.size(); ++i) {
+      // Nearest frame with a face, earlier on ties.
+      int best = -1;
+      for (int d = 0; best < 0; ++d) {
+        if (static_cast<int>(i) - d >= 0 && plans[c].faces[i - d]) best = static_cast<int>(i) - d;
+        else if (i + d < kept.size() && plans[c].faces[i + d]) best = static_cast<int>(i + d);
+      }
+      face_frames[i] = FaceFrameOf(plans[c].faces[best]->landmarks);
+    }
+    if (options.crop == "sequence") {
+      plans[c].crops.assign(kept.size(), SequenceCrop(face_frames, options.crop_scale, options.resolution));
+    } else if (options.crop == "frame") {
+      plans[c].crops = FollowingCrops(face_frames, options.crop_scale, options.resolution);
+    } else {
+      plans[c].crops.assign(kept.size(), FullFrameCrop(cam.source->size(), options.resolution));
+    }
+    if (!options.masks.empty())
+      HF_RETURN_IF_ERROR(LoadUserMasks(options, cam.name, static_cast<int>(cameras.size()),
+                                       &plans[c].user_masks));
+  }
+
+  // Pass 2: decode again, crop, mask and write.
+  nlohmann::json landmarks_json = {{"format", "ibug68"},
+                                   {"coordinates", "pixels of frames/<camera>/<index>.png, "
+                                                   "pixel centres at integers"},
+                                   {"cameras", nlohmann::json::object()}};
+  nlohmann::json cameras_json = nlohmann::json::array();
+  for (size_t c = 0; c < cameras.size(); ++c) {
+    auto& cam = cameras[c];
+    const auto& plan_c = plans[c];
+    std::unique_ptr<FrameSource> source;
+    HF_RETURN_IF_ERROR(FrameSource::Open(options.inputs[c], options.folder_fps, &source));
+    const fs::path frame_dir = out_dir / "frames" / cam.name;
+    const fs::path mask_dir = out_dir / "masks" / cam.name;
+    HF_RETURN_IF_ERROR(EnsureDirectory(frame_dir));
+    HF_RETURN_IF_ERROR(EnsureDirectory(mask_dir));
+    std::map<int64_t, int> wanted;  // source frame -> output index
+    for (size_t i = 0; i < kept.size(); ++i) wanted[cam.analysis.at(kept[i]).source_index] = static_cast<int>(i);
+
+    progress->Start("ingest: writing " + cam.name, static_cast<int64_t>(kept.size()));
+    std::vector<std::pair<int, cv::Mat>> batch;
+    Status batch_status;
+    auto flush = [&]() {
+      std::vector<Status> statuses(batch.size());
+      ParallelFor(static_cast<int>(batch.size()), threads, [&](int b, int) {
+        const int i = batch[b].first;
+        const CropWindow& crop = plan_c.crops[i];
+        const cv::Mat frame = crop.Apply(batch[b].second, cv::INTER_LINEAR);
+        cv::Mat mask;
+        if (!plan_c.user_masks.empty()) {
+          const int64_t source_index = cam.analysis.at(kept[i]).source_index;
+          if (source_index >= static_cast<int64_t>(plan_c.user_masks.size())) {
+            statuses[b] = Status::DataError("no mask for source frame " + std::to_string(source_index) +
+                                            " of " + cam.name + " in " + options.masks);
+            return;
+          }
+          cv::Mat user;
+          statuses[b] = ReadImage(plan_c.user_masks[source_index], &user, cv::IMREAD_GRAYSCALE);
+          if (!statuses[b].ok()) return;
+          if (user.size() != batch[b].second.size()) {
+            statuses[b] = Status::DataError("mask " + plan_c.user_masks[source_index].string() +
+                                            " is not the size of its frame");
+            return;
+          }
+          mask = crop.Apply(user, cv::INTER_LINEAR) > 127;
+        } else {
+          // Lost frames borrow the nearest face, mapped into this crop.
+          const FaceCandidate* face = plan_c.faces[i];
+          for (int d = 1; !face; ++d) {
+            if (i - d >= 0 && plan_c.faces[i - d]) face = plan_c.faces[i - d];
+            else if (i + d < static_cast<int>(kept.size()) && plan_c.faces[i + d]) face = plan_c.faces[i + d];
+          }
+          Landmarks68 mapped;
+          for (int p = 0; p < 68; ++p) mapped[p] = crop.Map(face->landmarks[p]);
+          mask = HeadMask(frame, mapped, options.mask,
+                          static_cast<uint64_t>(options.seed) * 1000003ULL + i + 1);
+        }
+        statuses[b] = WriteImageAtomic(frame_dir / FrameFile(i), frame);
+        if (statuses[b].ok()) statuses[b] = WriteImageAtomic(mask_dir / FrameFile(i), mask);
+      });
+      for (const auto& st : statuses)
+        if (!st.ok() && batch_status.ok()) batch_status = st;
+      progress->Advance(static_cast<int64_t>(batch.size()));
+      batch.clear();
+    };
+    const int64_t last = wanted.rbegin()->first;
+    for (int64_t j = 0; j <= last && batch_status.ok(); ++j) {
+      const auto it = wanted.find(j);
+      if (it == wanted.end()) {
+        if (!source->Skip()) break;
+        continue;
+      }
+      cv::Mat frame;
+      bool end = false;
+      HF_RETURN_IF_ERROR(source->Read(&frame, &end));
+      if (end) break;
+      batch.emplace_back(it->second, frame);
+      if (static_cast<int>(batch.size()) >= 16) flush();
+    }
+    if (!batch.empty()) flush();
+    HF_RETURN_IF_ERROR(batch_status);
+    if (ListFiles(frame_dir).size() != kept.size())
+      return Status::DataError(cam.source->path() + " yielded fewer frames on the second read "
+                               "than on the first (damaged stream?)");
+    progress->Finish();
+
+    nlohmann::json lm_frames = nlohmann::json::array();
+    nlohmann::json cam_frames = nlohmann::json::array();
+    for (size_t i = 0; i < kept.size(); ++i) {
+      const FrameAnalysis& a = cam.analysis.at(kept[i]);
+      const FaceCandidate* face = plan_c.faces[i];
+      const CropWindow& crop = plan_c.crops[i];
+      nlohmann::json entry = {{"index", i}, {"found", face != nullptr}};
+      if (face) {
+        Landmarks68 mapped;
+        for (int p = 0; p < 68; ++p) mapped[p] = crop.Map(face->landmarks[p]);
+        const cv::Point2f tl = crop.Map(face->detection.box.tl());
+        const cv::Point2f br = crop.Map(face->detection.box.br());
+        entry["score"] = std::round(face->detection.score * 1000.0f) / 1000.0f;
+        entry["detector"] = face->detection.from_fallback ? "dlib-hog (fallback)" : options.detector.detector;
+        entry["box"] = {tl.x, tl.y, br.x - tl.x, br.y - tl.y};
+        entry["points"] = PointsJson(mapped);
+      }
+      lm_frames.push_back(entry);
+      nlohmann::json frame_json = {{"index", i},
+                                   {"source_frame", a.source_index},
+                                   {"time_s", a.source_index / cam.source->fps()},
+                                   {"sharpness", std::round(a.sharpness * 10.0) / 10.0},
+                                   {"face", face ? "found" : "lost"}};
+      if (source->is_folder()) frame_json["source_file"] = source->FrameName(a.source_index);
+      if (options.crop == "frame") frame_json["crop"] = CropJson(crop);
+      cam_frames.push_back(frame_json);
+    }
+    landmarks_json["cameras"][cam.name] = lm_frames;
+    nlohmann::json cam_json = {{"name", cam.name},
+                               {"source", AbsolutePath(cam.source->path()).string()},
+                               {"source_fps", cam.source->fps()},
+                               {"source_size", {cam.source->size().width, cam.source->size().height}},
+                               {"offset", cam.offset},
+                               {"median_sharpness", cam.median_sharpness},
+                               {"masks", options.masks.empty() ? "grabcut" : "user"},
+                               {"frames", cam_frames}};
+    if (options.crop != "frame") cam_json["crop"] = CropJson(plan_c.crops[0]);
+    cameras_json.push_back(cam_json);
+  }
+
+  nlohmann::json frames_json = nlohmann::json::array();
+  for (size_t i = 0; i < kept.size(); ++i)
+    frames_json.push_back({{"index", i},
+                           {"sample", kept[i]},
+                           {"time_s", cameras[0].analysis.at(kept[i]).source_index / source_fps}});
+  const nlohmann::json capture = {
+      {"version", 1},
+      {"crop_mode", options.crop},
+      {"crop_mapping", "u_out = (u_src + 0.5 - x0) * scale - 0.5, pixel centres at integers"},
+      {"fps", options.fps > 0.0 ? std::min(options.fps, source_fps) : source_fps},
+      {"resolution", options.resolution},
+      {"frames", frames_json},
+      {"cameras", cameras_json},
+      {"dropped", dropped},
+      {"report",
+       {{"sampled", summary->sampled},
+        {"kept", summary->kept},
+        {"dropped_blur", summary->dropped_blur},
+        {"dropped_missing", summary->dropped_missing},
+        {"face_lost", summary->face_lost},
+        {"with_landmarks", summary->with_landmarks}}}};
+  HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "landmarks.json", landmarks_json, -1));
+  HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "capture.json", capture, 1));
+  return Status::Ok();
+}
+
+}  // namespace headforge

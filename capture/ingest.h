@@ -1,0 +1,90 @@
+// The ingest stage: turns one video or image folder per camera into the
+// workspace's frames/, masks/, landmarks.json and capture.json (DESIGN.md).
+//
+// Frames are sampled in time, blurred ones dropped, the face detected and its
+// 68 landmarks predicted, each frame cropped around the head and resized, and a
+// head mask made (or the user's masks cropped alike). Several cameras are
+// synchronised by frame index, shifted by per-camera offsets.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "capture/face_detector.h"
+#include "capture/face_mask.h"
+#include "core/fs.h"
+#include "core/options.h"
+#include "core/progress.h"
+#include "core/status.h"
+
+namespace headforge {
+
+struct IngestOptions {
+  // One video file or image folder per camera.
+  std::vector<std::string> inputs;
+  // Frames per second to sample; 0 keeps every source frame.
+  double fps = 0.0;
+  // Upper bound on the number of sampled frames; 0 for no bound.
+  int max_frames = 0;
+  // Time range to sample, in seconds from the start; end 0 means to the end.
+  double start = 0.0;
+  double end = 0.0;
+  // Side of the square output frames (pixels).
+  int resolution = 512;
+  // "sequence": one square crop per camera holding the head in every frame
+  // (fixed intrinsics); "frame": a square of fixed size following the head;
+  // "none": the whole frame, longer side scaled to `resolution`.
+  std::string crop = "sequence";
+  // Side of a crop as a multiple of the face size (landmark extent).
+  double crop_scale = 2.0;
+  // A frame is dropped as blurred when its Laplacian variance is below this
+  // fraction of the camera's median; 0 keeps every frame.
+  double blur_ratio = 0.35;
+  FaceDetectorOptions detector;
+  // dlib 68-point shape predictor file.
+  std::string landmark_model;
+  // A folder of the user's own masks (one image per source frame, sorted by
+  // name; a sub-folder per camera name when there are several cameras).
+  std::string masks;
+  HeadMaskOptions mask;
+  // Per-camera offset in source frames: camera i's frame (j + offsets[i])
+  // pairs with the first camera's frame j. Empty: all zero.
+  std::vector<int> offsets;
+  // Frame rate assumed for image folders.
+  double folder_fps = 25.0;
+  // Warn when the face is found in fewer than this fraction of a camera's frames.
+  double min_face_fraction = 0.5;
+  // Seed of the mask segmentation's random initialisation.
+  int seed = 0;
+
+  Status Check() const;
+};
+
+// Binds every field to its "ingest.*" key; `data_dir` fills the model defaults.
+void AddIngestOptions(OptionSet* options, IngestOptions* ingest);
+// Applies the shared data folder to options whose defaults live there.
+void ResolveIngestDefaults(const std::string& data_dir, IngestOptions* ingest);
+
+// The fingerprint of the stage: its options (semantic INI text), the contents
+// of every input and mask, and the model files.
+Status IngestFingerprint(const IngestOptions& options, const std::string& options_ini,
+                         std::string* fingerprint);
+
+struct IngestSummary {
+  int sampled = 0;           // synchronised frames sampled
+  int kept = 0;              // frames written
+  int dropped_blur = 0;      // dropped as blurred
+  int dropped_missing = 0;   // dropped because a camera had no such frame
+  int face_lost = 0;         // kept frames (over all cameras) without a detected face
+  int with_landmarks = 0;    // kept frames (over all cameras) with landmarks
+  int cameras = 0;
+  std::string OneLine() const;
+};
+
+// Runs ingest, writing frames/, masks/, landmarks.json and capture.json under
+// `out_dir`. Expected failures (unreadable input, no face, empty range) come
+// back as a Status that names the file and suggests what to try.
+Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int threads,
+                 Progress* progress, IngestSummary* summary);
+
+}  // namespace headforge

@@ -1,0 +1,93 @@
+#include "capture/landmarks.h"
+
+#include <dlib/image_processing/shape_predictor.h>
+#include <dlib/opencv.h>
+
+#include <algorithm>
+
+#include "core/fs.h"
+
+namespace headforge {
+
+struct LandmarkPredictor::Impl {
+  dlib::shape_predictor model;
+};
+
+LandmarkPredictor::LandmarkPredictor() : impl_(std::make_unique<Impl>()) {}
+LandmarkPredictor::~LandmarkPredictor() = default;
+
+Status LandmarkPredictor::Load(const std::string& path,
+                               std::unique_ptr<LandmarkPredictor>* predictor) {
+  Status readable = CheckReadableFile(path, "landmark model");
+  if (!readable.ok())
+    return Status(readable).WithContext(
+        "the 68-point landmark model comes with Debian's libdlib-data (apt-get install "
+        "libdlib-data) or set --landmark-model");
+  std::unique_ptr<LandmarkPredictor> loaded(new LandmarkPredictor());
+  try {
+    dlib::deserialize(path) >> loaded->impl_->model;
+  } catch (const std::exception& e) {
+    return Status::DataError("cannot read the landmark model " + path +
+                             " (is it the uncompressed shape_predictor_68_face_landmarks.dat?): " +
+                             e.what());
+  }
+  if (loaded->impl_->model.num_parts() != 68)
+    return Status::DataError("landmark model " + path + " predicts " +
+                             std::to_string(loaded->impl_->model.num_parts()) +
+                             " points, expected 68");
+  *predictor = std::move(loaded);
+  return Status::Ok();
+}
+
+namespace {
+
+dlib::rectangle ToDlib(const cv::Rect2f& box) {
+  return dlib::rectangle(std::lround(box.x), std::lround(box.y), std::lround(box.x + box.width),
+                         std::lround(box.y + box.height));
+}
+
+Landmarks68 Run(const dlib::shape_predictor& model, const dlib::cv_image<dlib::bgr_pixel>& view,
+                const cv::Rect2f& box) {
+  const dlib::full_object_detection shape = model(view, ToDlib(box));
+  Landmarks68 points;
+  for (int i = 0; i < 68; ++i)
+    points[i] = cv::Point2f(static_cast<float>(shape.part(i).x()), static_cast<float>(shape.part(i).y()));
+  return points;
+}
+
+}  // namespace
+
+Landmarks68 LandmarkPredictor::Predict(const cv::Mat& bgr, const cv::Rect2f& box) const {
+  HF_CHECK(bgr.type() == CV_8UC3);
+  dlib::cv_image<dlib::bgr_pixel> view(bgr);
+  Landmarks68 points = Run(impl_->model, view, box);
+  // dlib's HOG boxes, which the model was trained on, span roughly the
+  // landmarks' width and run from just above the brows to just below the chin.
+  const cv::Rect2f bounds = LandmarkBounds(points);
+  const float side = std::max(bounds.width, bounds.height);
+  const cv::Point2f centre(bounds.x + bounds.width * 0.5f, bounds.y + bounds.height * 0.55f);
+  const cv::Rect2f refined(centre.x - side * 0.5f, centre.y - side * 0.5f, side, side);
+  return Run(impl_->model, view, refined);
+}
+
+cv::Rect2f LandmarkBounds(const Landmarks68& points) {
+  float x0 = points[0].x, x1 = x0, y0 = points[0].y, y1 = y0;
+  for (const auto& p : points) {
+    x0 = std::min(x0, p.x);
+    x1 = std::max(x1, p.x);
+    y0 = std::min(y0, p.y);
+    y1 = std::max(y1, p.y);
+  }
+  return cv::Rect2f(x0, y0, x1 - x0, y1 - y0);
+}
+
+bool PlausibleFaceLayout(const Landmarks68& p) {
+  using namespace ibug;
+  const float eyes_y = 0.25f * (p[kRightEyeOuter].y + p[kRightEyeInner].y + p[kLeftEyeInner].y +
+                                p[kLeftEyeOuter].y);
+  const float mouth_y = 0.5f * (p[kMouthRight].y + p[kMouthLeft].y);
+  return eyes_y < p[kNoseTip].y && p[kNoseTip].y < mouth_y && mouth_y < p[kChin].y &&
+         p[kRightEyeOuter].x < p[kLeftEyeOuter].x && p[kMouthRight].x < p[kMouthLeft].x;
+}
+
+}  // namespace headforge

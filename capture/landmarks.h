@@ -1,0 +1,51 @@
+// The 68 iBUG facial landmarks, predicted by dlib's regression-tree shape
+// predictor (Kazemi & Sullivan 2014) from Debian's libdlib-data. That model was
+// trained on iBUG 300-W, whose licence excludes commercial use.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "core/status.h"
+
+namespace headforge {
+
+using Landmarks68 = std::array<cv::Point2f, 68>;
+
+// iBUG 68 indices used across the tool.
+namespace ibug {
+constexpr int kJawFirst = 0, kJawLast = 16, kChin = 8;
+constexpr int kRightEyeOuter = 36, kRightEyeInner = 39;  // subject's right, image left
+constexpr int kLeftEyeInner = 42, kLeftEyeOuter = 45;
+constexpr int kNoseTip = 30;
+constexpr int kMouthRight = 48, kMouthLeft = 54;
+constexpr int kBrowFirst = 17, kBrowLast = 26;
+}  // namespace ibug
+
+class LandmarkPredictor {
+ public:
+  // Loads the model (about 100 MB; a second or so). Thread-safe once loaded.
+  static Status Load(const std::string& path, std::unique_ptr<LandmarkPredictor>* predictor);
+  ~LandmarkPredictor();
+
+  // Landmarks of the face in `box` of a BGR image. The detector's box is first
+  // replaced by one derived from a first prediction, so that boxes from any
+  // detector end up in the framing the model was trained with.
+  Landmarks68 Predict(const cv::Mat& bgr, const cv::Rect2f& box) const;
+
+ private:
+  LandmarkPredictor();
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// The tight box around a set of landmarks.
+cv::Rect2f LandmarkBounds(const Landmarks68& points);
+// True when the landmarks have a face's layout: eyes above the mouth, the
+// subject's right eye left of the left eye, nose between eyes and mouth.
+bool PlausibleFaceLayout(const Landmarks68& points);
+
+}  // namespace headforge

@@ -1,0 +1,46 @@
+# Every third-party dependency, found from Debian 12 packages (scripts/install_deps.sh
+# installs them). Each layer links only what it uses; LibTorch only in avatar/.
+
+# COLMAP runs as a subprocess; its path is compiled in as the default.
+find_program(COLMAP_EXECUTABLE colmap REQUIRED)
+
+find_package(Eigen3 3.3 REQUIRED NO_MODULE)
+find_package(nlohmann_json 3 REQUIRED)
+find_package(Boost 1.74 REQUIRED COMPONENTS program_options)
+find_package(OpenCV 4 REQUIRED COMPONENTS
+  core imgproc imgcodecs videoio dnn calib3d features2d quality)
+find_package(dlib REQUIRED)
+find_package(HDF5 REQUIRED COMPONENTS C CXX)
+find_package(Ceres 2 REQUIRED)
+find_package(CGAL REQUIRED)
+# CGAL ships a FindOpenMesh module that would shadow OpenMesh's own config.
+find_package(OpenMesh REQUIRED CONFIG)
+find_package(TinyGLTF REQUIRED CONFIG)
+find_package(tomlplusplus REQUIRED CONFIG)
+find_package(Torch REQUIRED)
+find_package(Threads REQUIRED)
+
+if(HEADFORGE_BUILD_TESTS)
+  find_package(GTest REQUIRED)
+  find_package(rapidcheck CONFIG)
+endif()
+if(HEADFORGE_BUILD_BENCHMARKS)
+  find_package(benchmark REQUIRED)
+endif()
+
+# HDF5 as one imported target.
+add_library(headforge_hdf5 INTERFACE)
+target_include_directories(headforge_hdf5 SYSTEM INTERFACE ${HDF5_INCLUDE_DIRS})
+target_link_libraries(headforge_hdf5 INTERFACE ${HDF5_LIBRARIES} ${HDF5_CXX_LIBRARIES})
+target_compile_definitions(headforge_hdf5 INTERFACE ${HDF5_DEFINITIONS})
+
+# LibTorch as one imported target, its compile flags (ABI) kept to its users.
+add_library(headforge_torch INTERFACE)
+target_link_libraries(headforge_torch INTERFACE ${TORCH_LIBRARIES})
+target_include_directories(headforge_torch SYSTEM INTERFACE ${TORCH_INCLUDE_DIRS})
+separate_arguments(_torch_flags UNIX_COMMAND "${TORCH_CXX_FLAGS}")
+target_compile_options(headforge_torch INTERFACE ${_torch_flags})
+
+# Where the dlib landmark model sits on Debian (package libdlib-data).
+set(HEADFORGE_DLIB_LANDMARKS "/usr/share/dlib/shape_predictor_68_face_landmarks.dat"
+    CACHE FILEPATH "Default 68-point landmark model")

@@ -1,0 +1,18 @@
+# Warning flags and per-target helpers shared by every HeadForge target.
+add_library(headforge_warnings INTERFACE)
+target_compile_options(headforge_warnings INTERFACE
+  -Wall -Wextra -Wpedantic -Wno-unused-parameter)
+if(HEADFORGE_ARCH)
+  target_compile_options(headforge_warnings INTERFACE -march=${HEADFORGE_ARCH})
+endif()
+
+# headforge_add_test(NAME SOURCES... LIBS...) : one gtest executable registered with ctest.
+function(headforge_add_test name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS;LABELS" ${ARGN})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main headforge_warnings)
+  target_compile_definitions(${name} PRIVATE
+    HEADFORGE_TEST_SHARED_DATA="${HEADFORGE_SHARED_DATA}"
+    HEADFORGE_TEST_BINARY_DIR="${CMAKE_BINARY_DIR}")
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
+endfunction()

@@ -1,0 +1,133 @@
+#include "core/options.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "core/fs.h"
+
+namespace headforge {
+namespace {
+
+struct Sample {
+  double fps = 0.0;
+  int max_frames = 10;
+  bool flag = false;
+  std::string name = "x";
+  std::vector<std::string> videos;
+  std::vector<int> offsets;
+  int threads = 2;
+};
+
+void Bind(OptionSet* set, Sample* s) {
+  set->Add("ingest.fps", &s->fps, "fps", "fps");
+  set->Add("ingest.max_frames", &s->max_frames, "max", "max-frames");
+  set->Add("ingest.flag", &s->flag, "flag", "flag");
+  set->Add("ingest.name", &s->name, "name");
+  set->Add("ingest.video", &s->videos, "videos", "video");
+  set->Add("ingest.offsets", &s->offsets, "offsets", "offsets");
+  set->Add("threads", &s->threads, "threads", "", OptionSet::Effect::kRuntime);
+}
+
+TEST(OptionSet, ShortFlagsDottedKeysAndDefaults) {
+  Sample s;
+  OptionSet set;
+  Bind(&set, &s);
+  ASSERT_TRUE(set.Parse({"--fps", "5", "--ingest.max_frames=7", "--flag", "--video", "a.mp4",
+                         "b.mp4", "--offsets", "0,3,-1"})
+                  .ok());
+  EXPECT_DOUBLE_EQ(s.fps, 5.0);
+  EXPECT_EQ(s.max_frames, 7);
+  EXPECT_TRUE(s.flag);
+  EXPECT_EQ(s.name, "x");
+  EXPECT_EQ(s.videos, (std::vector<std::string>{"a.mp4", "b.mp4"}));
+  EXPECT_EQ(s.offsets, (std::vector<int>{0, 3, -1}));
+}
+
+TEST(OptionSet, RejectsUnknownOptionsAndBadValues) {
+  Sample s;
+  OptionSet set;
+  Bind(&set, &s);
+  EXPECT_FALSE(set.Parse({"--no-such-option", "1"}).ok());
+  Sample t;
+  OptionSet set2;
+  Bind(&set2, &t);
+  const Status status = set2.Parse({"--fps", "fast"});
+  ASSERT_FALSE(status.ok());
+  EXPECT_NE(status.message().find("ingest.fps"), std::string::npos);
+  EXPECT_NE(status.message().find("not a number"), std::string::npos);
+}
+
+TEST(OptionSet, ConfigFileUsesDottedKeysAndCommandLineWins) {
+  const fs::path dir = fs::temp_directory_path() / "hf_options_test";
+  fs::create_directories(dir);
+  const fs::path ini = dir / "run.ini";
+  {
+    std::ofstream out(ini);
+    out << "[ingest]\nfps = 10\nmax_frames = 3\nvideo = one.mp4\nvideo = two.mp4\n"
+           "[track]\nunknown = 1\n";
+  }
+  Sample s;
+  OptionSet set;
+  Bind(&set, &s);
+  ASSERT_TRUE(set.Parse({"--config", ini.string(), "--max-frames", "4"}).ok());
+  EXPECT_DOUBLE_EQ(s.fps, 10.0);
+  EXPECT_EQ(s.max_frames, 4);  // command line beats the file
+  EXPECT_EQ(s.videos, (std::vector<std::string>{"one.mp4", "two.mp4"}));
+  ASSERT_EQ(set.unknown_config_keys().size(), 1u);
+  EXPECT_EQ(set.unknown_config_keys()[0], "track.unknown");
+  fs::remove_all(dir);
+}
+
+TEST(OptionSet, IniRoundTripReproducesValues) {
+  Sample s;
+  OptionSet set;
+  Bind(&set, &s);
+  ASSERT_TRUE(set.Parse({"--fps", "12.5", "--video", "a b.mp4", "c.mp4", "--threads", "7"}).ok());
+  const fs::path ini = fs::temp_directory_path() / "hf_options_roundtrip.ini";
+  ASSERT_TRUE(WriteFileAtomic(ini, set.ToIni()).ok());
+
+  Sample t;
+  OptionSet reread;
+  Bind(&reread, &t);
+  ASSERT_TRUE(reread.Parse({"--config", ini.string()}).ok());
+  EXPECT_EQ(t.fps, s.fps);
+  EXPECT_EQ(t.videos, s.videos);
+  EXPECT_EQ(t.threads, 7);
+  EXPECT_EQ(reread.ToIni(), set.ToIni());
+  fs::remove(ini);
+}
+
+TEST(OptionSet, SemanticIniExcludesRuntimeOptionsAndFiltersSection) {
+  Sample s;
+  OptionSet set;
+  Bind(&set, &s);
+  const std::string all = set.ToIni();
+  const std::string semantic = set.ToIni("ingest", /*semantic_only=*/true);
+  EXPECT_NE(all.find("threads"), std::string::npos);
+  EXPECT_EQ(semantic.find("threads"), std::string::npos);
+  EXPECT_NE(semantic.find("fps = 0"), std::string::npos);
+}
+
+TEST(OptionSet, HelpListsEveryOptionWithDefault) {
+  Sample s;
+  OptionSet set;
+  Bind(&set, &s);
+  const std::string help = set.Help("headforge ingest [options]", "Ingests.");
+  for (const char* text : {"--fps, --ingest.fps", "--max-frames, --ingest.max_frames",
+                           "default: 10", "--ingest.name", "--threads", "--config"})
+    EXPECT_NE(help.find(text), std::string::npos) << text;
+}
+
+TEST(OptionSet, TakenShortFlagFallsBackToDottedKey) {
+  double a = 1, b = 2;
+  OptionSet set;
+  set.Add("ingest.resolution", &a, "a", "resolution");
+  set.Add("train.resolution", &b, "b", "resolution");
+  ASSERT_TRUE(set.Parse({"--resolution", "3", "--train.resolution", "4"}).ok());
+  EXPECT_EQ(a, 3);
+  EXPECT_EQ(b, 4);
+}
+
+}  // namespace
+}  // namespace headforge

@@ -1,0 +1,43 @@
+#include "core/parallel.h"
+
+#include <algorithm>
+#include <atomic>
+#include <exception>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace headforge {
+
+int HardwareThreads() { return std::max(1u, std::thread::hardware_concurrency()); }
+
+void ParallelFor(int count, int threads, const std::function<void(int, int)>& fn) {
+  threads = std::max(1, std::min(threads, count));
+  if (threads <= 1) {
+    for (int i = 0; i < count; ++i) fn(i, 0);
+    return;
+  }
+  std::atomic<int> next{0};
+  std::exception_ptr error;
+  std::mutex error_mutex;
+  auto work = [&](int worker) {
+    for (;;) {
+      const int i = next++;
+      if (i >= count) return;
+      try {
+        fn(i, worker);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = std::current_exception();
+        next = count;  // stop handing out work
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int w = 1; w < threads; ++w) pool.emplace_back(work, w);
+  work(0);
+  for (auto& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
+}
+
+}  // namespace headforge

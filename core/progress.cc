@@ -1,0 +1,73 @@
+#include "core/progress.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+
+namespace headforge {
+
+StderrProgress::StderrProgress(std::chrono::seconds interval)
+    : plain_(!isatty(STDERR_FILENO)), interval_(interval) {}
+
+void StderrProgress::Start(const std::string& label, int64_t total) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  label_ = label;
+  total_ = total;
+  done_ = 0;
+  last_quarter_ = 0;
+  start_ = last_print_ = std::chrono::steady_clock::now();
+  if (plain_) std::fprintf(stderr, "[headforge] %s: started (%lld)\n", label_.c_str(),
+                           static_cast<long long>(total_));
+}
+
+void StderrProgress::Advance(int64_t units) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  done_ += units;
+  Draw(false);
+}
+
+void StderrProgress::Finish(const std::string& summary) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  if (!plain_) std::fprintf(stderr, "\r\033[K");
+  std::fprintf(stderr, "[headforge] %s: done %lld in %.1f s%s%s\n", label_.c_str(),
+               static_cast<long long>(done_), seconds, summary.empty() ? "" : ", ",
+               summary.c_str());
+  std::fflush(stderr);
+}
+
+void StderrProgress::Draw(bool final_line) {
+  const auto now = std::chrono::steady_clock::now();
+  const double elapsed = std::chrono::duration<double>(now - start_).count();
+  const double fraction = total_ > 0 ? static_cast<double>(done_) / total_ : 0.0;
+  if (plain_) {
+    const int quarter = static_cast<int>(fraction * 4.0);
+    if (quarter <= last_quarter_ && now - last_print_ < interval_) return;
+    last_quarter_ = std::max(quarter, last_quarter_);
+    last_print_ = now;
+    if (total_ > 0)
+      std::fprintf(stderr, "[headforge] %s: %lld/%lld (%.0f%%), %.1f s\n", label_.c_str(),
+                   static_cast<long long>(done_), static_cast<long long>(total_),
+                   100.0 * fraction, elapsed);
+    else
+      std::fprintf(stderr, "[headforge] %s: %lld, %.1f s\n", label_.c_str(),
+                   static_cast<long long>(done_), elapsed);
+    return;
+  }
+  // Redraw at most ~10 times a second.
+  if (!final_line && now - last_print_ < std::chrono::milliseconds(100) && done_ != total_) return;
+  last_print_ = now;
+  constexpr int kWidth = 30;
+  const int filled = static_cast<int>(fraction * kWidth);
+  char bar[kWidth + 1];
+  for (int i = 0; i < kWidth; ++i) bar[i] = i < filled ? '#' : '.';
+  bar[kWidth] = '\0';
+  const double eta = fraction > 0 ? elapsed * (1.0 - fraction) / fraction : 0.0;
+  std::fprintf(stderr, "\r\033[K%s [%s] %lld/%lld  %.1f s elapsed, ~%.0f s left", label_.c_str(),
+               bar, static_cast<long long>(done_), static_cast<long long>(total_), elapsed, eta);
+  std::fflush(stderr);
+}
+
+}  // namespace headforge

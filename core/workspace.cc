@@ -1,0 +1,269 @@
+#include "core/workspace.h"
+
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <ctime>
+#include <nlohmann/json.hpp>
+
+#include "core/log.h"
+
+namespace headforge {
+namespace {
+
+constexpr const char* kManifest = "workspace.json";
+constexpr const char* kLockFile = ".lock";
+constexpr const char* kStagingDir = ".staging";
+constexpr int kManifestVersion = 1;
+
+StageStatus ParseStatus(const std::string& text) {
+  if (text == "running") return StageStatus::kRunning;
+  if (text == "done") return StageStatus::kDone;
+  if (text == "failed") return StageStatus::kFailed;
+  return StageStatus::kPending;
+}
+
+}  // namespace
+
+const char* StageStatusName(StageStatus status) {
+  switch (status) {
+    case StageStatus::kPending: return "pending";
+    case StageStatus::kRunning: return "running";
+    case StageStatus::kDone: return "done";
+    case StageStatus::kFailed: return "failed";
+  }
+  return "pending";
+}
+
+const std::vector<std::string>& KnownStages() {
+  static const std::vector<std::string> stages = {"ingest", "calibrate", "align",
+                                                  "track",  "train",     "export"};
+  return stages;
+}
+
+std::string NowIso8601() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char text[32];
+  std::strftime(text, sizeof(text), "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return text;
+}
+
+Status Workspace::Open(const fs::path& root, Mode mode, std::unique_ptr<Workspace>* workspace) {
+  std::unique_ptr<Workspace> ws(new Workspace());
+  ws->root_ = AbsolutePath(root);
+  ws->mode_ = mode;
+  std::error_code ec;
+  if (mode == Mode::kReadOnly) {
+    if (!fs::exists(ws->root_ / kManifest, ec))
+      return Status::NotFound("no workspace at " + root.string() + " (no " + kManifest + ")");
+  } else {
+    if (fs::exists(ws->root_, ec) && !fs::is_directory(ws->root_, ec))
+      return Status::InvalidArgument("workspace path is a file, not a folder: " + root.string());
+    HF_RETURN_IF_ERROR(EnsureDirectory(ws->root_));
+    const fs::path lock_path = ws->root_ / kLockFile;
+    ws->lock_fd_ = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (ws->lock_fd_ < 0)
+      return Status::IoError("cannot create lock file " + lock_path.string());
+    if (::flock(ws->lock_fd_, LOCK_EX | LOCK_NB) != 0)
+      return Status::InvalidArgument("workspace " + root.string() +
+                                     " is in use by another headforge process; wait for it "
+                                     "to finish or stop it");
+  }
+  HF_RETURN_IF_ERROR(ws->Load());
+  if (mode == Mode::kReadWrite && !fs::exists(ws->root_ / kManifest, ec)) HF_RETURN_IF_ERROR(ws->Save());
+  *workspace = std::move(ws);
+  return Status::Ok();
+}
+
+Workspace::~Workspace() {
+  if (lock_fd_ >= 0) ::close(lock_fd_);  // releases the flock
+}
+
+Status Workspace::Load() {
+  records_.clear();
+  const fs::path path = root_ / kManifest;
+  std::error_code ec;
+  if (!fs::exists(path, ec)) return Status::Ok();
+  std::string text;
+  HF_RETURN_IF_ERROR(ReadFileToString(path, &text));
+  nlohmann::json manifest;
+  try {
+    manifest = nlohmann::json::parse(text);
+    for (const auto& stage : manifest.at("stages")) {
+      StageRecord record;
+      record.name = stage.at("name").get<std::string>();
+      record.status = ParseStatus(stage.value("status", "pending"));
+      record.fingerprint = stage.value("fingerprint", "");
+      record.outputs = stage.value("outputs", std::vector<std::string>{});
+      record.wall_time_s = stage.value("wall_time_s", 0.0);
+      record.started_at = stage.value("started_at", "");
+      record.finished_at = stage.value("finished_at", "");
+      record.message = stage.value("message", "");
+      records_.push_back(record);
+    }
+  } catch (const nlohmann::json::exception& e) {
+    return Status::DataError(path.string() + " is damaged (" + e.what() +
+                             "); move it away to start the workspace afresh");
+  }
+  return Status::Ok();
+}
+
+Status Workspace::Save() const {
+  HF_CHECK(mode_ == Mode::kReadWrite);
+  nlohmann::json manifest;
+  manifest["version"] = kManifestVersion;
+  manifest["stages"] = nlohmann::json::array();
+  for (const auto& r : records_) {
+    manifest["stages"].push_back({{"name", r.name},
+                                  {"status", StageStatusName(r.status)},
+                                  {"fingerprint", r.fingerprint},
+                                  {"outputs", r.outputs},
+                                  {"wall_time_s", r.wall_time_s},
+                                  {"started_at", r.started_at},
+                                  {"finished_at", r.finished_at},
+                                  {"message", r.message}});
+  }
+  return WriteFileAtomic(root_ / kManifest, manifest.dump(2) + "\n");
+}
+
+std::vector<StageRecord> Workspace::Stages() const {
+  std::vector<StageRecord> ordered;
+  for (const auto& name : KnownStages()) {
+    if (const StageRecord* r = Find(name)) {
+      ordered.push_back(*r);
+    } else {
+      StageRecord pending;
+      pending.name = name;
+      ordered.push_back(pending);
+    }
+  }
+  for (const auto& r : records_) {
+    const auto& known = KnownStages();
+    if (std::find(known.begin(), known.end(), r.name) == known.end()) ordered.push_back(r);
+  }
+  return ordered;
+}
+
+const StageRecord* Workspace::Find(const std::string& stage) const {
+  for (const auto& r : records_)
+    if (r.name == stage) return &r;
+  return nullptr;
+}
+
+StageRecord* Workspace::Mutable(const std::string& stage) {
+  for (auto& r : records_)
+    if (r.name == stage) return &r;
+  records_.emplace_back();
+  records_.back().name = stage;
+  return &records_.back();
+}
+
+bool Workspace::IsUpToDate(const std::string& stage, const std::string& fingerprint) const {
+  const StageRecord* r = Find(stage);
+  if (!r || r->status != StageStatus::kDone || r->fingerprint != fingerprint) return false;
+  std::error_code ec;
+  for (const auto& output : r->outputs)
+    if (!fs::exists(root_ / output, ec)) return false;
+  return true;
+}
+
+bool Workspace::WasInterrupted(const std::string& stage) const {
+  const StageRecord* r = Find(stage);
+  if (!r || r->status != StageStatus::kRunning) return false;
+  if (lock_fd_ >= 0) return true;  // we hold the lock, so nobody else is running it
+  const fs::path lock_path = root_ / kLockFile;
+  const int fd = ::open(lock_path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return true;
+  const bool free = ::flock(fd, LOCK_SH | LOCK_NB) == 0;
+  ::close(fd);
+  return free;
+}
+
+Status Workspace::BeginStage(const std::string& stage, const std::string& fingerprint,
+                             fs::path* staging) {
+  HF_CHECK(mode_ == Mode::kReadWrite);
+  *staging = root_ / kStagingDir / stage;
+  HF_RETURN_IF_ERROR(RemoveAll(*staging));  // leftovers of an interrupted attempt
+  HF_RETURN_IF_ERROR(EnsureDirectory(*staging));
+  StageRecord* r = Mutable(stage);
+  r->status = StageStatus::kRunning;
+  r->fingerprint = fingerprint;
+  r->started_at = NowIso8601();
+  r->finished_at.clear();
+  r->message.clear();
+  return Save();
+}
+
+Status Workspace::CommitStage(const std::string& stage, const std::vector<std::string>& outputs,
+                              double wall_time_s, const std::string& message) {
+  HF_CHECK(mode_ == Mode::kReadWrite);
+  const fs::path staging = root_ / kStagingDir / stage;
+  for (const auto& output : outputs) {
+    std::error_code ec;
+    if (!fs::exists(staging / output, ec))
+      return Status::Internal("stage " + stage + " did not write its output " + output);
+  }
+  for (const auto& output : outputs) HF_RETURN_IF_ERROR(ReplacePath(staging / output, root_ / output));
+  HF_RETURN_IF_ERROR(RemoveAll(staging));
+  StageRecord* r = Mutable(stage);
+  r->status = StageStatus::kDone;
+  r->outputs = outputs;
+  r->wall_time_s = wall_time_s;
+  r->finished_at = NowIso8601();
+  r->message = message;
+  return Save();
+}
+
+Status Workspace::FailStage(const std::string& stage, const std::string& message,
+                            double wall_time_s) {
+  HF_CHECK(mode_ == Mode::kReadWrite);
+  RemoveAll(root_ / kStagingDir / stage);
+  StageRecord* r = Mutable(stage);
+  r->status = StageStatus::kFailed;
+  r->wall_time_s = wall_time_s;
+  r->finished_at = NowIso8601();
+  r->message = message;
+  return Save();
+}
+
+Status RunStage(Workspace* workspace, const std::string& stage, const std::string& fingerprint,
+                const std::string& options_ini,
+                const std::function<Status(const fs::path& staging, StageResult* result)>& body,
+                bool* skipped) {
+  if (workspace->IsUpToDate(stage, fingerprint)) {
+    HF_LOG(Info) << stage << ": up to date (inputs and options unchanged), skipped";
+    *skipped = true;
+    return Status::Ok();
+  }
+  *skipped = false;
+  if (workspace->WasInterrupted(stage))
+    HF_LOG(Info) << stage << ": an earlier run was interrupted; redoing the stage";
+  fs::path staging;
+  HF_RETURN_IF_ERROR(workspace->BeginStage(stage, fingerprint, &staging));
+  const auto start = std::chrono::steady_clock::now();
+  auto seconds = [&] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+  StageResult result;
+  Status status = WriteFileAtomic(staging / (stage + ".ini"), options_ini);
+  if (status.ok()) {
+    try {
+      status = body(staging, &result);
+    } catch (const std::exception& e) {
+      status = Status::Internal(e.what());
+    }
+  }
+  if (!status.ok()) {
+    workspace->FailStage(stage, status.message(), seconds());
+    return status.WithContext(stage);
+  }
+  result.outputs.push_back(stage + ".ini");
+  return workspace->CommitStage(stage, result.outputs, seconds(), result.message);
+}
+
+}  // namespace headforge

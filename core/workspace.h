@@ -1,0 +1,98 @@
+// The on-disk workspace that makes runs resumable (DESIGN.md, "Stages and their
+// contracts"). `workspace.json` records for each stage its status, the
+// fingerprint of its inputs and options, its outputs and its wall time.
+//
+// A stage writes its outputs into a private staging folder; only when it has
+// finished are they moved into the workspace and the stage marked done. So a
+// stage that fails or is killed leaves the outputs of earlier runs (and of
+// earlier stages) as they were, and is simply redone on the next run.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/fs.h"
+#include "core/status.h"
+
+namespace headforge {
+
+enum class StageStatus { kPending, kRunning, kDone, kFailed };
+const char* StageStatusName(StageStatus status);
+
+// The pipeline's stages in order; `status` lists them in this order.
+const std::vector<std::string>& KnownStages();
+
+struct StageRecord {
+  std::string name;
+  StageStatus status = StageStatus::kPending;
+  std::string fingerprint;           // hash of inputs + options of the last start
+  std::vector<std::string> outputs;  // paths relative to the workspace root
+  double wall_time_s = 0.0;          // of the last completed (or failed) attempt
+  std::string started_at;            // ISO 8601 UTC
+  std::string finished_at;
+  std::string message;               // one-line summary, or the failure reason
+};
+
+class Workspace {
+ public:
+  enum class Mode { kReadOnly, kReadWrite };
+
+  // Opens the workspace at `root`. kReadWrite creates it if missing and takes an
+  // exclusive lock (a second concurrent run fails with a clear message).
+  static Status Open(const fs::path& root, Mode mode, std::unique_ptr<Workspace>* workspace);
+  ~Workspace();
+
+  const fs::path& root() const { return root_; }
+  fs::path Path(const std::string& relative) const { return root_ / relative; }
+
+  // Records in KnownStages() order, then any other stage, pending ones included.
+  std::vector<StageRecord> Stages() const;
+  // nullptr when the stage has never started.
+  const StageRecord* Find(const std::string& stage) const;
+  // Done with this fingerprint, and every recorded output still present.
+  bool IsUpToDate(const std::string& stage, const std::string& fingerprint) const;
+  // True when the record says running but no process holds the lock: the run
+  // that started it was interrupted.
+  bool WasInterrupted(const std::string& stage) const;
+
+  // Marks the stage running and returns an empty staging folder for its outputs.
+  Status BeginStage(const std::string& stage, const std::string& fingerprint, fs::path* staging);
+  // Moves each output (relative to the staging folder) into the workspace root,
+  // replacing what was there, then marks the stage done.
+  Status CommitStage(const std::string& stage, const std::vector<std::string>& outputs,
+                     double wall_time_s, const std::string& message);
+  // Marks the stage failed; its previous outputs stay where they are.
+  Status FailStage(const std::string& stage, const std::string& message, double wall_time_s);
+
+ private:
+  Workspace() = default;
+  Status Load();
+  Status Save() const;
+  StageRecord* Mutable(const std::string& stage);
+
+  fs::path root_;
+  Mode mode_ = Mode::kReadOnly;
+  int lock_fd_ = -1;
+  std::vector<StageRecord> records_;
+};
+
+// What a stage body reports back to RunStage.
+struct StageResult {
+  std::vector<std::string> outputs;  // relative to the staging folder
+  std::string message;               // one-line summary for `status`
+};
+
+// Runs `body` as `stage` unless it is up to date with `fingerprint`. The body
+// writes into `staging`; RunStage writes `options_ini` there as <stage>.ini,
+// commits, and records the wall time. `*skipped` tells whether the body ran.
+Status RunStage(Workspace* workspace, const std::string& stage, const std::string& fingerprint,
+                const std::string& options_ini,
+                const std::function<Status(const fs::path& staging, StageResult* result)>& body,
+                bool* skipped);
+
+// Current UTC time as ISO 8601 text.
+std::string NowIso8601();
+
+}  // namespace headforge

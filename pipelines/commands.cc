@@ -1,0 +1,123 @@
+#include "pipelines/commands.h"
+
+#include <opencv2/core/utility.hpp>
+
+#include <cstdio>
+#include <iostream>
+
+#include "avatar/torch_runtime.h"
+#include "core/log.h"
+#include "core/parallel.h"
+#include "core/paths.h"
+
+namespace headforge {
+
+const std::vector<Command>& Commands() {
+  static const std::vector<Command> commands = {
+      {"run", "Run every available stage on a video, resuming where an earlier run stopped.",
+       RunCommand},
+      {"ingest", "Turn videos or image folders into frames, landmarks and masks.", IngestCommand},
+      {"status", "Show the stages of a workspace: status, wall time, summary.", StatusCommand},
+      {"version", "Print the version and the libraries it was built with.", VersionCommand},
+  };
+  return commands;
+}
+
+Status CommonOptions::Check(bool needs_workspace) const {
+  if (needs_workspace && workspace.empty())
+    return Status::InvalidArgument("no workspace: give --workspace DIR");
+  if (threads < 0) return Status::InvalidArgument("--threads must be >= 0 (0: all cores)");
+  if (log_level != "debug" && log_level != "info" && log_level != "warning" &&
+      log_level != "error" && log_level != "silent")
+    return Status::InvalidArgument("--log-level must be debug, info, warning, error or silent");
+  return Status::Ok();
+}
+
+void AddCommonOptions(OptionSet* o, CommonOptions* common, bool with_workspace) {
+  constexpr auto kRuntime = OptionSet::Effect::kRuntime;
+  if (with_workspace)
+    o->Add("workspace", &common->workspace,
+           "Workspace folder holding every stage's outputs and workspace.json.", "", kRuntime);
+  o->Add("threads", &common->threads, "Worker threads; 0 uses every hardware thread.", "",
+         kRuntime);
+  common->data_dir = DefaultDataDir();
+  o->Add("data", &common->data_dir,
+         "Shared data folder (face model, detectors); $HEADFORGE_DATA overrides the built-in "
+         "default.",
+         "", kRuntime);
+  o->Add("log_level", &common->log_level, "debug, info, warning, error or silent.", "log-level",
+         kRuntime);
+}
+
+void ApplyCommonOptions(const CommonOptions& common) {
+  const int threads = common.threads > 0 ? common.threads : HardwareThreads();
+  cv::setNumThreads(threads);
+  ConfigureTorchThreads(threads);
+  if (common.log_level == "debug") SetLogLevel(LogLevel::kDebug);
+  if (common.log_level == "info") SetLogLevel(LogLevel::kInfo);
+  if (common.log_level == "warning") SetLogLevel(LogLevel::kWarning);
+  if (common.log_level == "error") SetLogLevel(LogLevel::kError);
+  if (common.log_level == "silent") SetLogLevel(LogLevel::kSilent);
+}
+
+int ParseOrExit(OptionSet* options, const std::vector<std::string>& args, const std::string& usage,
+                const std::string& description) {
+  const Status status = options->Parse(args);
+  if (!status.ok()) {
+    std::fprintf(stderr, "headforge: %s\nUsage: %s (see --help)\n", status.message().c_str(),
+                 usage.c_str());
+    return kExitUsage;
+  }
+  if (options->help_requested()) {
+    std::cout << options->Help(usage, description);
+    return kExitOk;
+  }
+  for (const auto& key : options->unknown_config_keys())
+    HF_LOG(Warning) << "config key '" << key << "' is not an option of this command; ignored";
+  return -1;
+}
+
+int ReportFailure(const Status& status) {
+  std::fprintf(stderr, "headforge: %s\n", status.message().c_str());
+  return status.code() == Status::Code::kInvalidArgument ? kExitUsage : kExitFailure;
+}
+
+namespace {
+
+void PrintMainHelp() {
+  std::printf(
+      "headforge %s: turns a video of a person's head into an animatable 3D avatar.\n\n"
+      "Usage: headforge <command> [options]\n"
+      "       headforge <command> --help   options of one command, with defaults\n"
+      "       headforge --version\n\nCommands:\n",
+      HeadForgeVersion().c_str());
+  for (const auto& c : Commands()) std::printf("  %-10s %s\n", c.name, c.summary);
+  std::printf(
+      "\nEvery stage reads and writes one workspace folder; a stage whose inputs and options\n"
+      "are unchanged is skipped, and an interrupted run resumes. Exit codes: 0 done,\n"
+      "1 failure (reason on stderr), 2 usage error.\n");
+}
+
+}  // namespace
+
+int HeadForgeMain(int argc, char** argv) {
+  std::vector<std::string> args(argv + 1, argv + argc);
+  if (args.empty() || args[0] == "--help" || args[0] == "-h" || args[0] == "help") {
+    PrintMainHelp();
+    return args.empty() ? kExitUsage : kExitOk;
+  }
+  if (args[0] == "--version" || args[0] == "-V") return VersionCommand({});
+  for (const auto& c : Commands()) {
+    if (args[0] != c.name) continue;
+    try {
+      return c.run(std::vector<std::string>(args.begin() + 1, args.end()));
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "headforge: %s: unexpected error: %s\n", c.name, e.what());
+      return kExitFailure;
+    }
+  }
+  std::fprintf(stderr, "headforge: unknown command '%s' (see headforge --help)\n", args[0].c_str());
+  return kExitUsage;
+}
+
+}  // namespace headforge

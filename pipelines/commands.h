@@ -1,0 +1,56 @@
+// The `headforge` command table. Each command parses its options, checks them,
+// runs a testable library function and returns an exit code:
+//   0 done, 1 failure (one-line reason on stderr), 2 usage error.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/options.h"
+#include "core/status.h"
+
+namespace headforge {
+
+constexpr int kExitOk = 0;
+constexpr int kExitFailure = 1;
+constexpr int kExitUsage = 2;
+
+struct Command {
+  const char* name;
+  const char* summary;
+  int (*run)(const std::vector<std::string>& args);
+};
+
+// Every command, in the order `headforge --help` lists them.
+const std::vector<Command>& Commands();
+
+// The whole program: dispatches argv[1] to its command.
+int HeadForgeMain(int argc, char** argv);
+
+// Options every workspace command shares.
+struct CommonOptions {
+  std::string workspace;  // the workspace folder
+  int threads = 0;        // worker threads; 0 = all hardware threads
+  std::string data_dir;   // the shared data folder
+  std::string log_level = "info";
+
+  Status Check(bool needs_workspace) const;
+};
+void AddCommonOptions(OptionSet* options, CommonOptions* common, bool with_workspace);
+// Applies threads and logging to the process (OpenCV, LibTorch, our logger).
+void ApplyCommonOptions(const CommonOptions& common);
+
+// Parses `args` into `options`: prints help and returns kExitOk when asked for,
+// prints a usage error and returns kExitUsage on failure, else returns -1.
+int ParseOrExit(OptionSet* options, const std::vector<std::string>& args, const std::string& usage,
+                const std::string& description);
+// Prints "headforge: <message>" on stderr and returns the exit code for `status`.
+int ReportFailure(const Status& status);
+
+// Command entry points.
+int RunCommand(const std::vector<std::string>& args);
+int IngestCommand(const std::vector<std::string>& args);
+int StatusCommand(const std::vector<std::string>& args);
+int VersionCommand(const std::vector<std::string>& args);
+
+}  // namespace headforge

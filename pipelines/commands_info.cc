@@ -1,0 +1,54 @@
+// `headforge status` and `headforge version`.
+#include <opencv2/core/version.hpp>
+
+#include <cstdio>
+
+#include "avatar/torch_runtime.h"
+#include "calibration/colmap_tool.h"
+#include "core/paths.h"
+#include "core/workspace.h"
+#include "pipelines/commands.h"
+
+namespace headforge {
+
+int StatusCommand(const std::vector<std::string>& args) {
+  OptionSet options;
+  std::string workspace_path;
+  options.AddPositional("WORKSPACE", &workspace_path, "The workspace folder.");
+  const int parsed = ParseOrExit(&options, args, "headforge status WORKSPACE",
+                                 "Prints each stage's status, wall time and summary.");
+  if (parsed >= 0) return parsed;
+  if (workspace_path.empty()) return ReportFailure(Status::InvalidArgument("give the WORKSPACE folder"));
+  std::unique_ptr<Workspace> workspace;
+  if (Status s = Workspace::Open(workspace_path, Workspace::Mode::kReadOnly, &workspace); !s.ok())
+    return ReportFailure(s);
+  std::printf("workspace %s\n", workspace->root().c_str());
+  std::printf("%-10s %-12s %10s  %-20s  %s\n", "stage", "status", "wall time", "finished", "summary");
+  for (const auto& r : workspace->Stages()) {
+    std::string status = StageStatusName(r.status);
+    if (workspace->WasInterrupted(r.name)) status = "interrupted";
+    char wall[32] = "";
+    if (r.status == StageStatus::kDone || r.status == StageStatus::kFailed)
+      std::snprintf(wall, sizeof(wall), "%.2f s", r.wall_time_s);
+    std::printf("%-10s %-12s %10s  %-20s  %s\n", r.name.c_str(), status.c_str(), wall,
+                r.finished_at.c_str(), r.message.c_str());
+  }
+  return kExitOk;
+}
+
+int VersionCommand(const std::vector<std::string>& args) {
+  OptionSet options;
+  const int parsed = ParseOrExit(&options, args, "headforge version",
+                                 "Prints the version and the libraries it was built with.");
+  if (parsed >= 0) return parsed;
+  std::string colmap;
+  if (!ColmapVersion(DefaultColmapExecutable(), &colmap).ok()) colmap = "not found";
+  std::printf("headforge %s\n", HeadForgeVersion().c_str());
+  std::printf("  OpenCV %s\n", CV_VERSION);
+  std::printf("  LibTorch %s\n", TorchDescription().c_str());
+  std::printf("  %s (%s)\n", colmap.c_str(), DefaultColmapExecutable().c_str());
+  std::printf("  data folder %s\n", DefaultDataDir().c_str());
+  return kExitOk;
+}
+
+}  // namespace headforge

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# Installs what HeadForge needs from Debian 12's archive. Idempotent: when every
+# package is present it returns in well under a second without touching apt.
+set -euo pipefail
+
+PACKAGES=(
+  build-essential cmake ninja-build pkg-config git
+  colmap
+  libceres-dev libeigen3-dev
+  libopencv-dev libopencv-contrib-dev opencv-data
+  libcgal-dev libopenmesh-dev
+  libtorch-dev
+  libboost-program-options-dev libboost-filesystem-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  libdlib-dev libdlib-data
+  libhdf5-dev
+  libtinygltf-dev nlohmann-json3-dev libtomlplusplus-dev
+  librapidcheck-dev
+  ffmpeg
+  libblas-dev liblapack-dev
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install_deps: all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+
+echo "install_deps: installing ${#missing[@]} missing packages: ${missing[*]}"
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then
+  if command -v sudo >/dev/null; then SUDO="sudo"; else
+    echo "install_deps: not root and no sudo; install these by hand: ${missing[*]}" >&2
+    exit 1
+  fi
+fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+echo "install_deps: done"

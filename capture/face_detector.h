@@ -30,7 +30,10 @@ struct FaceDetectorOptions {
 };
 
 struct FaceDetection {
-  cv::Rect2f box;      // pixels of the input image
+  cv::Rect2f box;      // the detector's own box, pixels of the input image
+  // The box in the framing dlib's landmark model was trained with (its HOG
+  // detector's): square, from the brows to about the chin.
+  cv::Rect2f landmark_box;
   float score = 0.0f;  // detector confidence; HOG scores are mapped into (0, 1)
   bool from_fallback = false;
 };

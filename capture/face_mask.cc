@@ -14,17 +14,18 @@ cv::Mat HeadMaskSeeds(cv::Size size, const Landmarks68& lm) {
   // Head region: wider than the jaw (ears, hair), up to the top of the skull,
   // down past the chin for the neck.
   const cv::Point head_centre(cvRound(centre.x), cvRound(centre.y - 0.15f * h));
-  cv::ellipse(seeds, head_centre, cv::Size(cvRound(0.95f * w), cvRound(1.15f * h)), 0, 0, 360,
+  cv::ellipse(seeds, head_centre, cv::Size(cvRound(1.3f * w), cvRound(1.4f * h)), 0, 0, 360,
               cv::Scalar(cv::GC_PR_BGD), cv::FILLED);
-  cv::ellipse(seeds, head_centre, cv::Size(cvRound(0.62f * w), cvRound(0.85f * h)), 0, 0, 360,
+  cv::ellipse(seeds, head_centre, cv::Size(cvRound(0.75f * w), cvRound(0.95f * h)), 0, 0, 360,
               cv::Scalar(cv::GC_PR_FGD), cv::FILLED);
   cv::rectangle(seeds, cv::Point(cvRound(centre.x - 0.3f * w), cvRound(face.y + 0.8f * h)),
                 cv::Point(cvRound(centre.x + 0.3f * w), cvRound(face.y + 1.35f * h)),
                 cv::Scalar(cv::GC_PR_FGD), cv::FILLED);
-  // Sure foreground: the landmark hull, shrunk towards its centre.
+  // Sure foreground: the landmark hull, grown a little so that points on its
+  // edge stay inside after the mask is resampled.
   std::vector<cv::Point> hull_points;
-  for (const auto& p : lm) hull_points.emplace_back(cvRound(centre.x + 0.85f * (p.x - centre.x)),
-                                                     cvRound(centre.y + 0.85f * (p.y - centre.y)));
+  for (const auto& p : lm) hull_points.emplace_back(cvRound(centre.x + 1.04f * (p.x - centre.x)),
+                                                     cvRound(centre.y + 1.04f * (p.y - centre.y)));
   std::vector<cv::Point> hull;
   cv::convexHull(hull_points, hull);
   cv::fillConvexPoly(seeds, hull, cv::Scalar(cv::GC_FGD));

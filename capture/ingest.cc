@@ -216,7 +216,7 @@ FrameAnalysis Analyse(const cv::Mat& frame, FaceDetector* detector,
   for (size_t i = 0; i < detections.size() && static_cast<int>(i) < kMaxCandidates; ++i) {
     FaceCandidate c;
     c.detection = detections[i];
-    c.landmarks = predictor.Predict(frame, detections[i].box);
+    c.landmarks = predictor.Predict(frame, detections[i].landmark_box);
     c.plausible = PlausibleFaceLayout(c.landmarks);
     a.faces.push_back(c);
   }

@@ -60,14 +60,7 @@ Landmarks68 Run(const dlib::shape_predictor& model, const dlib::cv_image<dlib::b
 Landmarks68 LandmarkPredictor::Predict(const cv::Mat& bgr, const cv::Rect2f& box) const {
   HF_CHECK(bgr.type() == CV_8UC3);
   dlib::cv_image<dlib::bgr_pixel> view(bgr);
-  Landmarks68 points = Run(impl_->model, view, box);
-  // dlib's HOG boxes, which the model was trained on, span roughly the
-  // landmarks' width and run from just above the brows to just below the chin.
-  const cv::Rect2f bounds = LandmarkBounds(points);
-  const float side = std::max(bounds.width, bounds.height);
-  const cv::Point2f centre(bounds.x + bounds.width * 0.5f, bounds.y + bounds.height * 0.55f);
-  const cv::Rect2f refined(centre.x - side * 0.5f, centre.y - side * 0.5f, side, side);
-  return Run(impl_->model, view, refined);
+  return Run(impl_->model, view, box);
 }
 
 cv::Rect2f LandmarkBounds(const Landmarks68& points) {

@@ -31,9 +31,8 @@ class LandmarkPredictor {
   static Status Load(const std::string& path, std::unique_ptr<LandmarkPredictor>* predictor);
   ~LandmarkPredictor();
 
-  // Landmarks of the face in `box` of a BGR image. The detector's box is first
-  // replaced by one derived from a first prediction, so that boxes from any
-  // detector end up in the framing the model was trained with.
+  // Landmarks of the face in `box` of a BGR image; `box` must be in the framing
+  // of dlib's HOG detector (FaceDetection::landmark_box).
   Landmarks68 Predict(const cv::Mat& bgr, const cv::Rect2f& box) const;
 
  private:

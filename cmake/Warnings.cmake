@@ -6,13 +6,19 @@ if(HEADFORGE_ARCH)
   target_compile_options(headforge_warnings INTERFACE -march=${HEADFORGE_ARCH})
 endif()
 
-# headforge_add_test(NAME SOURCES... LIBS...) : one gtest executable registered with ctest.
+# headforge_add_test(NAME [WHOLE] SOURCES... LIBS...): one gtest executable
+# registered with ctest, a ctest entry per test case, or one entry for the
+# whole executable with WHOLE (for suites sharing an expensive set-up).
 function(headforge_add_test name)
-  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "WHOLE" "" "SOURCES;LIBS;LABELS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main headforge_warnings)
   target_compile_definitions(${name} PRIVATE
     HEADFORGE_TEST_SHARED_DATA="${HEADFORGE_SHARED_DATA}"
     HEADFORGE_TEST_BINARY_DIR="${CMAKE_BINARY_DIR}")
-  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
+  if(ARG_WHOLE)
+    add_test(NAME ${name} COMMAND ${name})
+  else()
+    gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
+  endif()
 endfunction()

@@ -5,12 +5,20 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "core/log.h"
+
 namespace headforge {
 
 StderrProgress::StderrProgress(std::chrono::seconds interval)
     : plain_(!isatty(STDERR_FILENO)), interval_(interval) {}
 
+namespace {
+// Progress is information: silenced with the info log level.
+bool Quiet() { return GetLogLevel() > LogLevel::kInfo; }
+}  // namespace
+
 void StderrProgress::Start(const std::string& label, int64_t total) {
+  if (Quiet()) return;
   std::lock_guard<std::mutex> lock(mutex_);
   label_ = label;
   total_ = total;
@@ -22,12 +30,14 @@ void StderrProgress::Start(const std::string& label, int64_t total) {
 }
 
 void StderrProgress::Advance(int64_t units) {
+  if (Quiet()) return;
   std::lock_guard<std::mutex> lock(mutex_);
   done_ += units;
   Draw(false);
 }
 
 void StderrProgress::Finish(const std::string& summary) {
+  if (Quiet()) return;
   std::lock_guard<std::mutex> lock(mutex_);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();

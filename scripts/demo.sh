@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# The demo: installs what is missing, builds, and runs `headforge run` on a real
+# GRID talking-head clip into demo_workspace/ (resumes if run again).
+#   scripts/demo.sh [video] [workspace]
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+build="${HEADFORGE_BUILD_DIR:-$root/build}"
+video="${1:-$root/../shared/data/video/grid/bbaf2n.mpg}"
+workspace="${2:-$root/demo_workspace}"
+"$root/scripts/install_deps.sh"
+"$root/scripts/build.sh"
+"$build/pipelines/headforge" run --video "$video" --workspace "$workspace"
+"$build/pipelines/headforge" status "$workspace"
+echo "demo: frames, masks and landmarks are in $workspace"

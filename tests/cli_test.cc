@@ -1,0 +1,257 @@
+// The command line end to end on a real GRID clip: exit codes, help, the
+// workspace's skip and resume behaviour, a SIGKILL mid-stage, failures that
+// leave earlier outputs intact.
+#include <gtest/gtest.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "core/fs.h"
+#include "core/hash.h"
+#include "core/json_io.h"
+
+extern char** environ;
+
+namespace headforge {
+namespace {
+
+const fs::path kGrid = fs::path(HEADFORGE_TEST_SHARED_DATA) / "video" / "grid";
+
+struct Result {
+  int code = -1;
+  std::string out, err;
+};
+
+pid_t Spawn(const std::vector<std::string>& args, const fs::path& out, const fs::path& err) {
+  std::vector<std::string> full = {HEADFORGE_BINARY};
+  full.insert(full.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (auto& a : full) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_addopen(&actions, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  pid_t pid = -1;
+  EXPECT_EQ(posix_spawn(&pid, HEADFORGE_BINARY, &actions, nullptr, argv.data(), environ), 0);
+  posix_spawn_file_actions_destroy(&actions);
+  return pid;
+}
+
+std::string Slurp(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+Result Headforge(const std::vector<std::string>& args) {
+  const fs::path out = fs::temp_directory_path() / ("hf_cli_out_" + std::to_string(getpid()));
+  const fs::path err = fs::temp_directory_path() / ("hf_cli_err_" + std::to_string(getpid()));
+  const pid_t pid = Spawn(args, out, err);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  Result r;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = Slurp(out);
+  r.err = Slurp(err);
+  return r;
+}
+
+bool Contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+// The hash of the stage's outputs: frames, masks, landmarks and capture report.
+std::string OutputsHash(const fs::path& ws) {
+  Hasher h;
+  EXPECT_TRUE(h.AddTreeContents(ws / "frames").ok());
+  EXPECT_TRUE(h.AddTreeContents(ws / "masks").ok());
+  EXPECT_TRUE(h.AddFileContents(ws / "landmarks.json").ok());
+  EXPECT_TRUE(h.AddFileContents(ws / "capture.json").ok());
+  return h.Hex();
+}
+
+size_t CountFiles(const fs::path& dir) {
+  std::error_code ec;
+  size_t n = 0;
+  for (auto it = fs::directory_iterator(dir, ec); !ec && it != fs::directory_iterator(); it.increment(ec)) ++n;
+  return n;
+}
+
+class CliTest : public ::testing::Test {
+ protected:
+  // One full run of the acceptance clip, shared by the tests that compare with it.
+  static void SetUpTestSuite() {
+    reference_ = fs::temp_directory_path() / "hf_cli_reference";
+    fs::remove_all(reference_);
+    first_run_ = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
+                      reference_.string()});
+  }
+  static fs::path Scratch(const std::string& name) {
+    const fs::path dir = fs::temp_directory_path() / ("hf_cli_" + name);
+    fs::remove_all(dir);
+    return dir;
+  }
+  static fs::path reference_;
+  static Result first_run_;
+};
+fs::path CliTest::reference_;
+Result CliTest::first_run_;
+
+TEST_F(CliTest, GridClipIngestsAllFramesWithLandmarks) {
+  ASSERT_EQ(first_run_.code, 0) << first_run_.err;
+  nlohmann::json landmarks, capture;
+  ASSERT_TRUE(ReadJson(reference_ / "landmarks.json", &landmarks).ok());
+  ASSERT_TRUE(ReadJson(reference_ / "capture.json", &capture).ok());
+  const auto& frames = landmarks["cameras"]["cam0"];
+  ASSERT_EQ(frames.size(), 75u);
+  int found = 0;
+  for (const auto& f : frames) {
+    if (!f["found"].get<bool>()) continue;
+    ++found;
+    EXPECT_EQ(f["points"].size(), 68u);
+  }
+  EXPECT_GE(found, 72) << "68 landmarks on at least 95% of 75 frames";
+  EXPECT_EQ(capture["report"]["kept"], 75);
+  EXPECT_EQ(CountFiles(reference_ / "frames" / "cam0"), 75u);
+  EXPECT_EQ(CountFiles(reference_ / "masks" / "cam0"), 75u);
+  // The effective options sit beside the outputs.
+  EXPECT_TRUE(Contains(Slurp(reference_ / "ingest.ini"), "[ingest]"));
+  EXPECT_TRUE(Contains(Slurp(reference_ / "ingest.ini"), "resolution = 512"));
+
+  const Result status = Headforge({"status", reference_.string()});
+  EXPECT_EQ(status.code, 0);
+  EXPECT_TRUE(Contains(status.out, "ingest     done")) << status.out;
+  EXPECT_TRUE(Contains(status.out, "calibrate  pending")) << status.out;
+}
+
+TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
+  ASSERT_EQ(first_run_.code, 0);
+  const fs::path ws = Scratch("skip");
+  fs::copy(reference_, ws, fs::copy_options::recursive);
+  nlohmann::json before;
+  ASSERT_TRUE(ReadJson(ws / "workspace.json", &before).ok());
+  const auto capture_time = fs::last_write_time(ws / "capture.json");
+
+  const Result again = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace", ws.string()});
+  ASSERT_EQ(again.code, 0) << again.err;
+  EXPECT_TRUE(Contains(again.err, "ingest: up to date")) << again.err;
+  nlohmann::json after;
+  ASSERT_TRUE(ReadJson(ws / "workspace.json", &after).ok());
+  EXPECT_EQ(after["stages"][0]["finished_at"], before["stages"][0]["finished_at"]);
+  EXPECT_EQ(fs::last_write_time(ws / "capture.json"), capture_time);
+
+  // A changed option redoes the stage.
+  const Result changed = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
+                              ws.string(), "--max-frames", "5", "--resolution", "128"});
+  ASSERT_EQ(changed.code, 0) << changed.err;
+  EXPECT_FALSE(Contains(changed.err, "up to date"));
+  EXPECT_EQ(CountFiles(ws / "frames" / "cam0"), 5u);
+}
+
+TEST_F(CliTest, KilledMidIngestResumesToTheSameOutputs) {
+  ASSERT_EQ(first_run_.code, 0);
+  const fs::path ws = Scratch("killed");
+  const fs::path log = fs::temp_directory_path() / "hf_cli_killed.log";
+  const pid_t pid = Spawn({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
+                           ws.string(), "--threads", "1"},
+                          log, log);
+  // Wait until ingest is writing frames, then kill it without warning.
+  const fs::path staging = ws / ".staging" / "ingest" / "frames" / "cam0";
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  int status = 0;
+  bool exited = false;
+  while (CountFiles(staging) < 3 && std::chrono::steady_clock::now() < deadline) {
+    if (waitpid(pid, &status, WNOHANG) == pid) {
+      exited = true;
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_FALSE(exited) << "ingest finished before it could be interrupted";
+  ASSERT_EQ(kill(pid, SIGKILL), 0);
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status));
+  EXPECT_FALSE(fs::exists(ws / "capture.json"));  // nothing half-done reached the workspace
+
+  const Result status_out = Headforge({"status", ws.string()});
+  EXPECT_TRUE(Contains(status_out.out, "interrupted")) << status_out.out;
+
+  const Result resumed = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace", ws.string()});
+  ASSERT_EQ(resumed.code, 0) << resumed.err;
+  EXPECT_TRUE(Contains(resumed.err, "interrupted")) << resumed.err;
+  EXPECT_EQ(OutputsHash(ws), OutputsHash(reference_));
+  EXPECT_FALSE(fs::exists(ws / ".staging" / "ingest"));
+}
+
+TEST_F(CliTest, FailedRerunKeepsEarlierOutputs) {
+  ASSERT_EQ(first_run_.code, 0);
+  const fs::path ws = Scratch("failed");
+  fs::copy(reference_, ws, fs::copy_options::recursive);
+  const std::string before = OutputsHash(ws);
+  const fs::path corrupt = fs::temp_directory_path() / "hf_cli_corrupt.mp4";
+  ASSERT_TRUE(WriteFileAtomic(corrupt, std::string(5000, 'x')).ok());
+  const Result failed = Headforge({"run", "--video", corrupt.string(), "--workspace", ws.string()});
+  EXPECT_EQ(failed.code, 1);
+  EXPECT_TRUE(Contains(failed.err, "headforge: ingest: cannot decode")) << failed.err;
+  EXPECT_TRUE(Contains(failed.err, "hf_cli_corrupt.mp4")) << failed.err;
+  EXPECT_EQ(OutputsHash(ws), before);
+  const Result status = Headforge({"status", ws.string()});
+  EXPECT_TRUE(Contains(status.out, "ingest     failed")) << status.out;
+}
+
+TEST_F(CliTest, ConfigFileSetsDottedKeysAndCommandLineWins) {
+  const fs::path ws = Scratch("config");
+  const fs::path ini = fs::temp_directory_path() / "hf_cli_config.ini";
+  ASSERT_TRUE(WriteFileAtomic(ini, "threads = 2\n[ingest]\nmax_frames = 4\nresolution = 96\nfps = 5\n").ok());
+  const Result r = Headforge({"ingest", "--config", ini.string(), "--resolution", "64", "--video",
+                        (kGrid / "lbax4n.mpg").string(), "--workspace", ws.string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  const std::string written = Slurp(ws / "ingest.ini");
+  EXPECT_TRUE(Contains(written, "max_frames = 4")) << written;
+  EXPECT_TRUE(Contains(written, "resolution = 64")) << written;
+  EXPECT_TRUE(Contains(written, "fps = 5")) << written;
+  EXPECT_EQ(CountFiles(ws / "frames" / "cam0"), 4u);
+}
+
+TEST(Cli, HelpVersionAndUsageErrors) {
+  const Result help = Headforge({"--help"});
+  EXPECT_EQ(help.code, 0);
+  for (const char* command : {"run", "ingest", "status", "version"}) EXPECT_TRUE(Contains(help.out, command));
+
+  const Result ingest_help = Headforge({"ingest", "--help"});
+  EXPECT_EQ(ingest_help.code, 0);
+  for (const char* text : {"--fps, --ingest.fps", "--max-frames", "--start", "--end", "--masks",
+                           "--resolution", "default: 512", "--detector", "--workspace", "--threads"})
+    EXPECT_TRUE(Contains(ingest_help.out, text)) << text;
+
+  const Result version = Headforge({"--version"});
+  EXPECT_EQ(version.code, 0);
+  EXPECT_TRUE(Contains(version.out, "headforge 0.1.0"));
+  EXPECT_TRUE(Contains(version.out, "COLMAP 3.8"));
+
+  EXPECT_EQ(Headforge({"frobnicate"}).code, 2);
+  const Result unknown = Headforge({"ingest", "--no-such-flag"});
+  EXPECT_EQ(unknown.code, 2);
+  EXPECT_TRUE(Contains(unknown.err, "no-such-flag"));
+  const Result bad = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
+                          "/tmp/hf_cli_bad", "--resolution", "0"});
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_TRUE(Contains(bad.err, "--resolution must be a positive")) << bad.err;
+  const Result missing = Headforge({"run", "--video", "/no/such.mp4", "--workspace", "/tmp/hf_cli_missing"});
+  EXPECT_EQ(missing.code, 1);
+  EXPECT_TRUE(Contains(missing.err, "/no/such.mp4")) << missing.err;
+  const Result no_ws = Headforge({"status", "/tmp/hf_cli_never_created"});
+  EXPECT_EQ(no_ws.code, 1);
+}
+
+}  // namespace
+}  // namespace headforge

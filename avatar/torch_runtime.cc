@@ -15,7 +15,7 @@ std::string TorchDescription() {
   if (torch::cuda::is_available()) {
     text += " (CUDA, " + std::to_string(torch::cuda::device_count()) + " device(s))";
   } else {
-    text += " (CPU, " + std::to_string(at::get_num_threads()) + " thread(s))";
+    text += " (CPU)";
   }
   return text;
 }

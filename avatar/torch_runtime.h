@@ -8,7 +8,7 @@ namespace headforge {
 
 // Sets LibTorch's intra-op thread count (it starts with one on these machines).
 void ConfigureTorchThreads(int threads);
-// "1.13.1 (CPU)" or "2.4.0 (CUDA 12.1, 1 device)".
+// "1.13.0 (CPU)" or "2.4.0 (CUDA, 1 device(s))".
 std::string TorchDescription();
 
 }  // namespace headforge

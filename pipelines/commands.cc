@@ -17,6 +17,8 @@ const std::vector<Command>& Commands() {
       {"run", "Run every available stage on a video, resuming where an earlier run stopped.",
        RunCommand},
       {"ingest", "Turn videos or image folders into frames, landmarks and masks.", IngestCommand},
+      {"simulate", "Render a synthetic head capture with ground truth from a scene file.",
+       SimulateCommand},
       {"status", "Show the stages of a workspace: status, wall time, summary.", StatusCommand},
       {"version", "Print the version and the libraries it was built with.", VersionCommand},
   };

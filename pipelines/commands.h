@@ -50,6 +50,7 @@ int ReportFailure(const Status& status);
 // Command entry points.
 int RunCommand(const std::vector<std::string>& args);
 int IngestCommand(const std::vector<std::string>& args);
+int SimulateCommand(const std::vector<std::string>& args);
 int StatusCommand(const std::vector<std::string>& args);
 int VersionCommand(const std::vector<std::string>& args);
 

@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <nlohmann/json.hpp>
@@ -40,7 +41,7 @@ Status EncodeVideo(const fs::path& frames, const fs::path& video, double fps, in
 }  // namespace
 
 Status WriteSimulation(const Simulator& sim, const fs::path& out_dir, const std::string& scene_text,
-                       Progress* progress) {
+                       int max_frames, Progress* progress) {
   const Scene& scene = sim.scene();
   const FaceModel& model = sim.model();
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
@@ -56,15 +57,16 @@ Status WriteSimulation(const Simulator& sim, const fs::path& out_dir, const std:
     effects.push_back({{"name", name}, {"params", params}});
   }
   nlohmann::json cameras = nlohmann::json::array();
-  std::vector<nlohmann::json> frames(sim.num_frames());
-  const int total = sim.num_frames() * sim.num_cameras();
+  const int frame_count = max_frames > 0 ? std::min(max_frames, sim.num_frames()) : sim.num_frames();
+  std::vector<nlohmann::json> frames(frame_count);
+  const int total = frame_count * sim.num_cameras();
   progress->Start("simulate " + scene.name, total);
   for (int c = 0; c < sim.num_cameras(); ++c) {
     const std::string name = sim.CameraName(c);
     const fs::path frame_dir = compress ? out_dir / ".encode" / name : out_dir / name;
     HF_RETURN_IF_ERROR(RemoveAll(frame_dir));
     double k1 = 0, k2 = 0;
-    for (int f = 0; f < sim.num_frames(); ++f) {
+    for (int f = 0; f < frame_count; ++f) {
       const SimulatedView view = sim.RenderView(f, c);
       k1 = view.k1;
       k2 = view.k2;
@@ -120,7 +122,8 @@ Status WriteSimulation(const Simulator& sim, const fs::path& out_dir, const std:
   const nlohmann::json truth = {
       {"scene", scene.name},
       {"fps", scene.fps},
-      {"frame_count", sim.num_frames()},
+      {"frame_count", frame_count},
+      {"scene_frame_count", sim.num_frames()},
       {"conventions",
        "metres; head frame +y up, face toward +z; OpenCV cameras; pixel centres at integers; "
        "landmarks in iBUG-68 order, distorted when lens_distortion is applied"},

@@ -78,10 +78,10 @@ class Simulator {
   Texture occluder_texture_;
 };
 
-// Renders every frame of every camera into `out_dir`:
+// Renders the first `max_frames` frames (0: all) of every camera into `out_dir`:
 //   cam<i>/<frame>.png (or cam<i>.mp4 with video_compression), masks/cam<i>/<frame>.png,
 //   ground_truth.json, scene.toml (a copy of the scene file when given).
 Status WriteSimulation(const Simulator& simulator, const fs::path& out_dir, const std::string& scene_text,
-                       Progress* progress);
+                       int max_frames, Progress* progress);
 
 }  // namespace headforge

@@ -230,7 +230,7 @@ TEST_F(SimulatorTest, CompressionWritesAVideoAndTheTruthRecordsTheEffects) {
   const fs::path dir = headforge::testing::ScratchDir();
   const auto sim = Make("effects = [\"video_compression\", \"sensor_noise\"]", "[effect.video_compression]\ncrf = 30\n");
   NullProgress progress;
-  ASSERT_TRUE(WriteSimulation(*sim, dir, "", &progress).ok());
+  ASSERT_TRUE(WriteSimulation(*sim, dir, "", 0, &progress).ok());
   EXPECT_TRUE(fs::exists(dir / "cam0.mp4"));
   EXPECT_FALSE(fs::exists(dir / "cam0"));
   cv::VideoCapture video((dir / "cam0.mp4").string(), cv::CAP_FFMPEG);

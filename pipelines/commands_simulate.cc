@@ -1,4 +1,6 @@
 // `headforge simulate`: renders a scene file into a capture with ground truth.
+#include <algorithm>
+
 #include "capture/simulator.h"
 #include "core/log.h"
 #include "core/parallel.h"
@@ -36,21 +38,21 @@ int SimulateCommand(const std::vector<std::string>& args) {
   if (Status s = ReadFileToString(scene_path, &text).WithContext("scene"); !s.ok()) return ReportFailure(s);
   Scene scene;
   if (Status s = ParseScene(text, scene_path, &scene); !s.ok()) return ReportFailure(s);
-  if (frames > 0) scene.frames = std::min(frames, scene.FrameCount());
   FaceModel model;
   if (Status s = FaceModel::Load(face_model, &model); !s.ok()) return ReportFailure(s);
   std::unique_ptr<Simulator> simulator;
   const int threads = common.threads > 0 ? common.threads : HardwareThreads();
   if (Status s = Simulator::Create(scene, model, threads, &simulator); !s.ok()) return ReportFailure(s);
   HF_LOG(Info) << "simulate: " << scene.name << ", " << simulator->num_cameras() << " camera(s) x "
-               << simulator->num_frames() << " frames, effects: "
+               << (frames > 0 ? std::min(frames, simulator->num_frames()) : simulator->num_frames())
+               << " frames, effects: "
                << (scene.effects.empty() ? std::string("none") : [&] {
                     std::string all;
                     for (const auto& e : scene.effects) all += (all.empty() ? "" : ", ") + e;
                     return all;
                   }());
   StderrProgress progress;
-  if (Status s = WriteSimulation(*simulator, out_dir, text, &progress); !s.ok()) return ReportFailure(s);
+  if (Status s = WriteSimulation(*simulator, out_dir, text, frames, &progress); !s.ok()) return ReportFailure(s);
   HF_LOG(Info) << "simulate: wrote " << out_dir;
   return kExitOk;
 }

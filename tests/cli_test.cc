@@ -255,3 +255,48 @@ TEST(Cli, HelpVersionAndUsageErrors) {
 
 }  // namespace
 }  // namespace headforge
+
+namespace headforge {
+namespace {
+
+// The simulator's output goes into ingest unchanged, and the landmarks ingest
+// detects on it agree with the simulator's ground truth.
+TEST(SimulateThenIngest, IngestAcceptsTheSimulatorsOutputUnchanged) {
+  const fs::path root = fs::temp_directory_path() / "hf_cli_sim";
+  fs::remove_all(root);
+  const fs::path scenes = fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes";
+  const Result sim = Headforge({"simulate", "--scene", (scenes / "talking_static.toml").string(), "--out",
+                                (root / "capture").string(), "--frames", "6"});
+  ASSERT_EQ(sim.code, 0) << sim.err;
+  const Result ingest = Headforge({"ingest", "--video", (root / "capture" / "cam0").string(), "--workspace",
+                                   (root / "ws").string(), "--resolution", "256"});
+  ASSERT_EQ(ingest.code, 0) << ingest.err;
+
+  nlohmann::json truth, landmarks, capture;
+  ASSERT_TRUE(ReadJson(root / "capture" / "ground_truth.json", &truth).ok());
+  ASSERT_TRUE(ReadJson(root / "ws" / "landmarks.json", &landmarks).ok());
+  ASSERT_TRUE(ReadJson(root / "ws" / "capture.json", &capture).ok());
+  ASSERT_EQ(capture["report"]["kept"], 6);
+  const auto& crop = capture["cameras"][0]["crop"];
+  const double x0 = crop["x0"], y0 = crop["y0"], scale = crop["scale"];
+  std::vector<double> errors;
+  for (int f = 0; f < 6; ++f) {
+    const auto& detected = landmarks["cameras"]["cam0"][f];
+    ASSERT_TRUE(detected["found"].get<bool>()) << "frame " << f;
+    const int source = capture["cameras"][0]["frames"][f]["source_frame"];
+    const auto& gt = truth["frames"][source]["views"]["cam0"]["landmarks"];
+    for (int i = 17; i < 68; ++i) {  // the jaw contour is defined differently by detector and model
+      const double gx = (gt[i][0].get<double>() + 0.5 - x0) * scale - 0.5;
+      const double gy = (gt[i][1].get<double>() + 0.5 - y0) * scale - 0.5;
+      errors.push_back(std::hypot(detected["points"][i][0].get<double>() - gx,
+                                  detected["points"][i][1].get<double>() - gy) / scale);
+    }
+  }
+  std::nth_element(errors.begin(), errors.begin() + errors.size() / 2, errors.end());
+  const double median = errors[errors.size() / 2];
+  std::printf("median detected-vs-true landmark distance: %.2f px of the 512 px simulator frame\n", median);
+  EXPECT_LT(median, 6.0);
+}
+
+}  // namespace
+}  // namespace headforge

@@ -16,19 +16,11 @@ double Radians(double degrees) { return degrees * kPi / 180.0; }
 
 Mesh Quad(const Eigen::Vector3f& origin, const Eigen::Vector3f& du, const Eigen::Vector3f& dv,
           const Texture* texture, float repeat) {
-  Mesh m;
-  m.vertices.resize(3, 4);
-  m.vertices << origin, origin + du, origin + du + dv, origin + dv;
-  m.triangles.resize(3, 2);
-  m.triangles << 0, 0, 1, 2, 2, 3;
-  m.uvs.resize(2, 4);
-  m.uvs << 0, 1, 1, 0, 0, 0, 1, 1;
   Material material;
   material.texture = texture;
   material.u_scale = material.v_scale = repeat;
   material.part = kPartBackground;
-  m.materials = {material};
-  return m;
+  return MakeQuad(origin, du, dv, material);
 }
 
 Mesh Sphere(float radius, const Texture* texture) {

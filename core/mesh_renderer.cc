@@ -47,6 +47,19 @@ Eigen::Vector3f Texture::Sample(float u, float v) const {
          fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1));
 }
 
+Mesh MakeQuad(const Eigen::Vector3f& origin, const Eigen::Vector3f& du, const Eigen::Vector3f& dv,
+              const Material& material) {
+  Mesh m;
+  m.vertices.resize(3, 4);
+  m.vertices << origin, origin + du, origin + du + dv, origin + dv;
+  m.triangles.resize(3, 2);
+  m.triangles << 0, 0, 1, 2, 2, 3;
+  m.uvs.resize(2, 4);
+  m.uvs << 0, 1, 1, 0, 0, 0, 1, 1;
+  m.materials = {material};
+  return m;
+}
+
 Eigen::Matrix3Xf VertexNormals(const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& triangles) {
   Eigen::Matrix3Xf normals = Eigen::Matrix3Xf::Zero(3, vertices.cols());
   for (int t = 0; t < triangles.cols(); ++t) {

@@ -61,6 +61,11 @@ struct Mesh {
   std::vector<Material> materials;
 };
 
+// A planar quad origin, origin + du, origin + du + dv, origin + dv (two
+// triangles) with UVs (0,0) (1,0) (1,1) (0,1), drawn with `material`.
+Mesh MakeQuad(const Eigen::Vector3f& origin, const Eigen::Vector3f& du, const Eigen::Vector3f& dv,
+              const Material& material);
+
 // Area-weighted vertex normals.
 Eigen::Matrix3Xf VertexNormals(const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& triangles);
 

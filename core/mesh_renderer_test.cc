@@ -10,18 +10,10 @@ namespace {
 // A quad in the plane through `origin` spanned by `du`, `dv`, with UVs 0..1.
 Mesh Quad(const Eigen::Vector3f& origin, const Eigen::Vector3f& du, const Eigen::Vector3f& dv,
           uint8_t part = kPartFace) {
-  Mesh m;
-  m.vertices.resize(3, 4);
-  m.vertices << origin, origin + du, origin + du + dv, origin + dv;
-  m.triangles.resize(3, 2);
-  m.triangles << 0, 0, 1, 2, 2, 3;
-  m.uvs.resize(2, 4);
-  m.uvs << 0, 1, 1, 0, 0, 0, 1, 1;
   Material material;
   material.part = part;
   material.colour = Eigen::Vector3f(1, 1, 1);
-  m.materials = {material};
-  return m;
+  return MakeQuad(origin, du, dv, material);
 }
 
 PinholeCamera Camera(int size = 64) {

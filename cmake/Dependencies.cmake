@@ -22,7 +22,7 @@ find_package(Threads REQUIRED)
 
 if(HEADFORGE_BUILD_TESTS)
   find_package(GTest REQUIRED)
-  find_package(rapidcheck CONFIG)
+  find_package(rapidcheck REQUIRED CONFIG)
 endif()
 if(HEADFORGE_BUILD_BENCHMARKS)
   find_package(benchmark REQUIRED)

@@ -277,24 +277,35 @@ Texture MakePatternTexture(int size, uint64_t seed, const Eigen::Vector3f& base_
   }
   cv::Mat image;
   cv::resize(small, image, cv::Size(size, size), 0, 0, cv::INTER_CUBIC);
+  // Shapes at every scale, from a tenth of the texture down to a few texels,
+  // so that feature detectors find corners and blobs at any viewing distance.
   cv::RNG rng(seed);
-  const int shapes = 90;
+  const int shapes = 90 + size * size / 4000;
   for (int i = 0; i < shapes; ++i) {
     const cv::Scalar colour(rng.uniform(0.05, 0.95), rng.uniform(0.05, 0.95), rng.uniform(0.05, 0.95));
     const cv::Point centre(rng.uniform(0, size), rng.uniform(0, size));
-    const int extent = rng.uniform(size / 60, size / 10);
+    const double scale = i < 90 ? rng.uniform(size / 60.0, size / 10.0) : std::exp(rng.uniform(std::log(3.0), std::log(size / 40.0)));
+    const int extent = std::max(2, static_cast<int>(scale));
     switch (i % 3) {
       case 0:
-        cv::rectangle(image, centre, centre + cv::Point(extent, rng.uniform(extent / 3, extent * 2)), colour, cv::FILLED);
+        cv::rectangle(image, centre, centre + cv::Point(extent, rng.uniform(std::max(1, extent / 3), extent * 2)), colour, cv::FILLED);
         break;
       case 1:
-        cv::circle(image, centre, extent / 2, colour, cv::FILLED, cv::LINE_AA);
+        cv::circle(image, centre, std::max(1, extent / 2), colour, cv::FILLED, cv::LINE_AA);
         break;
       default:
         cv::line(image, centre, centre + cv::Point(rng.uniform(-extent, extent), rng.uniform(-extent, extent)) * 2,
                  colour, std::max(1, extent / 8), cv::LINE_AA);
     }
   }
+  // Fine grain.
+  cv::Mat grain(size, size, CV_32FC1);
+  rng.fill(grain, cv::RNG::NORMAL, 0.0, 0.06);
+  cv::GaussianBlur(grain, grain, cv::Size(0, 0), 0.8);
+  std::vector<cv::Mat> channels;
+  cv::split(image, channels);
+  for (auto& c : channels) c += grain;
+  cv::merge(channels, image);
   Texture t;
   t.image = image;
   return t;

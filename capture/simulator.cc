@@ -121,7 +121,7 @@ Status Simulator::Create(const Scene& scene, const FaceModel& model, int threads
     for (int i = 0; i < 6; ++i) {
       const Eigen::Vector3f tint = scene.background_colour.cwiseProduct(
           Eigen::Vector3f(0.8f + 0.08f * i, 1.1f - 0.07f * i, 0.9f + 0.03f * i)).cwiseMin(1.0f);
-      s->background_texture_[i] = MakePatternTexture(1024, bg_seed + i, tint);
+      s->background_texture_[i] = MakePatternTexture(2048, bg_seed + i, tint);
       s->background_.push_back(Quad(corners[i][0], corners[i][1], corners[i][2], &s->background_texture_[i], 1.0f));
     }
   }

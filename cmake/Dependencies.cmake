@@ -8,7 +8,7 @@ find_package(Eigen3 3.3 REQUIRED NO_MODULE)
 find_package(nlohmann_json 3 REQUIRED)
 find_package(Boost 1.74 REQUIRED COMPONENTS program_options)
 find_package(OpenCV 4 REQUIRED COMPONENTS
-  core imgproc imgcodecs videoio dnn calib3d features2d quality)
+  core imgproc imgcodecs videoio video dnn calib3d features2d quality)
 find_package(dlib REQUIRED)
 find_package(HDF5 REQUIRED COMPONENTS C CXX)
 find_package(Ceres 2 REQUIRED)

@@ -17,9 +17,12 @@ const std::vector<Command>& Commands() {
       {"run", "Run every available stage on a video, resuming where an earlier run stopped.",
        RunCommand},
       {"ingest", "Turn videos or image folders into frames, landmarks and masks.", IngestCommand},
+      {"calibrate", "Estimate cameras: COLMAP, head pose (fixed camera) or a rig file.", CalibrateCommand},
+      {"align", "Align the cameras to the face model's metric head frame (Procrustes).", AlignCommand},
       {"simulate", "Render a synthetic head capture with ground truth from a scene file.",
        SimulateCommand},
       {"status", "Show the stages of a workspace: status, wall time, summary.", StatusCommand},
+      {"bench", "Measure accuracy against time: bench calibrate.", BenchCommand},
       {"version", "Print the version and the libraries it was built with.", VersionCommand},
   };
   return commands;

@@ -1,4 +1,4 @@
-// `headforge ingest` and `headforge run`.
+// `headforge ingest`, `calibrate`, `align` and `run`.
 #include <cstdio>
 
 #include "core/log.h"
@@ -10,21 +10,31 @@
 namespace headforge {
 namespace {
 
-// Opens the workspace and runs ingest with the parsed options.
-int IngestInWorkspace(const CommonOptions& common, IngestOptions* ingest, const OptionSet& options) {
-  ResolveIngestDefaults(common.data_dir, ingest);
-  if (Status s = ingest->Check(); !s.ok()) return ReportFailure(s);
-  ApplyCommonOptions(common);
-  std::unique_ptr<Workspace> workspace;
-  if (Status s = Workspace::Open(common.workspace, Workspace::Mode::kReadWrite, &workspace); !s.ok())
+// Options of the stages after ingest, shared by their commands and by `run`.
+struct LaterStages {
+  CalibrateOptions calibrate;
+  AlignOptions align;
+  std::string face_model;
+
+  void Add(OptionSet* o) {
+    AddCalibrateOptions(o, &calibrate);
+    AddAlignOptions(o, &align);
+    o->Add("face_model", &face_model,
+           "Face model (Basel-layout HDF5); default DATA/ict_facekit/ict_face_model.h5.", "face-model",
+           OptionSet::Effect::kRuntime);
+  }
+  void Resolve(const CommonOptions& common) {
+    if (face_model.empty()) face_model = (fs::path(common.data_dir) / "ict_facekit" / "ict_face_model.h5").string();
+  }
+};
+
+int Threads(const CommonOptions& common) { return common.threads > 0 ? common.threads : HardwareThreads(); }
+
+// Opens the workspace for writing, reporting failures.
+int OpenWorkspace(const CommonOptions& common, std::unique_ptr<Workspace>* workspace) {
+  if (Status s = Workspace::Open(common.workspace, Workspace::Mode::kReadWrite, workspace); !s.ok())
     return ReportFailure(s);
-  StderrProgress progress;
-  const int threads = common.threads > 0 ? common.threads : 0;
-  const Status status =
-      RunIngestStage(workspace.get(), *ingest, options, threads > 0 ? threads : HardwareThreads(),
-                     &progress);
-  if (!status.ok()) return ReportFailure(status);
-  return kExitOk;
+  return -1;
 }
 
 }  // namespace
@@ -43,28 +53,98 @@ int IngestCommand(const std::vector<std::string>& args) {
       "Writes frames/, masks/, landmarks.json and capture.json into the workspace.");
   if (parsed >= 0) return parsed;
   if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
-  return IngestInWorkspace(common, &ingest, options);
+  ResolveIngestDefaults(common.data_dir, &ingest);
+  if (Status s = ingest.Check(); !s.ok()) return ReportFailure(s);
+  ApplyCommonOptions(common);
+  std::unique_ptr<Workspace> workspace;
+  if (int code = OpenWorkspace(common, &workspace); code >= 0) return code;
+  StderrProgress progress;
+  if (Status s = RunIngestStage(workspace.get(), ingest, options, Threads(common), &progress); !s.ok())
+    return ReportFailure(s);
+  return kExitOk;
+}
+
+int CalibrateCommand(const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  LaterStages stages;
+  AddCommonOptions(&options, &common, /*with_workspace=*/true);
+  stages.Add(&options);
+  const int parsed = ParseOrExit(
+      &options, args, "headforge calibrate --workspace DIR [--mode auto|colmap|head-pose|rig] [options]",
+      "Estimates the cameras of the ingested frames: COLMAP structure from motion for a moving\n"
+      "camera or several cameras, head-pose cameras for a fixed camera, or a rig file.\n"
+      "Writes cameras.json (and colmap/ with the COLMAP model when SfM ran).");
+  if (parsed >= 0) return parsed;
+  if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
+  stages.Resolve(common);
+  if (Status s = stages.calibrate.Check(); !s.ok()) return ReportFailure(s);
+  ApplyCommonOptions(common);
+  std::unique_ptr<Workspace> workspace;
+  if (int code = OpenWorkspace(common, &workspace); code >= 0) return code;
+  StderrProgress progress;
+  if (Status s = RunCalibrateStage(workspace.get(), stages.calibrate, stages.face_model, options, Threads(common), &progress);
+      !s.ok())
+    return ReportFailure(s);
+  return kExitOk;
+}
+
+int AlignCommand(const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  LaterStages stages;
+  AddCommonOptions(&options, &common, /*with_workspace=*/true);
+  stages.Add(&options);
+  const int parsed = ParseOrExit(
+      &options, args, "headforge align --workspace DIR [options]",
+      "Aligns the reconstruction to the face model's metric head frame: triangulates the\n"
+      "landmarks, fits a similarity by Umeyama's method in RANSAC, reports residuals in mm.\n"
+      "Writes alignment.json (head_from_world) and cameras_head.json.");
+  if (parsed >= 0) return parsed;
+  if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
+  stages.Resolve(common);
+  ApplyCommonOptions(common);
+  std::unique_ptr<Workspace> workspace;
+  if (int code = OpenWorkspace(common, &workspace); code >= 0) return code;
+  if (Status s = RunAlignStage(workspace.get(), stages.align, stages.face_model, options); !s.ok())
+    return ReportFailure(s);
+  return kExitOk;
 }
 
 int RunCommand(const std::vector<std::string>& args) {
   OptionSet options;
   CommonOptions common;
   IngestOptions ingest;
+  LaterStages stages;
   AddCommonOptions(&options, &common, /*with_workspace=*/true);
   AddIngestOptions(&options, &ingest);
+  stages.Add(&options);
   const std::string usage = "headforge run --video FILE|DIR... --workspace DIR [options]";
   const int parsed = ParseOrExit(
       &options, args, usage,
-      "Runs the pipeline's stages in order into one workspace: ingest (available now), then\n"
-      "calibrate, align, track, train and export as they become available. A stage whose\n"
-      "inputs and options are unchanged is skipped; a failed or interrupted one is redone.\n"
+      "Runs the pipeline's stages in order into one workspace: ingest, calibrate and align\n"
+      "(track, train and export follow as they become available). A stage whose inputs and\n"
+      "options are unchanged is skipped; a failed or interrupted one is redone.\n"
       "Options of every stage are accepted, by their short flag or their dotted key.");
   if (parsed >= 0) return parsed;
   if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
-  const int code = IngestInWorkspace(common, &ingest, options);
-  if (code != kExitOk) return code;
-  HF_LOG(Info) << "run: ingest is the last stage available in this version; results are in "
-               << common.workspace << " (headforge status " << common.workspace << ")";
+  ResolveIngestDefaults(common.data_dir, &ingest);
+  stages.Resolve(common);
+  for (const Status& s : {ingest.Check(), stages.calibrate.Check(), stages.align.Check()})
+    if (!s.ok()) return ReportFailure(s);
+  ApplyCommonOptions(common);
+  std::unique_ptr<Workspace> workspace;
+  if (int code = OpenWorkspace(common, &workspace); code >= 0) return code;
+  StderrProgress progress;
+  if (Status s = RunIngestStage(workspace.get(), ingest, options, Threads(common), &progress); !s.ok())
+    return ReportFailure(s);
+  if (Status s = RunCalibrateStage(workspace.get(), stages.calibrate, stages.face_model, options, Threads(common), &progress);
+      !s.ok())
+    return ReportFailure(s);
+  if (Status s = RunAlignStage(workspace.get(), stages.align, stages.face_model, options); !s.ok())
+    return ReportFailure(s);
+  HF_LOG(Info) << "run: align is the last stage available in this version; results are in " << common.workspace
+               << " (headforge status " << common.workspace << ")";
   return kExitOk;
 }
 

@@ -1,5 +1,6 @@
 #include "pipelines/stages.h"
 
+#include "core/hash.h"
 #include "core/log.h"
 
 namespace headforge {
@@ -19,6 +20,86 @@ Status RunIngestStage(Workspace* workspace, const IngestOptions& ingest, const O
         result->outputs = {"frames", "masks", "landmarks.json", "capture.json"};
         result->message = summary.OneLine();
         HF_LOG(Info) << "ingest: " << result->message;
+        return Status::Ok();
+      },
+      &skipped);
+}
+
+namespace {
+
+// The fingerprint of a stage that reads `upstream` stages and the face model.
+Status ChainedFingerprint(const Workspace& workspace, const std::string& stage, const std::vector<std::string>& upstream,
+                          const std::string& options_ini, const std::string& face_model, std::string* fingerprint) {
+  Hasher h;
+  h.Add(stage + "-1").Add(options_ini);
+  for (const auto& name : upstream) {
+    const StageRecord* r = workspace.Find(name);
+    if (!r || r->status != StageStatus::kDone)
+      return Status::InvalidArgument(stage + " needs the " + name + " stage first (headforge " + name + " or headforge run)");
+    h.Add(r->fingerprint);
+  }
+  HF_RETURN_IF_ERROR(h.AddFileStamp(face_model).WithContext("face model"));
+  *fingerprint = h.Hex();
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status RunCalibrateStage(Workspace* workspace, const CalibrateOptions& calibrate, const std::string& face_model,
+                         const OptionSet& options, int threads, Progress* progress) {
+  HF_RETURN_IF_ERROR(calibrate.Check());
+  std::string fingerprint;
+  HF_RETURN_IF_ERROR(ChainedFingerprint(*workspace, "calibrate", {"ingest"}, options.ToIni("calibrate", true),
+                                        face_model, &fingerprint));
+  bool skipped = false;
+  return RunStage(
+      workspace, "calibrate", fingerprint, options.ToIni("calibrate"),
+      [&](const fs::path& staging, StageResult* result) {
+        IngestedCapture capture;
+        HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace->root(), &capture));
+        FaceModel model;
+        HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+        CalibrateOptions effective = calibrate;
+        effective.colmap.threads = threads;
+        CameraSet cameras;
+        CalibrateSummary summary;
+        HF_RETURN_IF_ERROR(RunCalibrate(effective, capture, model, staging, progress, &cameras, &summary));
+        result->outputs = {"cameras.json"};
+        if (fs::exists(staging / "colmap")) result->outputs.push_back("colmap");
+        result->message = summary.OneLine();
+        HF_LOG(Info) << "calibrate: " << result->message;
+        return Status::Ok();
+      },
+      &skipped);
+}
+
+Status RunAlignStage(Workspace* workspace, const AlignOptions& align, const std::string& face_model,
+                     const OptionSet& options) {
+  HF_RETURN_IF_ERROR(align.Check());
+  std::string fingerprint;
+  HF_RETURN_IF_ERROR(ChainedFingerprint(*workspace, "align", {"ingest", "calibrate"}, options.ToIni("align", true),
+                                        face_model, &fingerprint));
+  bool skipped = false;
+  return RunStage(
+      workspace, "align", fingerprint, options.ToIni("align"),
+      [&](const fs::path& staging, StageResult* result) {
+        IngestedCapture capture;
+        HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace->root(), &capture));
+        CameraSet cameras;
+        HF_RETURN_IF_ERROR(CameraSet::Read(workspace->Path("cameras.json"), &cameras));
+        FaceModel model;
+        HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+        AlignResult aligned;
+        HF_RETURN_IF_ERROR(RunAlign(align, capture, cameras, model, &aligned));
+        HF_RETURN_IF_ERROR(WriteAlignment(aligned, staging / "alignment.json"));
+        HF_RETURN_IF_ERROR(aligned.cameras.Write(staging / "cameras_head.json"));
+        result->outputs = {"alignment.json", "cameras_head.json"};
+        char text[200];
+        std::snprintf(text, sizeof(text), "scale %.4g, %zu landmarks, median residual %.1f mm, rms %.1f mm%s",
+                      aligned.head_from_world.scale, aligned.landmarks_used.size(), aligned.median_mm,
+                      aligned.rms_mm, aligned.message.empty() ? "" : (", " + aligned.message).c_str());
+        result->message = text;
+        HF_LOG(Info) << "align: " << result->message;
         return Status::Ok();
       },
       &skipped);

@@ -2,6 +2,8 @@
 // staging, commit. Shared by the stage's own command and by `run`.
 #pragma once
 
+#include "calibration/align.h"
+#include "calibration/calibrate.h"
 #include "capture/ingest.h"
 #include "core/options.h"
 #include "core/progress.h"
@@ -13,5 +15,13 @@ namespace headforge {
 // section is recorded as ingest.ini and enters the fingerprint.
 Status RunIngestStage(Workspace* workspace, const IngestOptions& ingest, const OptionSet& options,
                       int threads, Progress* progress);
+
+// Runs (or skips) calibrate on the workspace's ingest outputs.
+Status RunCalibrateStage(Workspace* workspace, const CalibrateOptions& calibrate, const std::string& face_model,
+                         const OptionSet& options, int threads, Progress* progress);
+
+// Runs (or skips) align on the workspace's cameras.
+Status RunAlignStage(Workspace* workspace, const AlignOptions& align, const std::string& face_model,
+                     const OptionSet& options);
 
 }  // namespace headforge

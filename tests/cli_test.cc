@@ -130,7 +130,13 @@ TEST_F(CliTest, GridClipIngestsAllFramesWithLandmarks) {
   const Result status = Headforge({"status", reference_.string()});
   EXPECT_EQ(status.code, 0);
   EXPECT_TRUE(Contains(status.out, "ingest     done")) << status.out;
-  EXPECT_TRUE(Contains(status.out, "calibrate  pending")) << status.out;
+  // A fixed camera: auto mode chose head-pose cameras; align followed.
+  EXPECT_TRUE(Contains(status.out, "calibrate  done")) << status.out;
+  EXPECT_TRUE(Contains(status.out, "head-pose")) << status.out;
+  EXPECT_TRUE(Contains(status.out, "align      done")) << status.out;
+  EXPECT_TRUE(Contains(status.out, "track      pending")) << status.out;
+  EXPECT_TRUE(fs::exists(reference_ / "cameras.json"));
+  EXPECT_TRUE(fs::exists(reference_ / "alignment.json"));
 }
 
 TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
@@ -225,7 +231,8 @@ TEST_F(CliTest, ConfigFileSetsDottedKeysAndCommandLineWins) {
 TEST(Cli, HelpVersionAndUsageErrors) {
   const Result help = Headforge({"--help"});
   EXPECT_EQ(help.code, 0);
-  for (const char* command : {"run", "ingest", "status", "version"}) EXPECT_TRUE(Contains(help.out, command));
+  for (const char* command : {"run", "ingest", "calibrate", "align", "simulate", "bench", "status", "version"})
+    EXPECT_TRUE(Contains(help.out, command));
 
   const Result ingest_help = Headforge({"ingest", "--help"});
   EXPECT_EQ(ingest_help.code, 0);

@@ -1,0 +1,50 @@
+// The align stage: the similarity head_from_world that takes the
+// reconstruction's world frame to the face model's metric head frame.
+// Landmarks are triangulated from every registered view (DLT, then Ceres with
+// a robust loss) and matched to the model's landmark vertices by Umeyama's
+// method inside RANSAC over the rigid landmarks. Residuals are in millimetres.
+#pragma once
+
+#include <vector>
+
+#include "calibration/camera_set.h"
+#include "calibration/similarity.h"
+#include "capture/capture_io.h"
+#include "core/face_model.h"
+#include "core/options.h"
+
+namespace headforge {
+
+struct AlignOptions {
+  double inlier_mm = 8.0;      // RANSAC inlier threshold, millimetres
+  double max_reprojection_px = 8.0;  // triangulated landmarks reprojecting worse are dropped
+  double max_yaw_deg = 35.0;         // views of a more turned head give no landmarks
+  Status Check() const;
+};
+void AddAlignOptions(OptionSet* options, AlignOptions* align);
+
+struct AlignResult {
+  Sim3 head_from_world;
+  SimilarityQuality quality = SimilarityQuality::kGood;
+  std::vector<int> landmarks_used;     // iBUG indices triangulated and used
+  std::vector<double> residuals_mm;    // per used landmark, after alignment
+  std::vector<bool> inlier;
+  double rms_mm = 0.0, median_mm = 0.0;
+  int reference_frame = -1;            // several cameras: the frame whose head pose defines the head frame
+  CameraSet cameras;                   // the views re-expressed in the head frame
+  std::string message;
+};
+
+// Aligns `cameras` (frame "world"). For head-pose cameras (frame "head") the
+// transform is the identity and the residuals of the triangulated landmarks
+// against the model are still reported.
+Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
+                const FaceModel& model, AlignResult* result);
+
+// Re-expresses cameras through a similarity: cam_from_head = cam_from_world * world_from_head,
+// with the translation rescaled so that the head frame stays metric.
+CameraSet ToHeadFrame(const CameraSet& cameras, const Sim3& head_from_world);
+
+Status WriteAlignment(const AlignResult& result, const fs::path& path);
+
+}  // namespace headforge

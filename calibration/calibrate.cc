@@ -1,0 +1,343 @@
+#include "calibration/calibrate.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
+
+#include "core/json_io.h"
+#include "core/log.h"
+#include "core/paths.h"
+
+namespace headforge {
+
+Status CalibrateOptions::Check() const {
+  if (mode != "auto" && mode != "colmap" && mode != "head-pose" && mode != "rig")
+    return Status::InvalidArgument("--mode must be auto, colmap, head-pose or rig, not '" + mode + "'");
+  if (mode == "rig" && rig.empty()) return Status::InvalidArgument("--mode rig needs --rig FILE");
+  if (min_registered < 0 || min_registered > 1) return Status::InvalidArgument("--min-registered must be in [0, 1]");
+  HF_RETURN_IF_ERROR(colmap.Check());
+  return head_pose.Check();
+}
+
+void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
+  o->Add("calibrate.mode", &c->mode,
+         "auto, colmap, head-pose or rig. auto: head-pose for one video with a still background, "
+         "else colmap (falling back to head-pose when COLMAP registers too few frames).",
+         "mode");
+  o->Add("calibrate.rig", &c->rig, "Rig file for --mode rig: JSON (docs/calibration.md) or a COLMAP text model folder.",
+         "rig");
+  o->Add("calibrate.min_registered", &c->min_registered,
+         "Fewest frames COLMAP must register, as a fraction of those it was given.", "min-registered");
+  o->Add("calibrate.motion_threshold", &c->motion_threshold_px,
+         "Median background motion (px) above which one video counts as a moving camera.", "motion-threshold");
+  c->colmap.executable = DefaultColmapExecutable();
+  o->Add("calibrate.colmap.executable", &c->colmap.executable, "The colmap program.", "colmap",
+         OptionSet::Effect::kRuntime);
+  o->Add("calibrate.colmap.camera_model", &c->colmap.camera_model,
+         "COLMAP camera model: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL or OPENCV.", "camera-model");
+  o->Add("calibrate.colmap.max_features", &c->colmap.max_features, "SIFT features per image.", "max-features");
+  o->Add("calibrate.colmap.matcher", &c->colmap.matcher,
+         "auto (sequential for one video, exhaustive for several), sequential or exhaustive.", "matcher");
+  o->Add("calibrate.colmap.overlap", &c->colmap.overlap, "Sequential matcher: neighbours per image.", "overlap");
+  o->Add("calibrate.colmap.mask", &c->colmap.mask,
+         "Pixels COLMAP may use: auto, none, background (not the head) or head.", "colmap-mask");
+  o->Add("calibrate.colmap.frame_step", &c->colmap.frame_step, "Give COLMAP every n-th frame.", "frame-step");
+  o->Add("calibrate.head_pose.focal", &c->head_pose.focal,
+         "Head-pose mode: focal length in frame pixels; 0 estimates it.", "focal");
+  o->Add("calibrate.head_pose.smoothness", &c->head_pose.smoothness,
+         "Head-pose mode: weight of temporal smoothness (0: none).", "smoothness");
+  o->Add("calibrate.head_pose.robust_px", &c->head_pose.robust_px,
+         "Head-pose mode: Huber scale of landmark residuals (px).", "robust-px");
+}
+
+std::string CalibrateSummary::OneLine() const {
+  char text[320];
+  if (mode == "head-pose")
+    std::snprintf(text, sizeof(text), "head-pose: %d/%d frames, focal %.1f px, median landmark error %.2f px (%.2f source px)",
+                  registered, total, focal, reprojection_px, reprojection_source_px);
+  else
+    std::snprintf(text, sizeof(text), "%s: %d/%d frames registered, reprojection %.2f px", mode.c_str(), registered,
+                  total, reprojection_px);
+  return std::string(text) + (reason.empty() ? "" : " (" + reason + ")");
+}
+
+Status MeasureBackgroundMotion(const IngestedCapture& capture, const std::string& camera, double* median_px) {
+  const IngestedCamera* cam = nullptr;
+  for (const auto& c : capture.cameras)
+    if (c.name == camera) cam = &c;
+  if (!cam || cam->frames.size() < 2) {
+    *median_px = 0.0;
+    return Status::Ok();
+  }
+  // Pairs of frames spread over the sequence; features off the head only.
+  std::vector<double> motions;
+  const int n = static_cast<int>(cam->frames.size());
+  for (int k = 1; k <= 4; ++k) {
+    const int a = (k - 1) * (n - 1) / 4, b = k * (n - 1) / 4;
+    if (a == b) continue;
+    cv::Mat ia = cv::imread(capture.FramePath(camera, cam->frames[a].index).string(), cv::IMREAD_GRAYSCALE);
+    cv::Mat ib = cv::imread(capture.FramePath(camera, cam->frames[b].index).string(), cv::IMREAD_GRAYSCALE);
+    cv::Mat ma = cv::imread(capture.MaskPath(camera, cam->frames[a].index).string(), cv::IMREAD_GRAYSCALE);
+    if (ia.empty() || ib.empty()) return Status::DataError("cannot read frames of " + camera);
+    // Background: off the head mask by a margin, above the mouth (shoulders and
+    // body reach up to the chin and move with the head), and not the black
+    // padding of a crop.
+    cv::Mat background = ma.empty() ? cv::Mat(ia.size(), CV_8U, cv::Scalar(255)) : (ma == 0);
+    cv::erode(background, background, cv::Mat(), cv::Point(-1, -1), std::max(5, ia.cols / 30));
+    if (const auto& lm = cam->frames[a].landmarks) {
+      const int mouth = std::clamp(static_cast<int>(std::min((*lm)[ibug::kMouthRight].y, (*lm)[ibug::kMouthLeft].y)), 0, ia.rows);
+      background.rowRange(mouth, ia.rows).setTo(0);
+    }
+    background &= ia > 2;
+    std::vector<cv::Point2f> pa, pb;
+    cv::goodFeaturesToTrack(ia, pa, 300, 0.01, 5, background);
+    if (pa.size() < 10) continue;
+    std::vector<uchar> ok, back_ok;
+    std::vector<float> err;
+    std::vector<cv::Point2f> back;
+    cv::calcOpticalFlowPyrLK(ia, ib, pa, pb, ok, err);
+    cv::calcOpticalFlowPyrLK(ib, ia, pb, back, back_ok, err);
+    // Only tracks that come back to where they started: flat or noisy regions
+    // (a plain backdrop under compression) give no trustworthy motion.
+    for (size_t i = 0; i < pa.size(); ++i)
+      if (ok[i] && back_ok[i] && cv::norm(back[i] - pa[i]) < 0.3) motions.push_back(cv::norm(pb[i] - pa[i]));
+  }
+  if (motions.size() < 20) {
+    *median_px = 0.0;  // too little texture off the head: nothing shows camera motion
+    return Status::Ok();
+  }
+  std::nth_element(motions.begin(), motions.begin() + motions.size() / 2, motions.end());
+  *median_px = motions[motions.size() / 2];
+  return Status::Ok();
+}
+
+namespace {
+
+Status HeadPoseCameras(const CalibrateOptions& options, const IngestedCapture& capture, const FaceModel& model,
+                       CameraSet* cameras, CalibrateSummary* summary) {
+  if (capture.cameras.size() != 1)
+    return Status::InvalidArgument("head-pose cameras need exactly one video, got " +
+                                   std::to_string(capture.cameras.size()));
+  const IngestedCamera& cam = capture.cameras[0];
+  if (!cam.fixed_crop)
+    return Status::InvalidArgument("head-pose cameras need a fixed crop (ingest --crop sequence or none)");
+  std::vector<std::optional<Landmarks68>> landmarks;
+  for (const auto& f : cam.frames) landmarks.push_back(f.landmarks);
+  const Eigen::Vector2d principal(cam.SourceCentreX(), cam.SourceCentreY());
+  HeadPoseResult result;
+  HF_RETURN_IF_ERROR(EstimateHeadPoseCameras(model, landmarks, cam.width, cam.height, principal, options.head_pose, &result));
+  CameraSet set;
+  set.mode = "head-pose";
+  set.frame = "head";
+  set.notes = "cam_from_world is cam_from_head: the head frame of the face model serves as the world";
+  CameraIntrinsics in;
+  in.name = cam.name;
+  in.model = "PINHOLE";
+  in.width = cam.width;
+  in.height = cam.height;
+  in.fx = in.fy = result.focal;
+  in.cx = principal.x();
+  in.cy = principal.y();
+  set.cameras.push_back(in);
+  int observed = 0;
+  for (size_t i = 0; i < cam.frames.size(); ++i) {
+    CameraView v;
+    v.camera = cam.name;
+    v.frame = cam.frames[i].index;
+    v.registered = true;  // interpolated where the face was lost
+    v.cam_from_world = result.cam_from_head[i];
+    set.views.push_back(v);
+    observed += result.observed[i];
+  }
+  summary->mode = "head-pose";
+  summary->registered = observed;
+  summary->total = static_cast<int>(cam.frames.size());
+  summary->focal = result.focal;
+  summary->reprojection_px = result.median_px;
+  summary->reprojection_source_px = result.median_px / cam.crop_scale;
+  *cameras = std::move(set);
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status ImportRig(const std::string& path, const IngestedCapture& capture, CameraSet* cameras) {
+  std::map<std::string, std::pair<CameraIntrinsics, Eigen::Isometry3d>> rig;
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) {
+    // A COLMAP text model: image names "<camera>/..." or "<camera>.<ext>" name the camera.
+    std::ifstream cams(fs::path(path) / "cameras.txt"), images(fs::path(path) / "images.txt");
+    if (!cams || !images) return Status::NotFound("rig folder " + path + " holds no COLMAP text model (cameras.txt, images.txt)");
+    std::map<int, CameraIntrinsics> intrinsics;
+    std::string line;
+    while (std::getline(cams, line)) {
+      if (line.empty() || line[0] == '#') continue;
+      std::istringstream in(line);
+      int id;
+      CameraIntrinsics c;
+      std::vector<double> p;
+      double v;
+      in >> id >> c.model >> c.width >> c.height;
+      while (in >> v) p.push_back(v);
+      if (p.size() < 3) return Status::DataError("rig camera " + std::to_string(id) + " has too few parameters");
+      const bool one_focal = c.model.rfind("SIMPLE", 0) == 0 || c.model == "RADIAL";
+      c.fx = p[0];
+      c.fy = one_focal ? p[0] : p[1];
+      c.cx = (one_focal ? p[1] : p[2]) - 0.5;
+      c.cy = (one_focal ? p[2] : p[3]) - 0.5;
+      if (c.model == "SIMPLE_RADIAL" || c.model == "RADIAL") c.k1 = p[3];
+      if (c.model == "RADIAL") c.k2 = p[4];
+      if (c.model == "OPENCV" && p.size() >= 8) {
+        c.k1 = p[4]; c.k2 = p[5]; c.p1 = p[6]; c.p2 = p[7];
+      }
+      intrinsics[id] = c;
+    }
+    while (std::getline(images, line)) {
+      if (line.empty() || line[0] == '#') continue;
+      std::istringstream in(line);
+      int id, camera_id;
+      double qw, qx, qy, qz, tx, ty, tz;
+      std::string name;
+      in >> id >> qw >> qx >> qy >> qz >> tx >> ty >> tz >> camera_id >> name;
+      std::getline(images, line);
+      const std::string camera = name.find('/') != std::string::npos ? name.substr(0, name.find('/'))
+                                                                     : fs::path(name).stem().string();
+      Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+      t.linear() = Eigen::Quaterniond(qw, qx, qy, qz).normalized().toRotationMatrix();
+      t.translation() = Eigen::Vector3d(tx, ty, tz);
+      if (!intrinsics.count(camera_id)) return Status::DataError("rig image " + name + " names an unknown camera");
+      rig[camera] = {intrinsics[camera_id], t};
+    }
+  } else {
+    nlohmann::json j;
+    HF_RETURN_IF_ERROR(ReadJson(path, &j).WithContext("rig file"));
+    try {
+      for (const auto& c : j.at("cameras")) {
+        CameraIntrinsics in;
+        in.name = c.at("name").get<std::string>();
+        in.model = c.value("model", "PINHOLE");
+        in.width = c.at("width").get<int>();
+        in.height = c.at("height").get<int>();
+        in.fx = c.at("fx").get<double>();
+        in.fy = c.value("fy", in.fx);
+        in.cx = c.at("cx").get<double>();
+        in.cy = c.at("cy").get<double>();
+        in.k1 = c.value("k1", 0.0);
+        in.k2 = c.value("k2", 0.0);
+        Eigen::Matrix4d m;
+        for (int r = 0; r < 4; ++r)
+          for (int k = 0; k < 4; ++k) m(r, k) = c.at("cam_from_world").at(r).at(k).get<double>();
+        Eigen::Isometry3d t;
+        t.matrix() = m;
+        rig[in.name] = {in, t};
+      }
+    } catch (const nlohmann::json::exception& e) {
+      return Status::DataError("rig file " + path + ": " + e.what());
+    }
+  }
+  CameraSet set;
+  set.mode = "rig";
+  set.frame = "world";
+  set.notes = "imported from " + path;
+  for (const auto& cam : capture.cameras) {
+    const auto it = rig.find(cam.name);
+    if (it == rig.end()) return Status::DataError("rig file " + path + " has no camera named " + cam.name);
+    CameraIntrinsics in = it->second.first;
+    if (!cam.fixed_crop) return Status::InvalidArgument("rig import needs a fixed crop (ingest --crop sequence or none)");
+    if (in.width != cam.source_width || in.height != cam.source_height)
+      return Status::DataError("rig camera " + cam.name + " is " + std::to_string(in.width) + "x" +
+                               std::to_string(in.height) + " but its video is " + std::to_string(cam.source_width) +
+                               "x" + std::to_string(cam.source_height));
+    // Source pixels -> frame pixels through ingest's crop.
+    in.fx *= cam.crop_scale;
+    in.fy *= cam.crop_scale;
+    in.cx = (in.cx + 0.5 - cam.crop_x0) * cam.crop_scale - 0.5;
+    in.cy = (in.cy + 0.5 - cam.crop_y0) * cam.crop_scale - 0.5;
+    in.width = cam.width;
+    in.height = cam.height;
+    in.name = cam.name;
+    set.cameras.push_back(in);
+    for (const auto& f : cam.frames) {
+      CameraView v;
+      v.camera = cam.name;
+      v.frame = f.index;
+      v.registered = true;
+      v.cam_from_world = it->second.second;
+      set.views.push_back(v);
+    }
+  }
+  *cameras = std::move(set);
+  return Status::Ok();
+}
+
+Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capture, const FaceModel& model,
+                    const fs::path& out_dir, Progress* progress, CameraSet* cameras, CalibrateSummary* summary) {
+  HF_RETURN_IF_ERROR(options.Check());
+  *summary = CalibrateSummary();
+  std::string mode = options.mode;
+  if (mode == "auto") {
+    if (capture.cameras.size() > 1) {
+      mode = "colmap";
+      summary->reason = "auto: " + std::to_string(capture.cameras.size()) + " cameras";
+    } else {
+      double motion = 0;
+      HF_RETURN_IF_ERROR(MeasureBackgroundMotion(capture, capture.cameras[0].name, &motion));
+      char text[160];
+      if (motion > options.motion_threshold_px) {
+        mode = "colmap";
+        std::snprintf(text, sizeof(text), "auto: the background moves %.1f px between frames: a moving camera", motion);
+      } else {
+        mode = "head-pose";
+        std::snprintf(text, sizeof(text), "auto: the background moves %.1f px between frames: a fixed camera", motion);
+      }
+      summary->reason = text;
+    }
+    HF_LOG(Info) << "calibrate: " << summary->reason << " -> " << mode;
+  }
+  if (mode == "rig") {
+    HF_RETURN_IF_ERROR(ImportRig(options.rig, capture, cameras));
+    summary->mode = "rig";
+    summary->registered = summary->total = static_cast<int>(cameras->views.size());
+    return cameras->Write(out_dir / "cameras.json");
+  }
+  if (mode == "head-pose") {
+    HF_RETURN_IF_ERROR(HeadPoseCameras(options, capture, model, cameras, summary));
+    return cameras->Write(out_dir / "cameras.json");
+  }
+  progress->Start("calibrate: COLMAP", 0);
+  ColmapReport report;
+  Status status = RunColmap(options.colmap, capture, out_dir / "colmap", cameras, &report);
+  progress->Finish();
+  const bool too_few = status.ok() && report.registered < options.min_registered * report.total;
+  if (status.ok() && !too_few) {
+    summary->mode = "colmap";
+    summary->registered = report.registered;
+    summary->total = report.total;
+    summary->reprojection_px = report.mean_reprojection_px;
+    HF_LOG(Info) << "calibrate: COLMAP registered " << report.registered << "/" << report.total << " frames in "
+                 << report.seconds << " s";
+    return cameras->Write(out_dir / "cameras.json");
+  }
+  const std::string what = status.ok() ? "COLMAP registered only " + std::to_string(report.registered) + " of " +
+                                             std::to_string(report.total) + " frames (below --min-registered " +
+                                             std::to_string(options.min_registered) + ")"
+                                       : status.message();
+  if (options.mode != "auto" || capture.cameras.size() != 1)
+    return Status::DataError(what + ". Try: more texture in the background, --max-features 8192, --matcher "
+                             "exhaustive, or --mode head-pose for a fixed camera");
+  HF_LOG(Warning) << "calibrate: " << what << "; falling back to head-pose cameras";
+  summary->reason += (summary->reason.empty() ? "" : "; ") + what + "; fell back to head-pose";
+  RemoveAll(out_dir / "colmap");
+  const std::string reason = summary->reason;
+  HF_RETURN_IF_ERROR(HeadPoseCameras(options, capture, model, cameras, summary));
+  summary->reason = reason;
+  return cameras->Write(out_dir / "cameras.json");
+}
+
+}  // namespace headforge

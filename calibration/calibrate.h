@@ -1,0 +1,59 @@
+// The calibrate stage: cameras for the ingested frames, by the method that
+// suits the capture (DESIGN.md, "Capture modes").
+//   colmap     structure from motion (moving camera, several cameras)
+//   head-pose  a fixed camera: head poses from landmarks with a shared focal length
+//   rig        intrinsics and extrinsics imported from a file
+//   auto       head-pose for one video whose background does not move, else
+//              colmap; falls back to head-pose when COLMAP registers too few frames
+#pragma once
+
+#include <string>
+
+#include "calibration/camera_set.h"
+#include "calibration/colmap_runner.h"
+#include "calibration/head_pose.h"
+#include "capture/capture_io.h"
+#include "core/face_model.h"
+#include "core/options.h"
+#include "core/progress.h"
+
+namespace headforge {
+
+struct CalibrateOptions {
+  std::string mode = "auto";
+  ColmapOptions colmap;
+  HeadPoseOptions head_pose;
+  // rig: a JSON file (docs/calibration.md) or a COLMAP text model folder.
+  std::string rig;
+  // Fewest registered frames, as a fraction of those given to COLMAP.
+  double min_registered = 0.5;
+  // Median background motion (pixels) above which a single video counts as a moving camera.
+  double motion_threshold_px = 1.5;
+  Status Check() const;
+};
+
+void AddCalibrateOptions(OptionSet* options, CalibrateOptions* calibrate);
+
+struct CalibrateSummary {
+  std::string mode;       // the mode used
+  std::string reason;     // why (auto mode), and any fallback
+  int registered = 0, total = 0;
+  double reprojection_px = 0.0;  // median landmark (head-pose) or mean SfM (colmap) reprojection error
+  double reprojection_source_px = 0.0;  // the same in source-video pixels (head-pose)
+  double focal = 0.0;     // head-pose: estimated focal length (frame pixels)
+  std::string OneLine() const;
+};
+
+// Calibrates into `out_dir` (cameras.json, colmap/ when SfM ran).
+Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capture, const FaceModel& model,
+                    const fs::path& out_dir, Progress* progress, CameraSet* cameras, CalibrateSummary* summary);
+
+// Median displacement (pixels) of background features between frames of one
+// camera: near zero for a fixed camera.
+Status MeasureBackgroundMotion(const IngestedCapture& capture, const std::string& camera, double* median_px);
+
+// Reads a rig file (JSON, or a COLMAP text model folder) into cameras for the
+// ingested views; intrinsics given in source pixels are mapped through ingest's crop.
+Status ImportRig(const std::string& path, const IngestedCapture& capture, CameraSet* cameras);
+
+}  // namespace headforge

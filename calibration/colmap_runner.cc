@@ -1,0 +1,256 @@
+#include "calibration/colmap_runner.h"
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+
+#include "core/image_io.h"
+#include "core/log.h"
+#include "core/parallel.h"
+
+namespace headforge {
+
+Status ColmapOptions::Check() const {
+  if (camera_model != "SIMPLE_RADIAL" && camera_model != "RADIAL" && camera_model != "OPENCV" &&
+      camera_model != "PINHOLE" && camera_model != "SIMPLE_PINHOLE")
+    return Status::InvalidArgument("colmap camera model must be SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL or OPENCV");
+  if (max_features < 100) return Status::InvalidArgument("colmap max features must be at least 100");
+  if (matcher != "auto" && matcher != "sequential" && matcher != "exhaustive")
+    return Status::InvalidArgument("colmap matcher must be auto, sequential or exhaustive");
+  if (mask != "auto" && mask != "none" && mask != "background" && mask != "head")
+    return Status::InvalidArgument("colmap mask must be auto, none, background or head");
+  if (frame_step < 1) return Status::InvalidArgument("frame step must be at least 1");
+  if (overlap < 1) return Status::InvalidArgument("sequential overlap must be at least 1");
+  return Status::Ok();
+}
+
+namespace {
+
+// Runs `args` with stdout and stderr appended to `log`; the environment gets
+// QT_QPA_PLATFORM=offscreen so no display is needed.
+Status RunTool(const std::vector<std::string>& args, const fs::path& log) {
+  const pid_t pid = fork();
+  if (pid < 0) return Status::Internal("fork failed");
+  if (pid == 0) {
+    FILE* out = std::fopen(log.c_str(), "a");
+    if (out) {
+      dup2(fileno(out), 1);
+      dup2(fileno(out), 2);
+    }
+    setenv("QT_QPA_PLATFORM", "offscreen", 1);
+    std::vector<char*> argv;
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    execvp(argv[0], argv.data());
+    _exit(127);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  if (WIFEXITED(status) && WEXITSTATUS(status) == 127)
+    return Status::NotFound("cannot run " + args[0] + " (install Debian's colmap package)");
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+    return Status::DataError("colmap " + args[1] + " failed (exit " +
+                             std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "); see " + log.string());
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status ReadColmapTextModel(const fs::path& dir, const IngestedCapture& capture, CameraSet* cameras,
+                           ColmapReport* report) {
+  std::ifstream cams(dir / "cameras.txt"), images(dir / "images.txt"), points(dir / "points3D.txt");
+  if (!cams || !images) return Status::DataError("no COLMAP text model in " + dir.string());
+  // cameras.txt: CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]
+  std::map<int, CameraIntrinsics> by_id;
+  std::string line;
+  while (std::getline(cams, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream in(line);
+    int id;
+    CameraIntrinsics c;
+    in >> id >> c.model >> c.width >> c.height;
+    std::vector<double> p;
+    double v;
+    while (in >> v) p.push_back(v);
+    if (c.model == "SIMPLE_PINHOLE" && p.size() >= 3) {
+      c.fx = c.fy = p[0]; c.cx = p[1]; c.cy = p[2];
+    } else if (c.model == "PINHOLE" && p.size() >= 4) {
+      c.fx = p[0]; c.fy = p[1]; c.cx = p[2]; c.cy = p[3];
+    } else if (c.model == "SIMPLE_RADIAL" && p.size() >= 4) {
+      c.fx = c.fy = p[0]; c.cx = p[1]; c.cy = p[2]; c.k1 = p[3];
+    } else if (c.model == "RADIAL" && p.size() >= 5) {
+      c.fx = c.fy = p[0]; c.cx = p[1]; c.cy = p[2]; c.k1 = p[3]; c.k2 = p[4];
+    } else if (c.model == "OPENCV" && p.size() >= 8) {
+      c.fx = p[0]; c.fy = p[1]; c.cx = p[2]; c.cy = p[3]; c.k1 = p[4]; c.k2 = p[5]; c.p1 = p[6]; c.p2 = p[7];
+    } else {
+      return Status::DataError("unsupported COLMAP camera model " + c.model);
+    }
+    // COLMAP puts pixel centres at +0.5; this tool at integers.
+    c.cx -= 0.5;
+    c.cy -= 0.5;
+    by_id[id] = c;
+  }
+  // images.txt: two lines per image; IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, then points.
+  std::map<std::string, std::pair<int, Eigen::Isometry3d>> posed;
+  while (std::getline(images, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream in(line);
+    int id, camera_id;
+    double qw, qx, qy, qz, tx, ty, tz;
+    std::string name;
+    in >> id >> qw >> qx >> qy >> qz >> tx >> ty >> tz >> camera_id >> name;
+    Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+    t.linear() = Eigen::Quaterniond(qw, qx, qy, qz).normalized().toRotationMatrix();
+    t.translation() = Eigen::Vector3d(tx, ty, tz);
+    posed[name] = {camera_id, t};
+    std::getline(images, line);  // the 2D points
+  }
+  CameraSet set;
+  set.mode = "colmap";
+  set.frame = "world";
+  for (const auto& cam : capture.cameras) {
+    bool named = false;
+    for (const auto& frame : cam.frames) {
+      CameraView view;
+      view.camera = cam.name;
+      view.frame = frame.index;
+      const auto it = posed.find(cam.name + "/" + FrameFileName(frame.index));
+      if (it != posed.end()) {
+        view.registered = true;
+        view.cam_from_world = it->second.second;
+        if (!named) {
+          CameraIntrinsics c = by_id.at(it->second.first);
+          c.name = cam.name;
+          set.cameras.push_back(c);
+          named = true;
+        }
+      }
+      set.views.push_back(view);
+    }
+    if (!named) {
+      CameraIntrinsics c;
+      c.name = cam.name;
+      c.width = cam.width;
+      c.height = cam.height;
+      set.cameras.push_back(c);  // no view registered: intrinsics unknown
+    }
+  }
+  int n_points = 0;
+  double error_sum = 0;
+  while (points && std::getline(points, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream in(line);
+    double id, x, y, z, r, g, b, error;
+    in >> id >> x >> y >> z >> r >> g >> b >> error;
+    ++n_points;
+    error_sum += error;
+  }
+  report->points = n_points;
+  report->mean_reprojection_px = n_points ? error_sum / n_points : 0.0;
+  report->registered = set.registered();
+  *cameras = std::move(set);
+  return Status::Ok();
+}
+
+Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, const fs::path& work_dir,
+                 CameraSet* cameras, ColmapReport* report) {
+  HF_RETURN_IF_ERROR(options.Check());
+  const auto start = std::chrono::steady_clock::now();
+  HF_RETURN_IF_ERROR(EnsureDirectory(work_dir));
+  const fs::path log = work_dir / "colmap.log";
+  const fs::path database = work_dir / "database.db";
+  RemoveAll(database);
+  const int threads = options.threads > 0 ? options.threads : HardwareThreads();
+  const bool several = capture.cameras.size() > 1;
+  report->matcher = options.matcher == "auto" ? (several ? "exhaustive" : "sequential") : options.matcher;
+  report->mask = options.mask == "auto" ? (several ? "background" : "none") : options.mask;
+
+  // The images COLMAP sees, named "<camera>/<index>.png", every frame_step-th frame.
+  const fs::path list = work_dir / "images.txt";
+  std::ofstream names(list);
+  int total = 0;
+  for (const auto& cam : capture.cameras)
+    for (size_t i = 0; i < cam.frames.size(); i += options.frame_step) {
+      names << cam.name << "/" << FrameFileName(cam.frames[i].index) << "\n";
+      ++total;
+    }
+  names.close();
+  report->total = total;
+  // Masks: COLMAP reads <mask_path>/<image name>.png and ignores pixels that are 0.
+  const fs::path mask_dir = work_dir / "masks";
+  if (report->mask != "none") {
+    for (const auto& cam : capture.cameras)
+      for (size_t i = 0; i < cam.frames.size(); i += options.frame_step) {
+        cv::Mat head = cv::imread(capture.MaskPath(cam.name, cam.frames[i].index).string(), cv::IMREAD_GRAYSCALE);
+        if (head.empty()) return Status::DataError("missing mask for " + cam.name + " frame " + std::to_string(i));
+        const cv::Mat keep = report->mask == "head" ? head : 255 - head;
+        HF_RETURN_IF_ERROR(WriteImageAtomic(mask_dir / cam.name / (FrameFileName(cam.frames[i].index) + ".png"), keep));
+      }
+  }
+  const std::string exe = options.executable;
+  const std::string image_path = (capture.workspace / "frames").string();
+  std::vector<std::string> extract = {exe, "feature_extractor", "--database_path", database.string(),
+                                      "--image_path", image_path, "--image_list_path", list.string(),
+                                      "--ImageReader.camera_model", options.camera_model,
+                                      "--ImageReader.single_camera_per_folder", "1",
+                                      "--SiftExtraction.use_gpu", "0",
+                                      "--SiftExtraction.num_threads", std::to_string(threads),
+                                      "--SiftExtraction.max_num_features", std::to_string(options.max_features)};
+  if (report->mask != "none") {
+    extract.push_back("--ImageReader.mask_path");
+    extract.push_back(mask_dir.string());
+  }
+  HF_LOG(Info) << "calibrate: COLMAP feature extraction on " << total << " images (" << options.max_features
+               << " SIFT features max, mask: " << report->mask << ")";
+  HF_RETURN_IF_ERROR(RunTool(extract, log));
+  HF_LOG(Info) << "calibrate: COLMAP " << report->matcher << " matching";
+  if (report->matcher == "sequential") {
+    HF_RETURN_IF_ERROR(RunTool({exe, "sequential_matcher", "--database_path", database.string(),
+                                "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", std::to_string(threads),
+                                "--SequentialMatching.overlap", std::to_string(options.overlap),
+                                "--SequentialMatching.quadratic_overlap", "1"},
+                               log));
+  } else {
+    HF_RETURN_IF_ERROR(RunTool({exe, "exhaustive_matcher", "--database_path", database.string(),
+                                "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", std::to_string(threads)},
+                               log));
+  }
+  const fs::path sparse = work_dir / "sparse";
+  RemoveAll(sparse);
+  HF_RETURN_IF_ERROR(EnsureDirectory(sparse));
+  HF_LOG(Info) << "calibrate: COLMAP mapper";
+  HF_RETURN_IF_ERROR(RunTool({exe, "mapper", "--database_path", database.string(), "--image_path", image_path,
+                              "--output_path", sparse.string(), "--Mapper.num_threads", std::to_string(threads)},
+                             log));
+  // The model that registered the most images.
+  fs::path best;
+  size_t best_size = 0;
+  for (const auto& entry : fs::directory_iterator(sparse)) {
+    if (!entry.is_directory()) continue;
+    const size_t size = fs::exists(entry.path() / "images.bin") ? fs::file_size(entry.path() / "images.bin") : 0;
+    if (size > best_size) {
+      best_size = size;
+      best = entry.path();
+    }
+  }
+  if (best.empty())
+    return Status::DataError("COLMAP reconstructed nothing from " + std::to_string(total) +
+                             " images (too few features or matches: textureless frames? see " + log.string() + ")");
+  const fs::path text = work_dir / "model";
+  RemoveAll(text);
+  HF_RETURN_IF_ERROR(EnsureDirectory(text));
+  HF_RETURN_IF_ERROR(RunTool({exe, "model_converter", "--input_path", best.string(), "--output_path", text.string(),
+                              "--output_type", "TXT"},
+                             log));
+  HF_RETURN_IF_ERROR(ReadColmapTextModel(text, capture, cameras, report));
+  report->total = total;
+  report->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return Status::Ok();
+}
+
+}  // namespace headforge

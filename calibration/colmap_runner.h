@@ -1,0 +1,50 @@
+// Structure from motion with the real `colmap` executable, run headless with
+// CPU SIFT on the ingested frames: feature extraction with one shared camera
+// per video, sequential (one video) or exhaustive (several) matching, the
+// incremental mapper; the largest model is converted to text and read back.
+#pragma once
+
+#include <string>
+
+#include "calibration/camera_set.h"
+#include "capture/capture_io.h"
+#include "core/fs.h"
+#include "core/status.h"
+
+namespace headforge {
+
+struct ColmapOptions {
+  std::string executable;                 // the colmap program
+  std::string camera_model = "SIMPLE_RADIAL";  // SIMPLE_RADIAL, RADIAL, OPENCV or PINHOLE
+  int max_features = 4096;                // SIFT features per image
+  std::string matcher = "auto";           // auto (sequential for one video, else exhaustive), sequential, exhaustive
+  int overlap = 10;                       // sequential matcher: neighbours per image
+  // Which pixels COLMAP may use: "none" (all), "background" (not the head:
+  // for a head that moves or deforms between frames), "head" (only the head),
+  // "auto" (background when several cameras watch a moving head, else none).
+  std::string mask = "auto";
+  int frame_step = 1;                     // use every n-th frame
+  int threads = 0;                        // 0: all
+  Status Check() const;
+};
+
+struct ColmapReport {
+  int registered = 0, total = 0;
+  double seconds = 0.0;
+  int points = 0;
+  double mean_reprojection_px = 0.0;
+  std::string matcher, mask;
+};
+
+// Runs COLMAP in `work_dir` (kept: database, sparse/ and text model, logs) and
+// fills `cameras` (frame "world", views of unused or unregistered frames marked
+// unregistered).
+Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, const fs::path& work_dir,
+                 CameraSet* cameras, ColmapReport* report);
+
+// Reads a COLMAP text model (cameras.txt, images.txt, points3D.txt). Image
+// names "<camera>/<index>.png" map to views.
+Status ReadColmapTextModel(const fs::path& dir, const IngestedCapture& capture, CameraSet* cameras,
+                           ColmapReport* report);
+
+}  // namespace headforge

@@ -1,0 +1,42 @@
+// Cameras for a fixed camera watching a moving head: the head pose in every
+// frame from its 68 landmarks, by PnP against the face model's landmark
+// vertices, then one Ceres problem over the whole sequence with a shared focal
+// length, a robust loss and temporal smoothness. The result is cam_from_head
+// per frame: the head frame (the face model's) serves as the world.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <optional>
+#include <vector>
+
+#include "capture/landmarks.h"
+#include "core/face_model.h"
+#include "core/status.h"
+
+namespace headforge {
+
+struct HeadPoseOptions {
+  double focal = 0.0;            // pixels; 0 estimates it over the sequence
+  double robust_px = 3.0;        // Huber loss scale on landmark residuals
+  double jaw_weight = 0.3;       // weight of the jaw contour (0-16): detectors follow the silhouette
+  double smoothness = 1.0;       // weight of the temporal smoothness term (0: none)
+  int max_iterations = 100;
+  Status Check() const;
+};
+
+struct HeadPoseResult {
+  double focal = 0.0;
+  std::vector<Eigen::Isometry3d> cam_from_head;  // per frame
+  std::vector<bool> observed;                    // frame had landmarks (others are interpolated)
+  std::vector<double> rms_px;                    // per observed frame
+  double median_px = 0.0;
+  std::string message;
+};
+
+// `landmarks[i]` holds frame i's landmarks (frame pixels) or nothing;
+// `principal` is the principal point in frame pixels.
+Status EstimateHeadPoseCameras(const FaceModel& model, const std::vector<std::optional<Landmarks68>>& landmarks,
+                               int width, int height, const Eigen::Vector2d& principal,
+                               const HeadPoseOptions& options, HeadPoseResult* result);
+
+}  // namespace headforge

@@ -1,0 +1,235 @@
+// `headforge bench calibrate`: what camera accuracy costs in time. Simulates
+// the orbit_360 and rig_8cam scenes (and talking_static for head-pose cameras),
+// ingests them, runs calibrate and align at several settings and compares the
+// cameras with the ground truth.
+#include <chrono>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "calibration/align.h"
+#include "calibration/calibrate.h"
+#include "calibration/evaluation.h"
+#include "capture/ingest.h"
+#include "capture/simulator.h"
+#include "core/hash.h"
+#include "core/json_io.h"
+#include "core/log.h"
+#include "core/parallel.h"
+#include "core/paths.h"
+#include "pipelines/commands.h"
+
+namespace headforge {
+namespace {
+
+struct Setting {
+  std::string label;
+  int max_features;
+  std::string matcher;
+  int frame_step;
+};
+
+struct Row {
+  std::string scene, label, mode;
+  double seconds = 0;
+  CameraErrors world, head;
+  bool ok = false;
+  std::string error;
+};
+
+// Simulates `scene` into dir/capture and ingests it into dir/workspace unless
+// both are already there for the same scene file.
+Status PrepareScene(const fs::path& scene_file, const fs::path& dir, const FaceModel& model, const std::string& data,
+                    int threads, const std::string& crop, IngestedCapture* capture, nlohmann::json* truth) {
+  std::string text;
+  HF_RETURN_IF_ERROR(ReadFileToString(scene_file, &text));
+  const std::string stamp = Hasher().Add(text).Add(crop).Hex();
+  std::string previous;
+  if (!ReadFileToString(dir / "stamp", &previous).ok() || previous != stamp) {
+    RemoveAll(dir);
+    Scene scene;
+    HF_RETURN_IF_ERROR(ParseScene(text, scene_file.string(), &scene));
+    std::unique_ptr<Simulator> sim;
+    HF_RETURN_IF_ERROR(Simulator::Create(scene, model, threads, &sim));
+    StderrProgress progress;
+    HF_RETURN_IF_ERROR(WriteSimulation(*sim, dir / "capture", text, 0, &progress));
+    IngestOptions ingest;
+    for (int c = 0; c < sim->num_cameras(); ++c) ingest.inputs.push_back((dir / "capture" / sim->CameraName(c)).string());
+    ingest.crop = crop;
+    ingest.resolution = scene.camera.intrinsics.width;
+    ingest.blur_ratio = 0.0;
+    ResolveIngestDefaults(data, &ingest);
+    IngestSummary summary;
+    HF_RETURN_IF_ERROR(RunIngest(ingest, dir / "workspace", threads, &progress, &summary));
+    HF_RETURN_IF_ERROR(WriteFileAtomic(dir / "stamp", stamp));
+  }
+  HF_RETURN_IF_ERROR(ReadIngestedCapture(dir / "workspace", capture));
+  return ReadJson(dir / "capture" / "ground_truth.json", truth);
+}
+
+Row RunSetting(const std::string& scene, const Setting& s, const IngestedCapture& capture, const nlohmann::json& truth,
+               const FaceModel& model, const fs::path& dir, int threads) {
+  Row row;
+  row.scene = scene;
+  row.label = s.label;
+  row.mode = "colmap";
+  CalibrateOptions options;
+  options.mode = "colmap";
+  options.colmap.executable = DefaultColmapExecutable();
+  options.colmap.max_features = s.max_features;
+  options.colmap.matcher = s.matcher;
+  options.colmap.frame_step = s.frame_step;
+  options.colmap.threads = threads;
+  const auto start = std::chrono::steady_clock::now();
+  CameraSet cameras;
+  CalibrateSummary summary;
+  NullProgress progress;
+  Status status = RunCalibrate(options, capture, model, dir, &progress, &cameras, &summary);
+  AlignResult aligned;
+  if (status.ok()) status = RunAlign(AlignOptions(), capture, cameras, model, &aligned);
+  row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (status.ok()) status = EvaluateWorldCameras(cameras, capture, truth, &aligned.head_from_world, &row.world);
+  if (status.ok()) status = EvaluateHeadCameras(aligned.cameras, capture, truth, &row.head);
+  // Only the frames given to COLMAP count as registrable.
+  row.world.views = summary.total;
+  row.ok = status.ok();
+  row.error = status.message();
+  return row;
+}
+
+// Head-pose cameras; `focal` > 0 gives the true focal length instead of estimating it.
+Row RunHeadPose(const IngestedCapture& capture, const nlohmann::json& truth, const FaceModel& model, const fs::path& dir,
+                double focal) {
+  Row row;
+  row.scene = "talking_static";
+  row.label = focal > 0 ? "head-pose, true focal given" : "head-pose, focal estimated";
+  row.mode = "head-pose";
+  CalibrateOptions options;
+  options.mode = "head-pose";
+  options.head_pose.focal = focal;
+  const auto start = std::chrono::steady_clock::now();
+  CameraSet cameras;
+  CalibrateSummary summary;
+  NullProgress progress;
+  Status status = RunCalibrate(options, capture, model, dir, &progress, &cameras, &summary);
+  row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (status.ok()) status = EvaluateHeadCameras(cameras, capture, truth, &row.head);
+  row.world = row.head;
+  row.ok = status.ok();
+  row.error = status.message();
+  return row;
+}
+
+nlohmann::json RowJson(const Row& r) {
+  return {{"scene", r.scene},
+          {"setting", r.label},
+          {"mode", r.mode},
+          {"ok", r.ok},
+          {"error", r.error},
+          {"seconds", r.seconds},
+          {"registered", r.world.registered},
+          {"frames", r.world.views},
+          {"rotation_deg_median", r.world.median_rotation_deg},
+          {"rotation_deg_max", r.world.max_rotation_deg},
+          {"centre_mm_median", r.world.median_centre_mm},
+          {"centre_mm_max", r.world.max_centre_mm},
+          {"scale_error", r.world.scale_error},
+          {"focal_error", r.world.focal_error},
+          {"aligned_rotation_deg_median", r.head.median_rotation_deg},
+          {"aligned_centre_mm_median", r.head.median_centre_mm}};
+}
+
+void PrintRow(const Row& r) {
+  if (!r.ok) {
+    std::printf("| %s | %s | %.0f s | failed: %s |\n", r.scene.c_str(), r.label.c_str(), r.seconds, r.error.c_str());
+    return;
+  }
+  std::printf("| %s | %s | %.0f s | %d/%d | %.3f / %.3f | %.2f / %.2f | %.2f%% | %.2f%% | %.2f | %.1f |\n", r.scene.c_str(),
+              r.label.c_str(), r.seconds, r.world.registered, r.world.views, r.world.median_rotation_deg,
+              r.world.max_rotation_deg, r.world.median_centre_mm, r.world.max_centre_mm, 100 * r.world.scale_error,
+              100 * r.world.focal_error, r.head.median_rotation_deg, r.head.median_centre_mm);
+  std::fflush(stdout);
+}
+
+int BenchCalibrate(const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  AddCommonOptions(&options, &common, false);
+  bool json = false, quick = false;
+  std::string out = "bench_calibrate";
+  std::vector<std::string> scenes = {"orbit_360", "rig_8cam", "talking_static"};
+  options.Add("bench.json", &json, "Print one JSON document instead of the table.", "json");
+  options.Add("bench.out", &out, "Folder for the simulated scenes, workspaces and COLMAP runs (reused).", "out");
+  options.Add("bench.scenes", &scenes, "Scenes to run (from scenes/).", "scenes");
+  options.Add("bench.quick", &quick, "Only the baseline setting of each scene.", "quick");
+  const int parsed = ParseOrExit(&options, args, "headforge bench calibrate [--json] [--out DIR] [--quick]",
+                                 "Runs calibrate and align on simulated scenes at several settings and prints, per\n"
+                                 "setting: wall time, registered frames, rotation and camera-centre errors after the\n"
+                                 "best similarity to the truth, the scale error of align, the focal error, and the\n"
+                                 "errors of the aligned head-frame cameras.");
+  if (parsed >= 0) return parsed;
+  ApplyCommonOptions(common);
+  if (json) SetLogLevel(LogLevel::kWarning);
+  const int threads = common.threads > 0 ? common.threads : HardwareThreads();
+  FaceModel model;
+  if (Status s = FaceModel::Load(common.data_dir + "/ict_facekit/ict_face_model.h5", &model); !s.ok()) return ReportFailure(s);
+  const fs::path scene_dir = fs::path(HEADFORGE_SOURCE_DIR) / "scenes";
+  if (!json) {
+    std::printf("| scene | setting | wall time | registered | rotation error median / max (deg) | centre error median / max (mm) | align scale error | focal error | aligned rotation (deg) | aligned centre (mm) |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
+  }
+  nlohmann::json rows = nlohmann::json::array();
+  for (const auto& scene : scenes) {
+    IngestedCapture capture;
+    nlohmann::json truth;
+    const fs::path dir = fs::path(out) / scene;
+    const std::string crop = scene == "talking_static" ? "sequence" : "none";
+    if (Status s = PrepareScene(scene_dir / (scene + ".toml"), dir, model, common.data_dir, threads, crop, &capture, &truth);
+        !s.ok())
+      return ReportFailure(s.WithContext(scene));
+    std::vector<Row> results;
+    if (scene == "talking_static") {
+      results.push_back(RunHeadPose(capture, truth, model, dir / "runs" / "head_pose", 0.0));
+      const double true_focal = truth["cameras"][0]["fx"].get<double>() * capture.cameras[0].crop_scale;
+      results.push_back(RunHeadPose(capture, truth, model, dir / "runs" / "head_pose_known", true_focal));
+    } else {
+      const bool rig = capture.cameras.size() > 1;
+      const std::string base_matcher = rig ? "exhaustive" : "sequential";
+      const int base_step = rig ? 4 : 1;
+      std::vector<Setting> settings = {{"4k SIFT, " + base_matcher + ", every " + std::to_string(base_step) + ". frame", 4096, base_matcher, base_step}};
+      if (!quick) {
+        settings.push_back({"1k SIFT", 1024, base_matcher, base_step});
+        settings.push_back({"8k SIFT", 8192, base_matcher, base_step});
+        settings.push_back({rig ? "sequential matching" : "exhaustive matching", 4096, rig ? "sequential" : "exhaustive", base_step});
+        settings.push_back({"every " + std::to_string(2 * base_step) + ". frame", 4096, base_matcher, 2 * base_step});
+        settings.push_back({"every " + std::to_string(4 * base_step) + ". frame", 4096, base_matcher, 4 * base_step});
+      }
+      for (const auto& s : settings) {
+        std::string name = s.label;
+        for (char& c : name)
+          if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+        results.push_back(RunSetting(scene, s, capture, truth, model, dir / "runs" / name, threads));
+        if (!json) PrintRow(results.back());
+      }
+    }
+    for (const auto& r : results) {
+      if (!json && scene == "talking_static") PrintRow(r);
+      rows.push_back(RowJson(r));
+    }
+  }
+  if (json) std::printf("%s\n", rows.dump(1).c_str());
+  return kExitOk;
+}
+
+}  // namespace
+
+int BenchCommand(const std::vector<std::string>& args) {
+  if (!args.empty() && args[0] == "calibrate") return BenchCalibrate(std::vector<std::string>(args.begin() + 1, args.end()));
+  std::fprintf(stderr,
+               "Usage: headforge bench calibrate [--json] [--out DIR] [--quick]\n"
+               "  calibrate   camera accuracy against time on simulated scenes\n"
+               "(rendering and kernel speed: build/bench/headforge_bench)\n");
+  return args.empty() || args[0] == "--help" ? (args.empty() ? kExitUsage : kExitOk) : kExitUsage;
+}
+
+}  // namespace headforge

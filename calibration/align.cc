@@ -143,11 +143,12 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       for (int i = 0; i < 68; ++i) group[i].push_back({p, undistorted[i]});
     }
   }
-  // Rigid landmarks that name one point of the surface from any side: eye
-  // corners, nose tip, nostril wings and the base of the nose. The nose bridge,
-  // brows and jaw follow the visible contour, which is another point of the
-  // surface in every view, and the mouth moves.
-  std::vector<int> rigid = {36, 39, 42, 45, 30, 31, 33, 35};
+  // Landmarks that name one point of the surface from any side: eye corners,
+  // brow ends and mouth corners are marked by the skin's texture; the nose tip
+  // and base need shading to be seen and may be rejected by RANSAC. The nose
+  // bridge and jaw follow the visible contour (another surface point in every
+  // view) and are left out.
+  std::vector<int> rigid = {17, 21, 22, 26, 36, 39, 42, 45, 48, 54, 30, 33};
 
   if (head_frame) {
     // Head-pose cameras already live in the head frame: the transform is the
@@ -212,6 +213,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
     for (size_t k = 0; k < used.size(); ++k) {
       const double e = 1000.0 * (tgt.col(k) - r.head_from_world * src.col(k)).norm();
       r.residuals_mm.push_back(e);
+      r.points.push_back(src.col(k));
       r.inlier.push_back(std::find(sim.inliers.begin(), sim.inliers.end(), static_cast<int>(k)) != sim.inliers.end());
       sorted.push_back(e);
       sum += e * e;

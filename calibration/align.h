@@ -27,6 +27,7 @@ struct AlignResult {
   Sim3 head_from_world;
   SimilarityQuality quality = SimilarityQuality::kGood;
   std::vector<int> landmarks_used;     // iBUG indices triangulated and used
+  std::vector<Eigen::Vector3d> points;  // per used landmark: triangulated, world frame
   std::vector<double> residuals_mm;    // per used landmark, after alignment
   std::vector<bool> inlier;
   double rms_mm = 0.0, median_mm = 0.0;

@@ -21,6 +21,8 @@ Status CalibrateOptions::Check() const {
     return Status::InvalidArgument("--mode must be auto, colmap, head-pose or rig, not '" + mode + "'");
   if (mode == "rig" && rig.empty()) return Status::InvalidArgument("--mode rig needs --rig FILE");
   if (min_registered < 0 || min_registered > 1) return Status::InvalidArgument("--min-registered must be in [0, 1]");
+  if (static_rig != "auto" && static_rig != "yes" && static_rig != "no")
+    return Status::InvalidArgument("--static-rig must be auto, yes or no");
   HF_RETURN_IF_ERROR(colmap.Check());
   return head_pose.Check();
 }
@@ -48,6 +50,12 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
   o->Add("calibrate.colmap.mask", &c->colmap.mask,
          "Pixels COLMAP may use: auto, none, background (not the head) or head.", "colmap-mask");
   o->Add("calibrate.colmap.frame_step", &c->colmap.frame_step, "Give COLMAP every n-th frame.", "frame-step");
+  o->Add("calibrate.static_rig", &c->static_rig,
+         "Several cameras: auto (fixed when no camera's background moves), yes or no. Fixed cameras are "
+         "calibrated from synchronised frames and keep one pose each.",
+         "static-rig");
+  o->Add("calibrate.colmap.rig_instants", &c->colmap.rig_instants,
+         "Fixed cameras: synchronised instants given to COLMAP.", "rig-instants");
   o->Add("calibrate.head_pose.focal", &c->head_pose.focal,
          "Head-pose mode: focal length in frame pixels; 0 estimates it.", "focal");
   o->Add("calibrate.head_pose.smoothness", &c->head_pose.smoothness,
@@ -281,6 +289,22 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
   HF_RETURN_IF_ERROR(options.Check());
   *summary = CalibrateSummary();
   std::string mode = options.mode;
+  ColmapOptions colmap = options.colmap;
+  if (capture.cameras.size() > 1 && options.static_rig != "no") {
+    // Several cameras: a rig of fixed cameras is calibrated from synchronised frames.
+    bool fixed = options.static_rig == "yes";
+    if (options.static_rig == "auto") {
+      fixed = true;
+      for (const auto& cam : capture.cameras) {
+        double motion = 0;
+        HF_RETURN_IF_ERROR(MeasureBackgroundMotion(capture, cam.name, &motion));
+        fixed = fixed && motion <= options.motion_threshold_px;
+      }
+    }
+    colmap.static_cameras = fixed;
+    if (fixed) HF_LOG(Info) << "calibrate: the " << capture.cameras.size() << " cameras do not move: calibrating the rig from "
+                            << colmap.rig_instants << " synchronised instant(s)";
+  }
   if (mode == "auto") {
     if (capture.cameras.size() > 1) {
       mode = "colmap";
@@ -312,7 +336,7 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
   }
   progress->Start("calibrate: COLMAP", 0);
   ColmapReport report;
-  Status status = RunColmap(options.colmap, capture, out_dir / "colmap", cameras, &report);
+  Status status = RunColmap(colmap, capture, out_dir / "colmap", cameras, &report);
   progress->Finish();
   const bool too_few = status.ok() && report.registered < options.min_registered * report.total;
   if (status.ok() && !too_few) {

@@ -29,6 +29,8 @@ struct CalibrateOptions {
   double min_registered = 0.5;
   // Median background motion (pixels) above which a single video counts as a moving camera.
   double motion_threshold_px = 1.5;
+  // Several cameras: "auto" (fixed when no camera's background moves), "yes", "no".
+  std::string static_rig = "auto";
   Status Check() const;
 };
 

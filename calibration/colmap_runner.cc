@@ -26,6 +26,7 @@ Status ColmapOptions::Check() const {
     return Status::InvalidArgument("colmap mask must be auto, none, background or head");
   if (frame_step < 1) return Status::InvalidArgument("frame step must be at least 1");
   if (overlap < 1) return Status::InvalidArgument("sequential overlap must be at least 1");
+  if (rig_instants < 1) return Status::InvalidArgument("rig instants must be at least 1");
   return Status::Ok();
 }
 
@@ -168,15 +169,26 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
   const int threads = options.threads > 0 ? options.threads : HardwareThreads();
   const bool several = capture.cameras.size() > 1;
   report->matcher = options.matcher == "auto" ? (several ? "exhaustive" : "sequential") : options.matcher;
-  report->mask = options.mask == "auto" ? (several ? "background" : "none") : options.mask;
+  report->mask = options.mask == "auto" ? (several && !options.static_cameras ? "background" : "none") : options.mask;
 
-  // The images COLMAP sees, named "<camera>/<index>.png", every frame_step-th frame.
+  // The frames COLMAP sees, named "<camera>/<index>.png": every frame_step-th
+  // frame, or for fixed cameras a few synchronised instants.
+  std::vector<std::vector<size_t>> chosen(capture.cameras.size());
+  for (size_t c = 0; c < capture.cameras.size(); ++c) {
+    const size_t n = capture.cameras[c].frames.size();
+    if (options.static_cameras) {
+      const size_t k = std::min<size_t>(n, options.rig_instants);
+      for (size_t i = 0; i < k; ++i) chosen[c].push_back(k > 1 ? i * (n - 1) / (k - 1) : 0);
+    } else {
+      for (size_t i = 0; i < n; i += options.frame_step) chosen[c].push_back(i);
+    }
+  }
   const fs::path list = work_dir / "images.txt";
   std::ofstream names(list);
   int total = 0;
-  for (const auto& cam : capture.cameras)
-    for (size_t i = 0; i < cam.frames.size(); i += options.frame_step) {
-      names << cam.name << "/" << FrameFileName(cam.frames[i].index) << "\n";
+  for (size_t c = 0; c < capture.cameras.size(); ++c)
+    for (size_t i : chosen[c]) {
+      names << capture.cameras[c].name << "/" << FrameFileName(capture.cameras[c].frames[i].index) << "\n";
       ++total;
     }
   names.close();
@@ -184,8 +196,9 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
   // Masks: COLMAP reads <mask_path>/<image name>.png and ignores pixels that are 0.
   const fs::path mask_dir = work_dir / "masks";
   if (report->mask != "none") {
-    for (const auto& cam : capture.cameras)
-      for (size_t i = 0; i < cam.frames.size(); i += options.frame_step) {
+    for (size_t c = 0; c < capture.cameras.size(); ++c)
+      for (size_t i : chosen[c]) {
+        const IngestedCamera& cam = capture.cameras[c];
         cv::Mat head = cv::imread(capture.MaskPath(cam.name, cam.frames[i].index).string(), cv::IMREAD_GRAYSCALE);
         if (head.empty()) return Status::DataError("missing mask for " + cam.name + " frame " + std::to_string(i));
         const cv::Mat keep = report->mask == "head" ? head : 255 - head;
@@ -249,6 +262,18 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
                              log));
   HF_RETURN_IF_ERROR(ReadColmapTextModel(text, capture, cameras, report));
   report->total = total;
+  if (options.static_cameras) {
+    // Each fixed camera's pose (from its first registered instant) holds for
+    // all of its frames; registration counts the instants COLMAP was given.
+    std::map<std::string, Eigen::Isometry3d> pose;
+    for (const auto& v : cameras->views)
+      if (v.registered && !pose.count(v.camera)) pose[v.camera] = v.cam_from_world;
+    for (auto& v : cameras->views) {
+      const auto it = pose.find(v.camera);
+      v.registered = it != pose.end();
+      if (v.registered) v.cam_from_world = it->second;
+    }
+  }
   report->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return Status::Ok();
 }

@@ -24,6 +24,11 @@ struct ColmapOptions {
   // "auto" (background when several cameras watch a moving head, else none).
   std::string mask = "auto";
   int frame_step = 1;                     // use every n-th frame
+  // Cameras that do not move (a rig): COLMAP sees `rig_instants` synchronised
+  // frames per camera, with the head unmasked (at one instant it is as still
+  // as the room), and each camera's pose is given to all its frames.
+  bool static_cameras = false;
+  int rig_instants = 1;
   int threads = 0;                        // 0: all
   Status Check() const;
 };

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <Eigen/SVD>
 #include <map>
 #include <nlohmann/json.hpp>
 
@@ -16,6 +17,7 @@ Status AlignOptions::Check() const {
   if (!(inlier_mm > 0)) return Status::InvalidArgument("--inlier-mm must be positive");
   if (!(max_reprojection_px > 0)) return Status::InvalidArgument("--max-reprojection must be positive");
   if (!(max_yaw_deg > 0)) return Status::InvalidArgument("--max-yaw must be positive");
+  if (method != "views" && method != "landmarks") return Status::InvalidArgument("--align-method must be views or landmarks");
   return Status::Ok();
 }
 
@@ -23,6 +25,10 @@ void AddAlignOptions(OptionSet* o, AlignOptions* a) {
   o->Add("align.inlier_mm", &a->inlier_mm, "RANSAC inlier threshold for landmark pairs, millimetres.", "inlier-mm");
   o->Add("align.max_reprojection_px", &a->max_reprojection_px,
          "Drop triangulated landmarks that reproject worse than this (px).", "max-reprojection");
+  o->Add("align.method", &a->method,
+         "views: rotation from the views' head poses, scale and translation from the landmarks; "
+         "landmarks: Umeyama on triangulated landmarks.",
+         "align-method");
   o->Add("align.max_yaw_deg", &a->max_yaw_deg,
          "Use landmarks only from views whose head yaw is within this many degrees of frontal.", "max-yaw");
 }
@@ -65,6 +71,72 @@ Eigen::Vector2d UndistortPixel(const CameraIntrinsics& c, const Eigen::Vector2d&
     x = (xd - tangential) / radial;
   }
   return Eigen::Vector2d(c.fx * x.x() + c.cx, c.fy * x.y() + c.cy);
+}
+
+struct ViewPose {
+  Eigen::Isometry3d cam_from_world;  // from calibrate
+  Eigen::Isometry3d cam_from_head;   // from PnP of the view's landmarks against the model
+};
+
+// head_from_world from the views' own head poses: each view gives a rotation
+// head_from_world = head_from_cam * cam_from_world, and their robust chordal
+// mean is the rotation (landmark depth, which detectors guess poorly on
+// oblique or unshaded faces, plays no part in it). Scale and translation from
+// the camera centres are a first guess that the caller may refine.
+bool SimilarityFromViewPoses(const std::vector<ViewPose>& views, Sim3* head_from_world) {
+  if (views.size() < 3) return false;
+  std::vector<Eigen::Matrix3d> rotations;
+  for (const auto& v : views) rotations.push_back(v.cam_from_head.linear().transpose() * v.cam_from_world.linear());
+  auto chordal_mean = [](const std::vector<Eigen::Matrix3d>& rs, const std::vector<bool>& use) {
+    Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+    for (size_t i = 0; i < rs.size(); ++i)
+      if (use[i]) sum += rs[i];
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d r = svd.matrixU() * svd.matrixV().transpose();
+    if (r.determinant() < 0) {
+      Eigen::Matrix3d u = svd.matrixU();
+      u.col(2) *= -1;
+      r = u * svd.matrixV().transpose();
+    }
+    return r;
+  };
+  std::vector<bool> use(rotations.size(), true);
+  Eigen::Matrix3d rotation = chordal_mean(rotations, use);
+  for (int round = 0; round < 3; ++round) {
+    std::vector<double> angles;
+    for (const auto& r : rotations) angles.push_back(Eigen::AngleAxisd(rotation.transpose() * r).angle());
+    std::vector<double> sorted = angles;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double limit = std::max(3.0 * sorted[sorted.size() / 2], 2.0 * 3.14159265358979323846 / 180.0);
+    int kept = 0;
+    for (size_t i = 0; i < angles.size(); ++i) kept += use[i] = angles[i] <= limit;
+    if (kept < 3) break;
+    rotation = chordal_mean(rotations, use);
+  }
+  // Scale and translation with the rotation fixed: least squares on the centres.
+  Eigen::Vector3d mean_w = Eigen::Vector3d::Zero(), mean_h = Eigen::Vector3d::Zero();
+  int n = 0;
+  for (size_t i = 0; i < views.size(); ++i) {
+    if (!use[i]) continue;
+    mean_w += views[i].cam_from_world.inverse().translation();
+    mean_h += views[i].cam_from_head.inverse().translation();
+    ++n;
+  }
+  mean_w /= n;
+  mean_h /= n;
+  double num = 0, den = 0;
+  for (size_t i = 0; i < views.size(); ++i) {
+    if (!use[i]) continue;
+    const Eigen::Vector3d w = rotation * (views[i].cam_from_world.inverse().translation() - mean_w);
+    const Eigen::Vector3d h = views[i].cam_from_head.inverse().translation() - mean_h;
+    num += w.dot(h);
+    den += w.squaredNorm();
+  }
+  if (!(den > 0) || !(num > 0)) return false;
+  head_from_world->rotation = rotation;
+  head_from_world->scale = num / den;
+  head_from_world->translation = mean_h - head_from_world->scale * (rotation * mean_w);
+  return std::isfinite(head_from_world->scale) && head_from_world->translation.allFinite();
 }
 
 double Reprojection(const Observation& o, const Eigen::Vector3d& x) {
@@ -119,6 +191,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   std::vector<Eigen::Vector3d> model_points;
   for (int v : model.landmarks_ibug68()) model_points.push_back(model.neutral().col(v).cast<double>());
   std::map<int, std::vector<std::vector<Observation>>> groups;
+  std::map<int, std::vector<ViewPose>> view_poses;  // per group: head pose seen by each frontal view
   for (const auto& cam : capture.cameras) {
     const CameraIntrinsics* in = cameras.FindCamera(cam.name);
     if (!in || in->fx <= 0) continue;
@@ -136,6 +209,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
         if (!pose.ok) continue;
         const Eigen::Vector3d eye = pose.cam_from_object.inverse().translation();
         if (std::abs(std::atan2(eye.x(), eye.z())) * 180.0 / 3.14159265358979323846 > options.max_yaw_deg) continue;
+        view_poses[per_frame ? f.index : 0].push_back({view->cam_from_world, pose.cam_from_object});
       }
       auto& group = groups[per_frame ? f.index : 0];
       group.resize(68);
@@ -201,11 +275,48 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
     // applies in the target (head) frame, metres.
     RansacOptions ransac;
     ransac.inlier_threshold = options.inlier_mm / 1000.0;
-    const SimilarityResult sim = EstimateSimilarityRansac(src, tgt, ransac);
+    SimilarityResult sim = EstimateSimilarityRansac(src, tgt, ransac);
+    Sim3 from_views;
+    const bool use_views = options.method == "views" && SimilarityFromViewPoses(view_poses[frame], &from_views);
+    if (use_views) {
+      // The views fix the rotation; scale and translation come from the
+      // landmarks (their extent across the face is well measured even where
+      // their depth is not), by least squares with the rotation held.
+      const std::vector<int> fit_set = sim.ok && sim.inliers.size() >= 3 ? sim.inliers : [&] {
+        std::vector<int> all(used.size());
+        for (size_t k = 0; k < used.size(); ++k) all[k] = static_cast<int>(k);
+        return all;
+      }();
+      Eigen::Vector3d mean_w = Eigen::Vector3d::Zero(), mean_h = Eigen::Vector3d::Zero();
+      for (int k : fit_set) {
+        mean_w += src.col(k);
+        mean_h += tgt.col(k);
+      }
+      mean_w /= static_cast<double>(fit_set.size());
+      mean_h /= static_cast<double>(fit_set.size());
+      double num = 0, den = 0;
+      for (int k : fit_set) {
+        const Eigen::Vector3d w = from_views.rotation * (src.col(k) - mean_w);
+        num += w.dot(tgt.col(k) - mean_h);
+        den += w.squaredNorm();
+      }
+      if (num > 0 && den > 0) {
+        from_views.scale = num / den;
+        from_views.translation = mean_h - from_views.scale * (from_views.rotation * mean_w);
+      }
+      // Inliers and residuals of the landmarks under the combined similarity.
+      sim.ok = true;
+      sim.tgt_from_src = from_views;
+      sim.quality = SimilarityQuality::kGood;
+      sim.inliers.clear();
+      for (size_t k = 0; k < used.size(); ++k)
+        if ((tgt.col(k) - from_views * src.col(k)).norm() < options.inlier_mm / 1000.0) sim.inliers.push_back(static_cast<int>(k));
+    }
     if (!sim.ok) continue;
     AlignResult r;
     r.head_from_world = sim.tgt_from_src;
     r.quality = sim.quality;
+    r.method = use_views ? "views" : "landmarks";
     r.landmarks_used = used;
     r.reference_frame = per_frame ? frame : -1;
     std::vector<double> sorted;
@@ -252,6 +363,7 @@ Status WriteAlignment(const AlignResult& r, const fs::path& path) {
                            {"translation", {r.head_from_world.translation.x(), r.head_from_world.translation.y(), r.head_from_world.translation.z()}},
                            {"matrix", matrix}}},
       {"quality", SimilarityQualityName(r.quality)},
+      {"method", r.method},
       {"reference_frame", r.reference_frame},
       {"rms_mm", r.rms_mm},
       {"median_mm", r.median_mm},

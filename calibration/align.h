@@ -19,6 +19,10 @@ struct AlignOptions {
   double inlier_mm = 8.0;      // RANSAC inlier threshold, millimetres
   double max_reprojection_px = 8.0;  // triangulated landmarks reprojecting worse are dropped
   double max_yaw_deg = 35.0;         // views of a more turned head give no landmarks
+  // "views": the rotation from the views' PnP head poses (robust chordal mean),
+  // scale and translation from the triangulated landmarks with that rotation
+  // held; "landmarks": Umeyama in RANSAC on the triangulated landmarks alone.
+  std::string method = "views";
   Status Check() const;
 };
 void AddAlignOptions(OptionSet* options, AlignOptions* align);
@@ -26,6 +30,7 @@ void AddAlignOptions(OptionSet* options, AlignOptions* align);
 struct AlignResult {
   Sim3 head_from_world;
   SimilarityQuality quality = SimilarityQuality::kGood;
+  std::string method;                  // views or landmarks
   std::vector<int> landmarks_used;     // iBUG indices triangulated and used
   std::vector<Eigen::Vector3d> points;  // per used landmark: triangulated, world frame
   std::vector<double> residuals_mm;    // per used landmark, after alignment

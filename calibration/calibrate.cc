@@ -180,47 +180,12 @@ Status ImportRig(const std::string& path, const IngestedCapture& capture, Camera
   std::error_code ec;
   if (fs::is_directory(path, ec)) {
     // A COLMAP text model: image names "<camera>/..." or "<camera>.<ext>" name the camera.
-    std::ifstream cams(fs::path(path) / "cameras.txt"), images(fs::path(path) / "images.txt");
-    if (!cams || !images) return Status::NotFound("rig folder " + path + " holds no COLMAP text model (cameras.txt, images.txt)");
-    std::map<int, CameraIntrinsics> intrinsics;
-    std::string line;
-    while (std::getline(cams, line)) {
-      if (line.empty() || line[0] == '#') continue;
-      std::istringstream in(line);
-      int id;
-      CameraIntrinsics c;
-      std::vector<double> p;
-      double v;
-      in >> id >> c.model >> c.width >> c.height;
-      while (in >> v) p.push_back(v);
-      if (p.size() < 3) return Status::DataError("rig camera " + std::to_string(id) + " has too few parameters");
-      const bool one_focal = c.model.rfind("SIMPLE", 0) == 0 || c.model == "RADIAL";
-      c.fx = p[0];
-      c.fy = one_focal ? p[0] : p[1];
-      c.cx = (one_focal ? p[1] : p[2]) - 0.5;
-      c.cy = (one_focal ? p[2] : p[3]) - 0.5;
-      if (c.model == "SIMPLE_RADIAL" || c.model == "RADIAL") c.k1 = p[3];
-      if (c.model == "RADIAL") c.k2 = p[4];
-      if (c.model == "OPENCV" && p.size() >= 8) {
-        c.k1 = p[4]; c.k2 = p[5]; c.p1 = p[6]; c.p2 = p[7];
-      }
-      intrinsics[id] = c;
-    }
-    while (std::getline(images, line)) {
-      if (line.empty() || line[0] == '#') continue;
-      std::istringstream in(line);
-      int id, camera_id;
-      double qw, qx, qy, qz, tx, ty, tz;
-      std::string name;
-      in >> id >> qw >> qx >> qy >> qz >> tx >> ty >> tz >> camera_id >> name;
-      std::getline(images, line);
+    ColmapTextModel model;
+    HF_RETURN_IF_ERROR(ReadColmapCamerasAndImages(path, &model).WithContext("rig folder"));
+    for (const auto& [name, image] : model.images) {
       const std::string camera = name.find('/') != std::string::npos ? name.substr(0, name.find('/'))
                                                                      : fs::path(name).stem().string();
-      Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-      t.linear() = Eigen::Quaterniond(qw, qx, qy, qz).normalized().toRotationMatrix();
-      t.translation() = Eigen::Vector3d(tx, ty, tz);
-      if (!intrinsics.count(camera_id)) return Status::DataError("rig image " + name + " names an unknown camera");
-      rig[camera] = {intrinsics[camera_id], t};
+      rig[camera] = {model.cameras.at(image.first), image.second};
     }
   } else {
     nlohmann::json j;
@@ -238,12 +203,7 @@ Status ImportRig(const std::string& path, const IngestedCapture& capture, Camera
         in.cy = c.at("cy").get<double>();
         in.k1 = c.value("k1", 0.0);
         in.k2 = c.value("k2", 0.0);
-        Eigen::Matrix4d m;
-        for (int r = 0; r < 4; ++r)
-          for (int k = 0; k < 4; ++k) m(r, k) = c.at("cam_from_world").at(r).at(k).get<double>();
-        Eigen::Isometry3d t;
-        t.matrix() = m;
-        rig[in.name] = {in, t};
+        rig[in.name] = {in, PoseFromJson(c.at("cam_from_world"))};
       }
     } catch (const nlohmann::json::exception& e) {
       return Status::DataError("rig file " + path + ": " + e.what());

@@ -39,21 +39,6 @@ int CameraSet::registered() const {
   return n;
 }
 
-namespace {
-nlohmann::json Matrix4(const Eigen::Isometry3d& t) {
-  nlohmann::json rows = nlohmann::json::array();
-  for (int r = 0; r < 4; ++r) rows.push_back({t.matrix()(r, 0), t.matrix()(r, 1), t.matrix()(r, 2), t.matrix()(r, 3)});
-  return rows;
-}
-Eigen::Isometry3d FromMatrix4(const nlohmann::json& rows) {
-  Eigen::Matrix4d m;
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) m(r, c) = rows.at(r).at(c).get<double>();
-  Eigen::Isometry3d t;
-  t.matrix() = m;
-  return t;
-}
-}  // namespace
 
 Status CameraSet::Write(const fs::path& path) const {
   nlohmann::json cams = nlohmann::json::array(), views_json = nlohmann::json::array();
@@ -63,7 +48,7 @@ Status CameraSet::Write(const fs::path& path) const {
                     {"k1", c.k1}, {"k2", c.k2}, {"p1", c.p1}, {"p2", c.p2}});
   for (const auto& v : views) {
     nlohmann::json j = {{"camera", v.camera}, {"frame", v.frame}, {"registered", v.registered}};
-    if (v.registered) j["cam_from_world"] = Matrix4(v.cam_from_world);
+    if (v.registered) j["cam_from_world"] = PoseToJson(v.cam_from_world);
     views_json.push_back(j);
   }
   const nlohmann::json root = {{"version", 1},  {"mode", mode},       {"frame", frame},
@@ -101,7 +86,7 @@ Status CameraSet::Read(const fs::path& path, CameraSet* set) {
       view.camera = v.at("camera").get<std::string>();
       view.frame = v.at("frame").get<int>();
       view.registered = v.value("registered", false);
-      if (view.registered) view.cam_from_world = FromMatrix4(v.at("cam_from_world"));
+      if (view.registered) view.cam_from_world = PoseFromJson(v.at("cam_from_world"));
       s.views.push_back(view);
     }
   } catch (const nlohmann::json::exception& e) {

@@ -62,12 +62,10 @@ Status RunTool(const std::vector<std::string>& args, const fs::path& log) {
 
 }  // namespace
 
-Status ReadColmapTextModel(const fs::path& dir, const IngestedCapture& capture, CameraSet* cameras,
-                           ColmapReport* report) {
-  std::ifstream cams(dir / "cameras.txt"), images(dir / "images.txt"), points(dir / "points3D.txt");
-  if (!cams || !images) return Status::DataError("no COLMAP text model in " + dir.string());
+Status ReadColmapCamerasAndImages(const fs::path& dir, ColmapTextModel* model) {
+  std::ifstream cams(dir / "cameras.txt"), images(dir / "images.txt");
+  if (!cams || !images) return Status::NotFound("no COLMAP text model (cameras.txt, images.txt) in " + dir.string());
   // cameras.txt: CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]
-  std::map<int, CameraIntrinsics> by_id;
   std::string line;
   while (std::getline(cams, line)) {
     if (line.empty() || line[0] == '#') continue;
@@ -89,15 +87,14 @@ Status ReadColmapTextModel(const fs::path& dir, const IngestedCapture& capture, 
     } else if (c.model == "OPENCV" && p.size() >= 8) {
       c.fx = p[0]; c.fy = p[1]; c.cx = p[2]; c.cy = p[3]; c.k1 = p[4]; c.k2 = p[5]; c.p1 = p[6]; c.p2 = p[7];
     } else {
-      return Status::DataError("unsupported COLMAP camera model " + c.model);
+      return Status::DataError("unsupported COLMAP camera model " + c.model + " in " + dir.string());
     }
     // COLMAP puts pixel centres at +0.5; this tool at integers.
     c.cx -= 0.5;
     c.cy -= 0.5;
-    by_id[id] = c;
+    model->cameras[id] = c;
   }
-  // images.txt: two lines per image; IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, then points.
-  std::map<std::string, std::pair<int, Eigen::Isometry3d>> posed;
+  // images.txt: two lines per image; IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, then its points.
   while (std::getline(images, line)) {
     if (line.empty() || line[0] == '#') continue;
     std::istringstream in(line);
@@ -108,9 +105,22 @@ Status ReadColmapTextModel(const fs::path& dir, const IngestedCapture& capture, 
     Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
     t.linear() = Eigen::Quaterniond(qw, qx, qy, qz).normalized().toRotationMatrix();
     t.translation() = Eigen::Vector3d(tx, ty, tz);
-    posed[name] = {camera_id, t};
-    std::getline(images, line);  // the 2D points
+    if (!model->cameras.count(camera_id))
+      return Status::DataError("COLMAP image " + name + " names an unknown camera " + std::to_string(camera_id));
+    model->images[name] = {camera_id, t};
+    std::getline(images, line);
   }
+  return Status::Ok();
+}
+
+Status ReadColmapTextModel(const fs::path& dir, const IngestedCapture& capture, CameraSet* cameras,
+                           ColmapReport* report) {
+  ColmapTextModel model;
+  HF_RETURN_IF_ERROR(ReadColmapCamerasAndImages(dir, &model));
+  const auto& by_id = model.cameras;
+  const auto& posed = model.images;
+  std::ifstream points(dir / "points3D.txt");
+  std::string line;
   CameraSet set;
   set.mode = "colmap";
   set.frame = "world";

@@ -4,7 +4,9 @@
 // incremental mapper; the largest model is converted to text and read back.
 #pragma once
 
+#include <map>
 #include <string>
+#include <utility>
 
 #include "calibration/camera_set.h"
 #include "capture/capture_io.h"
@@ -46,6 +48,14 @@ struct ColmapReport {
 // unregistered).
 Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, const fs::path& work_dir,
                  CameraSet* cameras, ColmapReport* report);
+
+// The parts of a COLMAP text model: cameras by id (pixel centres moved to
+// integers), and images by name with their camera id and cam_from_world.
+struct ColmapTextModel {
+  std::map<int, CameraIntrinsics> cameras;
+  std::map<std::string, std::pair<int, Eigen::Isometry3d>> images;
+};
+Status ReadColmapCamerasAndImages(const fs::path& dir, ColmapTextModel* model);
 
 // Reads a COLMAP text model (cameras.txt, images.txt, points3D.txt). Image
 // names "<camera>/<index>.png" map to views.

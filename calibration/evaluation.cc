@@ -3,17 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/json_io.h"
+
 namespace headforge {
 namespace {
-
-Eigen::Isometry3d Pose(const nlohmann::json& rows) {
-  Eigen::Matrix4d m;
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) m(r, c) = rows.at(r).at(c).get<double>();
-  Eigen::Isometry3d t;
-  t.matrix() = m;
-  return t;
-}
 
 double Median(std::vector<double> v) {
   if (v.empty()) return 0;
@@ -41,8 +34,8 @@ Status Pairs(const CameraSet& cameras, const IngestedCapture& capture, const nlo
         const CameraView* v = cameras.FindView(cam.name, f.index);
         if (!v || !v->registered) continue;
         const auto& frame = truth.at("frames").at(f.source_frame);
-        Eigen::Isometry3d t = Pose(frame.at("views").at(cam.name).at("cam_from_world"));
-        if (head) t = t * Pose(frame.at("world_from_head"));
+        Eigen::Isometry3d t = PoseFromJson(frame.at("views").at(cam.name).at("cam_from_world"));
+        if (head) t = t * PoseFromJson(frame.at("world_from_head"));
         pairs->push_back({v->cam_from_world, t});
       }
     }

@@ -10,16 +10,6 @@
 namespace headforge {
 namespace {
 
-nlohmann::json Matrix4(const Eigen::Isometry3d& t) {
-  nlohmann::json rows = nlohmann::json::array();
-  for (int r = 0; r < 4; ++r) {
-    nlohmann::json row = nlohmann::json::array();
-    for (int c = 0; c < 4; ++c) row.push_back(t.matrix()(r, c));
-    rows.push_back(row);
-  }
-  return rows;
-}
-
 std::string FrameName(int frame) {
   char name[32];
   std::snprintf(name, sizeof(name), "%06d.png", frame);
@@ -80,7 +70,7 @@ Status WriteSimulation(const Simulator& sim, const fs::path& out_dir, const std:
           expression[model.expression_names()[e]] = Round(state.expression[e], 1e-6);
         frame = {{"index", f},
                  {"time_s", sim.FrameTime(f)},
-                 {"world_from_head", Matrix4(state.world_from_head)},
+                 {"world_from_head", PoseToJson(state.world_from_head)},
                  {"expression", expression},
                  {"views", nlohmann::json::object()}};
       }
@@ -91,7 +81,7 @@ Status WriteSimulation(const Simulator& sim, const fs::path& out_dir, const std:
         visible.push_back(static_cast<bool>(view.visible[i]));
         depth.push_back(Round(view.depth[i], 1e-6));
       }
-      frame["views"][name] = {{"cam_from_world", Matrix4(view.camera.cam_from_world)},
+      frame["views"][name] = {{"cam_from_world", PoseToJson(view.camera.cam_from_world)},
                               {"landmarks", landmarks},
                               {"visible", visible},
                               {"landmark_depth", depth}};

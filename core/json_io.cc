@@ -17,4 +17,20 @@ Status WriteJsonAtomic(const fs::path& path, const nlohmann::json& json, int ind
   return WriteFileAtomic(path, json.dump(indent) + "\n");
 }
 
+nlohmann::json PoseToJson(const Eigen::Isometry3d& pose) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (int r = 0; r < 4; ++r)
+    rows.push_back({pose.matrix()(r, 0), pose.matrix()(r, 1), pose.matrix()(r, 2), pose.matrix()(r, 3)});
+  return rows;
+}
+
+Eigen::Isometry3d PoseFromJson(const nlohmann::json& rows) {
+  Eigen::Matrix4d m;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) m(r, c) = rows.at(r).at(c).get<double>();
+  Eigen::Isometry3d pose;
+  pose.matrix() = m;
+  return pose;
+}
+
 }  // namespace headforge

@@ -1,6 +1,7 @@
 // JSON files of the workspace (capture.json, landmarks.json, ...), written atomically.
 #pragma once
 
+#include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
 #include "core/fs.h"
@@ -11,5 +12,10 @@ namespace headforge {
 Status ReadJson(const fs::path& path, nlohmann::json* json);
 // Writes `json` indented by `indent` (-1: compact) through a temporary file.
 Status WriteJsonAtomic(const fs::path& path, const nlohmann::json& json, int indent = 1);
+
+// A rigid transform as a row-major 4x4 array of arrays, and back (throws
+// nlohmann::json::exception on a malformed array).
+nlohmann::json PoseToJson(const Eigen::Isometry3d& pose);
+Eigen::Isometry3d PoseFromJson(const nlohmann::json& rows);
 
 }  // namespace headforge

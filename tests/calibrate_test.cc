@@ -210,6 +210,16 @@ TEST(Calibrate, RigFilesAreImportedThroughTheCrop) {
   EXPECT_NEAR(in.cx, (179.5 + 0.5 - cam.crop_x0) * cam.crop_scale - 0.5, 1e-9);
   EXPECT_EQ(cameras.registered(), 3);
   EXPECT_NEAR(cameras.views[2].cam_from_world.translation().z(), 0.7, 1e-12);
+  // The same rig as a COLMAP text model folder (pixel centres at +0.5 there).
+  fs::create_directories(dir / "colmap_rig");
+  ASSERT_TRUE(WriteFileAtomic(dir / "colmap_rig" / "cameras.txt", "# comment\n1 PINHOLE 360 288 600 600 180 144\n").ok());
+  ASSERT_TRUE(WriteFileAtomic(dir / "colmap_rig" / "images.txt", "1 1 0 0 0 0.1 0 0.7 1 cam0/000000.png\n\n").ok());
+  options.rig = (dir / "colmap_rig").string();
+  CameraSet from_colmap;
+  ASSERT_TRUE(RunCalibrate(options, capture, Model(), dir / "out2", &progress, &from_colmap, &result).ok());
+  EXPECT_NEAR(from_colmap.cameras[0].cx, in.cx, 1e-9);
+  EXPECT_NEAR(from_colmap.cameras[0].fx, in.fx, 1e-9);
+  EXPECT_NEAR(from_colmap.views[1].cam_from_world.translation().x(), 0.1, 1e-12);
   // A rig file for another camera size is refused.
   ASSERT_TRUE(WriteJsonAtomic(dir / "bad.json", nlohmann::json{{"cameras", {{{"name", "cam0"}, {"width", 640}, {"height", 480}, {"fx", 1.0}, {"cx", 1.0}, {"cy", 1.0}, {"cam_from_world", {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}}}}}}}).ok());
   options.rig = (dir / "bad.json").string();

@@ -27,8 +27,23 @@ for p in "${PACKAGES[@]}"; do
   fi
 done
 
+# The Gaussian-splat viewer tool the PLY export is checked against (npm),
+# when node and npm are there.
+install_node_tools() {
+  local root tools
+  root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+  tools="$root/.tools/node"
+  if command -v node >/dev/null && command -v npm >/dev/null && [ ! -x "$tools/node_modules/.bin/splat-transform" ]; then
+    echo "install_deps: installing @playcanvas/splat-transform into .tools/node"
+    mkdir -p "$tools"
+    npm install --prefix "$tools" --no-audit --no-fund --silent @playcanvas/splat-transform@3.7.0 ||
+      echo "install_deps: npm install failed; the PLY viewer test will not be built" >&2
+  fi
+}
+
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install_deps: all ${#PACKAGES[@]} packages present"
+  install_node_tools
   exit 0
 fi
 
@@ -43,4 +58,5 @@ fi
 export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+install_node_tools
 echo "install_deps: done"

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdint>
 #include <fstream>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
@@ -27,6 +28,7 @@ Status ColmapOptions::Check() const {
   if (frame_step < 1) return Status::InvalidArgument("frame step must be at least 1");
   if (overlap < 1) return Status::InvalidArgument("sequential overlap must be at least 1");
   if (rig_instants < 1) return Status::InvalidArgument("rig instants must be at least 1");
+  if (mapper_attempts < 1) return Status::InvalidArgument("mapper attempts must be at least 1");
   return Status::Ok();
 }
 
@@ -58,6 +60,15 @@ Status RunTool(const std::vector<std::string>& args, const fs::path& log) {
     return Status::DataError("colmap " + args[1] + " failed (exit " +
                              std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "); see " + log.string());
   return Status::Ok();
+}
+
+// The number of registered images in a COLMAP binary images.bin (its first
+// eight bytes); 0 when unreadable.
+int CountRegisteredImages(const fs::path& images_bin) {
+  std::ifstream in(images_bin, std::ios::binary);
+  uint64_t count = 0;
+  if (!in.read(reinterpret_cast<char*>(&count), sizeof(count))) return 0;
+  return static_cast<int>(count);
 }
 
 }  // namespace
@@ -243,23 +254,34 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
                                 "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", std::to_string(threads)},
                                log));
   }
-  const fs::path sparse = work_dir / "sparse";
-  RemoveAll(sparse);
-  HF_RETURN_IF_ERROR(EnsureDirectory(sparse));
-  HF_LOG(Info) << "calibrate: COLMAP mapper";
-  HF_RETURN_IF_ERROR(RunTool({exe, "mapper", "--database_path", database.string(), "--image_path", image_path,
-                              "--output_path", sparse.string(), "--Mapper.num_threads", std::to_string(threads)},
-                             log));
-  // The model that registered the most images.
+  // The incremental mapper depends on its initial pair and on thread timing: a
+  // run that registers too few images is repeated with relaxed initialisation
+  // (the attempts' models are kept side by side), and the largest model wins.
+  const std::vector<std::vector<std::string>> attempts = {
+      {},
+      {"--Mapper.init_min_tri_angle", "8", "--Mapper.init_min_num_inliers", "50", "--Mapper.abs_pose_min_num_inliers",
+       "15", "--Mapper.min_num_matches", "10"}};
   fs::path best;
-  size_t best_size = 0;
-  for (const auto& entry : fs::directory_iterator(sparse)) {
-    if (!entry.is_directory()) continue;
-    const size_t size = fs::exists(entry.path() / "images.bin") ? fs::file_size(entry.path() / "images.bin") : 0;
-    if (size > best_size) {
-      best_size = size;
-      best = entry.path();
+  int best_registered = 0;
+  for (size_t a = 0; a < attempts.size() && a < static_cast<size_t>(options.mapper_attempts); ++a) {
+    const fs::path sparse = work_dir / ("sparse" + (a == 0 ? std::string() : "_" + std::to_string(a)));
+    RemoveAll(sparse);
+    HF_RETURN_IF_ERROR(EnsureDirectory(sparse));
+    HF_LOG(Info) << "calibrate: COLMAP mapper" << (a == 0 ? "" : " (again, relaxed initialisation)");
+    std::vector<std::string> mapper = {exe, "mapper", "--database_path", database.string(), "--image_path", image_path,
+                                       "--output_path", sparse.string(), "--Mapper.num_threads", std::to_string(threads)};
+    mapper.insert(mapper.end(), attempts[a].begin(), attempts[a].end());
+    const Status mapped = RunTool(mapper, log);
+    if (!mapped.ok() && a + 1 == std::min(attempts.size(), static_cast<size_t>(options.mapper_attempts)) && best.empty())
+      return mapped;
+    for (const auto& entry : fs::directory_iterator(sparse)) {
+      const int registered = entry.is_directory() ? CountRegisteredImages(entry.path() / "images.bin") : 0;
+      if (registered > best_registered) {
+        best_registered = registered;
+        best = entry.path();
+      }
     }
+    if (best_registered >= options.retry_below * total) break;
   }
   if (best.empty())
     return Status::DataError("COLMAP reconstructed nothing from " + std::to_string(total) +

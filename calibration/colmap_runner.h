@@ -32,6 +32,10 @@ struct ColmapOptions {
   bool static_cameras = false;
   int rig_instants = 1;
   int threads = 0;                        // 0: all
+  // Mapper runs: a second one, with relaxed initialisation, when the first
+  // registers fewer than `retry_below` of the images.
+  int mapper_attempts = 2;
+  double retry_below = 0.9;
   Status Check() const;
 };
 

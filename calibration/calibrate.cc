@@ -294,6 +294,11 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
     HF_RETURN_IF_ERROR(HeadPoseCameras(options, capture, model, cameras, summary));
     return cameras->Write(out_dir / "cameras.json");
   }
+  for (const auto& cam : capture.cameras)
+    if (!cam.fixed_crop)
+      return Status::InvalidArgument("COLMAP needs one camera model per video, but " + cam.name +
+                                     " was ingested with a crop that follows the head (--crop frame); ingest it "
+                                     "again with --crop none or sequence");
   progress->Start("calibrate: COLMAP", 0);
   ColmapReport report;
   Status status = RunColmap(colmap, capture, out_dir / "colmap", cameras, &report);

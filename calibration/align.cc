@@ -6,6 +6,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "calibration/landmark_embedding.h"
 #include "calibration/pnp.h"
 #include "calibration/triangulation.h"
 #include "core/json_io.h"
@@ -25,6 +26,9 @@ void AddAlignOptions(OptionSet* o, AlignOptions* a) {
   o->Add("align.inlier_mm", &a->inlier_mm, "RANSAC inlier threshold for landmark pairs, millimetres.", "inlier-mm");
   o->Add("align.max_reprojection_px", &a->max_reprojection_px,
          "Drop triangulated landmarks that reproject worse than this (px).", "max-reprojection");
+  o->Add("align.landmark_embedding", &a->landmark_embedding,
+         "Where the detector's 68 landmarks sit on the face model; empty: the model's landmark vertices.",
+         "align-landmark-embedding");
   o->Add("align.method", &a->method,
          "views: rotation from the views' head poses, scale and translation from the landmarks; "
          "landmarks: Umeyama on triangulated landmarks.",
@@ -188,8 +192,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   // camera (or head-pose cameras, whose head frame is shared), a group per frame
   // when several cameras watch a moving head.
   const bool per_frame = !head_frame && capture.cameras.size() > 1;
-  std::vector<Eigen::Vector3d> model_points;
-  for (int v : model.landmarks_ibug68()) model_points.push_back(model.neutral().col(v).cast<double>());
+  const std::vector<Eigen::Vector3d> model_points = DetectorLandmarkPoints(model, options.landmark_embedding);
   std::map<int, std::vector<std::vector<Observation>>> groups;
   std::map<int, std::vector<ViewPose>> view_poses;  // per group: head pose seen by each frontal view
   for (const auto& cam : capture.cameras) {

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "calibration/camera_set.h"
+#include "calibration/landmark_embedding.h"
 #include "calibration/similarity.h"
 #include "capture/capture_io.h"
 #include "core/face_model.h"
@@ -23,6 +24,8 @@ struct AlignOptions {
   // scale and translation from the triangulated landmarks with that rotation
   // held; "landmarks": Umeyama in RANSAC on the triangulated landmarks alone.
   std::string method = "views";
+  // The detector's landmarks on the model (landmark_embedding.h); "" for the model's vertices.
+  std::string landmark_embedding = DefaultLandmarkEmbedding();
   Status Check() const;
 };
 void AddAlignOptions(OptionSet* options, AlignOptions* align);

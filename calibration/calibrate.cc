@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 
+#include "calibration/landmark_embedding.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/paths.h"
@@ -38,6 +39,10 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
          "Fewest frames COLMAP must register, as a fraction of those it was given.", "min-registered");
   o->Add("calibrate.motion_threshold", &c->motion_threshold_px,
          "Median background motion (px) above which one video counts as a moving camera.", "motion-threshold");
+  o->Add("calibrate.landmark_embedding", &c->landmark_embedding,
+         "Where the detector's 68 landmarks sit on the face model (headforge embed-landmarks); "
+         "empty: the model's landmark vertices.",
+         "landmark-embedding");
   c->colmap.executable = DefaultColmapExecutable();
   o->Add("calibrate.colmap.executable", &c->colmap.executable, "The colmap program.", "colmap",
          OptionSet::Effect::kRuntime);
@@ -138,8 +143,10 @@ Status HeadPoseCameras(const CalibrateOptions& options, const IngestedCapture& c
   std::vector<std::optional<Landmarks68>> landmarks;
   for (const auto& f : cam.frames) landmarks.push_back(f.landmarks);
   const Eigen::Vector2d principal(cam.SourceCentreX(), cam.SourceCentreY());
+  HeadPoseOptions head_pose = options.head_pose;
+  head_pose.landmark_points = DetectorLandmarkPoints(model, options.landmark_embedding);
   HeadPoseResult result;
-  HF_RETURN_IF_ERROR(EstimateHeadPoseCameras(model, landmarks, cam.width, cam.height, principal, options.head_pose, &result));
+  HF_RETURN_IF_ERROR(EstimateHeadPoseCameras(model, landmarks, cam.width, cam.height, principal, head_pose, &result));
   CameraSet set;
   set.mode = "head-pose";
   set.frame = "head";

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "calibration/camera_set.h"
+#include "calibration/landmark_embedding.h"
 #include "calibration/colmap_runner.h"
 #include "calibration/head_pose.h"
 #include "capture/capture_io.h"
@@ -29,6 +30,8 @@ struct CalibrateOptions {
   double min_registered = 0.5;
   // Median background motion (pixels) above which a single video counts as a moving camera.
   double motion_threshold_px = 1.5;
+  // The detector's landmarks on the model (landmark_embedding.h); "" for the model's vertices.
+  std::string landmark_embedding = DefaultLandmarkEmbedding();
   // Several cameras: "auto" (fixed when no camera's background moves), "yes", "no".
   std::string static_rig = "auto";
   Status Check() const;

@@ -79,7 +79,11 @@ Status EstimateHeadPoseCameras(const FaceModel& model, const std::vector<std::op
   if (model.landmarks_ibug68().size() != 68)
     return Status::InvalidArgument("the face model has no iBUG-68 landmark vertices");
   std::vector<Eigen::Vector3d> object;
-  for (int v : model.landmarks_ibug68()) object.push_back(model.neutral().col(v).cast<double>());
+  if (options.landmark_points.size() == 68) {
+    object = options.landmark_points;
+  } else {
+    for (int v : model.landmarks_ibug68()) object.push_back(model.neutral().col(v).cast<double>());
+  }
   std::vector<int> observed;
   for (size_t f = 0; f < landmarks.size(); ++f)
     if (landmarks[f]) observed.push_back(static_cast<int>(f));

@@ -21,6 +21,9 @@ struct HeadPoseOptions {
   double jaw_weight = 0.3;       // weight of the jaw contour (0-16): detectors follow the silhouette
   double smoothness = 1.0;       // weight of the temporal smoothness term (0: none)
   int max_iterations = 100;
+  // The 68 head-frame points the detector's landmarks stand for (see
+  // landmark_embedding.h); empty: the model's landmark vertices.
+  std::vector<Eigen::Vector3d> landmark_points;
   Status Check() const;
 };
 

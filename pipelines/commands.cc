@@ -22,6 +22,8 @@ const std::vector<Command>& Commands() {
       {"simulate", "Render a synthetic head capture with ground truth from a scene file.",
        SimulateCommand},
       {"status", "Show the stages of a workspace: status, wall time, summary.", StatusCommand},
+      {"embed-landmarks", "Measure where the landmark detector's points sit on the face model.",
+       EmbedLandmarksCommand},
       {"bench", "Measure accuracy against time: bench calibrate.", BenchCommand},
       {"version", "Print the version and the libraries it was built with.", VersionCommand},
   };

@@ -1,7 +1,9 @@
 // `headforge simulate`: renders a scene file into a capture with ground truth.
 #include <algorithm>
 
+#include "calibration/landmark_embedding.h"
 #include "capture/simulator.h"
+#include "core/paths.h"
 #include "core/log.h"
 #include "core/parallel.h"
 #include "pipelines/commands.h"
@@ -54,6 +56,32 @@ int SimulateCommand(const std::vector<std::string>& args) {
   StderrProgress progress;
   if (Status s = WriteSimulation(*simulator, out_dir, text, frames, &progress); !s.ok()) return ReportFailure(s);
   HF_LOG(Info) << "simulate: wrote " << out_dir;
+  return kExitOk;
+}
+
+int EmbedLandmarksCommand(const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  AddCommonOptions(&options, &common, /*with_workspace=*/false);
+  std::string out = DefaultLandmarkEmbedding(), face_model;
+  options.Add("embed.out", &out, "Where to write the embedding (JSON).", "out");
+  options.Add("embed.face_model", &face_model, "Face model; default DATA/ict_facekit/ict_face_model.h5.", "face-model");
+  const int parsed = ParseOrExit(&options, args, "headforge embed-landmarks [--out FILE]",
+                                 "Measures where the landmark detector's 68 points sit on the face model, from\n"
+                                 "simulator renders of the mean face (calibration/landmark_embedding.h).");
+  if (parsed >= 0) return parsed;
+  if (face_model.empty()) face_model = (fs::path(common.data_dir) / "ict_facekit" / "ict_face_model.h5").string();
+  ApplyCommonOptions(common);
+  FaceModel model;
+  if (Status s = FaceModel::Load(face_model, &model); !s.ok()) return ReportFailure(s);
+  FaceDetectorOptions detector;
+  detector.ultraface_dir = (fs::path(common.data_dir) / "models" / "ultraface").string();
+  std::vector<Eigen::Vector3d> points;
+  const int threads = common.threads > 0 ? common.threads : HardwareThreads();
+  if (Status s = MeasureLandmarkEmbedding(model, detector, DefaultLandmarkModel(), threads, &points); !s.ok())
+    return ReportFailure(s);
+  if (Status s = WriteLandmarkEmbedding(out, points); !s.ok()) return ReportFailure(s);
+  HF_LOG(Info) << "embed-landmarks: wrote " << out;
   return kExitOk;
 }
 

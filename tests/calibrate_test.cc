@@ -8,6 +8,7 @@
 #include "calibration/align.h"
 #include "calibration/calibrate.h"
 #include "calibration/evaluation.h"
+#include "calibration/landmark_embedding.h"
 #include "capture/ingest.h"
 #include "capture/simulator.h"
 #include "core/json_io.h"
@@ -226,6 +227,23 @@ TEST(Calibrate, RigFilesAreImportedThroughTheCrop) {
   const Status bad = RunCalibrate(options, capture, Model(), dir / "bad", &progress, &cameras, &result);
   EXPECT_FALSE(bad.ok());
   EXPECT_NE(bad.message().find("640x480"), std::string::npos) << bad.message();
+}
+
+// The shipped embedding is what `headforge embed-landmarks` measures today, and
+// away from the jaw contour (a silhouette, other surface points from every
+// side) it differs from the model's landmark vertices by millimetres.
+TEST(LandmarkEmbedding, ShippedFileMatchesAFreshMeasurement) {
+  std::vector<Eigen::Vector3d> shipped, fresh;
+  ASSERT_TRUE(ReadLandmarkEmbedding(DefaultLandmarkEmbedding(), &shipped).ok());
+  FaceDetectorOptions detector;
+  detector.ultraface_dir = (kData / "models" / "ultraface").string();
+  ASSERT_TRUE(MeasureLandmarkEmbedding(Model(), detector, DefaultLandmarkModel(), 2, &fresh).ok());
+  ASSERT_EQ(fresh.size(), 68u);
+  for (int i = 0; i < 68; ++i) {
+    EXPECT_LT((fresh[i] - shipped[i]).norm(), 0.0005) << "landmark " << i;
+    const Eigen::Vector3d vertex = Model().neutral().col(Model().landmarks_ibug68()[i]).cast<double>();
+    if (i > 16) EXPECT_LT((fresh[i] - vertex).norm(), 0.015) << "landmark " << i;
+  }
 }
 
 }  // namespace

@@ -199,17 +199,7 @@ Status ImportRig(const std::string& path, const IngestedCapture& capture, Camera
     HF_RETURN_IF_ERROR(ReadJson(path, &j).WithContext("rig file"));
     try {
       for (const auto& c : j.at("cameras")) {
-        CameraIntrinsics in;
-        in.name = c.at("name").get<std::string>();
-        in.model = c.value("model", "PINHOLE");
-        in.width = c.at("width").get<int>();
-        in.height = c.at("height").get<int>();
-        in.fx = c.at("fx").get<double>();
-        in.fy = c.value("fy", in.fx);
-        in.cx = c.at("cx").get<double>();
-        in.cy = c.at("cy").get<double>();
-        in.k1 = c.value("k1", 0.0);
-        in.k2 = c.value("k2", 0.0);
+        const CameraIntrinsics in = CameraIntrinsics::FromJson(c);
         rig[in.name] = {in, PoseFromJson(c.at("cam_from_world"))};
       }
     } catch (const nlohmann::json::exception& e) {

@@ -12,6 +12,23 @@ Eigen::Matrix3d CameraIntrinsics::K() const {
   return k;
 }
 
+CameraIntrinsics CameraIntrinsics::FromJson(const nlohmann::json& c) {
+  CameraIntrinsics in;
+  in.name = c.at("name").get<std::string>();
+  in.model = c.value("model", "PINHOLE");
+  in.width = c.at("width").get<int>();
+  in.height = c.at("height").get<int>();
+  in.fx = c.at("fx").get<double>();
+  in.fy = c.value("fy", in.fx);
+  in.cx = c.at("cx").get<double>();
+  in.cy = c.at("cy").get<double>();
+  in.k1 = c.value("k1", 0.0);
+  in.k2 = c.value("k2", 0.0);
+  in.p1 = c.value("p1", 0.0);
+  in.p2 = c.value("p2", 0.0);
+  return in;
+}
+
 Eigen::Vector2d CameraIntrinsics::Project(const Eigen::Vector3d& p) const {
   const double x = p.x() / p.z(), y = p.y() / p.z();
   const double r2 = x * x + y * y;
@@ -66,19 +83,7 @@ Status CameraSet::Read(const fs::path& path, CameraSet* set) {
     s.frame = root.value("frame", "world");
     s.notes = root.value("notes", "");
     for (const auto& c : root.at("cameras")) {
-      CameraIntrinsics in;
-      in.name = c.at("name").get<std::string>();
-      in.model = c.value("model", "PINHOLE");
-      in.width = c.at("width").get<int>();
-      in.height = c.at("height").get<int>();
-      in.fx = c.at("fx").get<double>();
-      in.fy = c.at("fy").get<double>();
-      in.cx = c.at("cx").get<double>();
-      in.cy = c.at("cy").get<double>();
-      in.k1 = c.value("k1", 0.0);
-      in.k2 = c.value("k2", 0.0);
-      in.p1 = c.value("p1", 0.0);
-      in.p2 = c.value("p2", 0.0);
+      const CameraIntrinsics in = CameraIntrinsics::FromJson(c);
       s.cameras.push_back(in);
     }
     for (const auto& v : root.at("views")) {

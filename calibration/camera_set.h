@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,10 @@ struct CameraIntrinsics {
   double k1 = 0, k2 = 0, p1 = 0, p2 = 0;
 
   Eigen::Matrix3d K() const;
+  // From a JSON object {name, model, width, height, fx, fy, cx, cy, k1, k2, p1, p2};
+  // fy defaults to fx, the model to PINHOLE, distortion to 0. Throws
+  // nlohmann::json::exception when a required field is missing.
+  static CameraIntrinsics FromJson(const nlohmann::json& json);
   // Pixel of a camera-frame point, with distortion.
   Eigen::Vector2d Project(const Eigen::Vector3d& camera_point) const;
 };

@@ -204,7 +204,7 @@ Eigen::Matrix3Xf Simulator::WorldVertices(const SubjectState& state) const {
   return (r * v).colwise() + t;
 }
 
-RenderOutput Simulator::RenderOnce(int camera, double t, const PinholeCamera& canvas, double frame_time) const {
+RenderOutput Simulator::RenderOnce(int camera, double t, const PinholeCamera& canvas) const {
   const SubjectState state = StateAt(t);
   Mesh head = head_template_;
   head.vertices = WorldVertices(state);
@@ -242,19 +242,17 @@ RenderOutput Simulator::RenderOnce(int camera, double t, const PinholeCamera& ca
     options.lighting.ambient = static_cast<float>(scene_.Param("lighting", "ambient", 0.35));
     options.lighting.diffuse = static_cast<float>(scene_.Param("lighting", "diffuse", 0.8));
   }
-  (void)frame_time;
   RenderOutput out;
   RenderMeshes(meshes, cam, options, &out);
   return out;
 }
 
-RenderOutput Simulator::RenderAt(int camera, const std::vector<double>& band_times, const PinholeCamera& canvas,
-                                 double frame_time) const {
-  if (band_times.size() == 1) return RenderOnce(camera, band_times[0], canvas, frame_time);
+RenderOutput Simulator::RenderAt(int camera, const std::vector<double>& band_times, const PinholeCamera& canvas) const {
+  if (band_times.size() == 1) return RenderOnce(camera, band_times[0], canvas);
   RenderOutput out;
   const int bands = static_cast<int>(band_times.size());
   for (int b = 0; b < bands; ++b) {
-    const RenderOutput part = RenderOnce(camera, band_times[b], canvas, frame_time);
+    const RenderOutput part = RenderOnce(camera, band_times[b], canvas);
     if (b == 0) out = part;
     const int y0 = b * canvas.height / bands, y1 = (b + 1) * canvas.height / bands;
     const cv::Range rows(y0, y1);
@@ -321,7 +319,7 @@ SimulatedView Simulator::RenderView(int frame, int camera) const {
     const double dt = blur ? ((i + 0.5) / samples - 0.5) * shutter : 0.0;
     std::vector<double> times;
     for (double o : band_offsets) times.push_back(t + dt + o);
-    RenderOutput r = RenderAt(camera, times, canvas, t);
+    RenderOutput r = RenderAt(camera, times, canvas);
     if (i == 0) colour = r.color.clone();
     else colour += r.color;
     if (i == samples / 2) view.render = std::move(r);

@@ -59,9 +59,8 @@ class Simulator {
   Simulator(const Scene& scene, const FaceModel& model) : scene_(scene), model_(model) {}
   // The colour and buffers at time(s) `row_times` (one per row band) with an
   // optional larger canvas for distortion.
-  RenderOutput RenderAt(int camera, const std::vector<double>& band_times, const PinholeCamera& canvas,
-                        double frame_time) const;
-  RenderOutput RenderOnce(int camera, double t, const PinholeCamera& canvas, double frame_time) const;
+  RenderOutput RenderAt(int camera, const std::vector<double>& band_times, const PinholeCamera& canvas) const;
+  RenderOutput RenderOnce(int camera, double t, const PinholeCamera& canvas) const;
 
   Scene scene_;
   const FaceModel& model_;

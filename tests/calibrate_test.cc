@@ -242,7 +242,9 @@ TEST(LandmarkEmbedding, ShippedFileMatchesAFreshMeasurement) {
   for (int i = 0; i < 68; ++i) {
     EXPECT_LT((fresh[i] - shipped[i]).norm(), 0.0005) << "landmark " << i;
     const Eigen::Vector3d vertex = Model().neutral().col(Model().landmarks_ibug68()[i]).cast<double>();
-    if (i > 16) EXPECT_LT((fresh[i] - vertex).norm(), 0.015) << "landmark " << i;
+    if (i > 16) {
+      EXPECT_LT((fresh[i] - vertex).norm(), 0.015) << "landmark " << i;
+    }
   }
 }
 

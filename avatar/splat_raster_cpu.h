@@ -1,0 +1,85 @@
+// Pieces shared by the CPU rasterize kernels (forward and backward): a fast
+// exponential the compiler can vectorise, the tile schedule and per-Gaussian
+// row bounds. Internal to avatar/.
+#pragma once
+
+#include <ATen/Parallel.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+
+#include "avatar/splat_camera.h"
+
+namespace headforge::splat::cpu {
+
+constexpr int kTile = kSplatTileSize;
+constexpr int kTilePixels = kTile * kTile;
+constexpr double kMinAlpha = 1.0 / 255.0;
+constexpr double kMaxAlpha = 0.999;
+constexpr double kMinTransmittance = 1e-4;
+
+// exp(x) in float with a relative error below 2e-7 (a Cephes-style range
+// reduction and degree-6 polynomial), branch-free so loops over it vectorise.
+// Arguments are clamped to [-87, 88], where the result is a normal float.
+inline float FastExp(float x) {
+  x = std::min(std::max(x, -87.0f), 88.0f);
+  const float n = std::floor(x * 1.44269504088896341f + 0.5f);
+  float r = x - n * 0.693359375f;
+  r = r + n * 2.12194440e-4f;
+  float y = 1.9875691500e-4f;
+  y = y * r + 1.3981999507e-3f;
+  y = y * r + 8.3334519073e-3f;
+  y = y * r + 4.1665795894e-2f;
+  y = y * r + 1.6666665459e-1f;
+  y = y * r + 5.0000001201e-1f;
+  y = y * (r * r) + r + 1.0f;
+  const int32_t bits = (static_cast<int32_t>(n) + 127) << 23;
+  float scale;
+  std::memcpy(&scale, &bits, sizeof(scale));
+  return y * scale;
+}
+
+inline float Exp(float x) { return FastExp(x); }
+inline double Exp(double x) { return std::exp(std::min(std::max(x, -700.0), 700.0)); }
+
+// Calls f(slot, tile) for every tile: slot s takes tiles s, s + S, s + 2S, ...
+// Which tiles a slot accumulates is fixed by the thread count alone, so
+// per-slot reductions give the same bits on every run.
+template <typename F>
+void ForEachTile(int64_t num_tiles, int slots, F&& f) {
+  at::parallel_for(0, slots, 1, [&](int64_t begin, int64_t end) {
+    for (int64_t s = begin; s < end; ++s) {
+      for (int64_t t = s; t < num_tiles; t += slots) f(static_cast<int>(s), t);
+    }
+  });
+}
+
+inline int TileSlots(int64_t num_tiles) {
+  return static_cast<int>(std::max<int64_t>(1, std::min<int64_t>(at::get_num_threads(), num_tiles)));
+}
+
+// The rows [*r0, *r1] of a tile starting at pixel row y0 where a Gaussian can
+// reach alpha >= 1/255: |dy| <= sqrt(2 ln(255 o) cov_yy), cov = inverse(conic).
+// False when it reaches none of them.
+template <typename T>
+bool RowBounds(T my, T a, T b, T c, T opacity, int y0, int* r0, int* r1) {
+  const double level = 2.0 * std::log(double(opacity) / kMinAlpha);
+  if (!(level >= 0)) return false;
+  const double det = double(a) * c - double(b) * b;
+  *r0 = 0;
+  *r1 = kTile - 1;
+  if (det > 0 && a > 0) {
+    const double extent = std::sqrt(level * double(a) / det) + 1.0;  // a pixel of slack for rounding
+    if (std::isfinite(extent)) {
+      const double lo = std::ceil(double(my) - extent) - y0, hi = std::floor(double(my) + extent) - y0;
+      if (hi < 0 || lo > kTile - 1) return false;
+      *r0 = static_cast<int>(std::max(lo, 0.0));
+      *r1 = static_cast<int>(std::min(hi, double(kTile - 1)));
+    }
+  }
+  return true;
+}
+
+}  // namespace headforge::splat::cpu

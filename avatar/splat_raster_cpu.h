@@ -20,29 +20,86 @@ constexpr double kMinAlpha = 1.0 / 255.0;
 constexpr double kMaxAlpha = 0.999;
 constexpr double kMinTransmittance = 1e-4;
 
-// exp(x) in float with a relative error below 2e-7 (a Cephes-style range
-// reduction and degree-6 polynomial), branch-free so loops over it vectorise.
-// Arguments are clamped to [-87, 88], where the result is a normal float.
-inline float FastExp(float x) {
-  x = std::min(std::max(x, -87.0f), 88.0f);
-  const float n = std::floor(x * 1.44269504088896341f + 0.5f);
-  float r = x - n * 0.693359375f;
+// One tile row as a GCC vector: 16 lanes of T, and the matching lane mask
+// (comparisons give all-ones or zero lanes). The compiler maps these onto
+// whatever vector unit the target has (one AVX-512 register, two AVX, four
+// SSE), or plain code on other machines.
+template <typename T> struct Lanes;
+template <> struct Lanes<float> {
+  typedef float Vec __attribute__((vector_size(kTile * sizeof(float))));
+  typedef int32_t Mask __attribute__((vector_size(kTile * sizeof(int32_t))));
+};
+template <> struct Lanes<double> {
+  typedef double Vec __attribute__((vector_size(kTile * sizeof(double))));
+  typedef int64_t Mask __attribute__((vector_size(kTile * sizeof(int64_t))));
+};
+
+template <typename V, typename S>
+inline V Splat(S s) {
+  return V{} + s;
+}
+
+template <typename M, typename V>
+inline V Select(M mask, V a, V b) {
+  return mask ? a : b;
+}
+
+template <typename V>
+inline V Min(V a, V b) {
+  return a < b ? a : b;
+}
+
+template <typename M>
+inline bool AnyLane(M m) {
+  for (int j = 0; j < kTile; ++j) {
+    if (m[j]) return true;
+  }
+  return false;
+}
+
+template <typename V>
+inline auto SumLanes(V v) {
+  auto s = v[0];
+  for (int j = 1; j < kTile; ++j) s += v[j];
+  return s;
+}
+
+// exp(x) lane by lane: in float a Cephes-style range reduction and degree-6
+// polynomial (relative error below 2e-7), branch-free; arguments clamped to
+// [-87, 88] where the result is a normal float. Double uses std::exp (the
+// double kernels serve tests against the reference, not speed).
+inline Lanes<float>::Vec Exp(Lanes<float>::Vec x) {
+  using V = Lanes<float>::Vec;
+  using M = Lanes<float>::Mask;
+  x = x < -87.0f ? Splat<V>(-87.0f) : x;
+  x = x > 88.0f ? Splat<V>(88.0f) : x;
+  // Round to nearest by adding and removing 1.5 * 2^23.
+  const V n = (x * 1.44269504088896341f + 12582912.0f) - 12582912.0f;
+  V r = x - n * 0.693359375f;
   r = r + n * 2.12194440e-4f;
-  float y = 1.9875691500e-4f;
+  V y = Splat<V>(1.9875691500e-4f);
   y = y * r + 1.3981999507e-3f;
   y = y * r + 8.3334519073e-3f;
   y = y * r + 4.1665795894e-2f;
   y = y * r + 1.6666665459e-1f;
   y = y * r + 5.0000001201e-1f;
   y = y * (r * r) + r + 1.0f;
-  const int32_t bits = (static_cast<int32_t>(n) + 127) << 23;
-  float scale;
-  std::memcpy(&scale, &bits, sizeof(scale));
-  return y * scale;
+  const M bits = (__builtin_convertvector(n, M) + 127) << 23;
+  return y * (V)bits;  // a vector cast keeps the bits
 }
 
-inline float Exp(float x) { return FastExp(x); }
-inline double Exp(double x) { return std::exp(std::min(std::max(x, -700.0), 700.0)); }
+inline Lanes<double>::Vec Exp(Lanes<double>::Vec x) {
+  for (int j = 0; j < kTile; ++j) x[j] = std::exp(std::min(std::max(x[j], -700.0), 700.0));
+  return x;
+}
+
+// 0, 1, ..., 15: the lanes' column offsets.
+template <typename V>
+inline V LaneIndex() {
+  V v;
+  for (int j = 0; j < kTile; ++j) v[j] = j;
+  return v;
+}
 
 // Calls f(slot, tile) for every tile: slot s takes tiles s, s + S, s + 2S, ...
 // Which tiles a slot accumulates is fixed by the thread count alone, so

@@ -1,8 +1,9 @@
 // CPU backward of RasterizeGaussians. Each tile walks its list back to front
 // from the last entry any of its pixels used, recovering each pixel's
 // transmittance by division and keeping the colour composited behind the
-// current Gaussian. Per-Gaussian gradients are summed into one buffer per
-// schedule slot (ForEachTile), and the slots are added in a fixed order.
+// current Gaussian, one 16-lane vector per tile row. Per-Gaussian gradients
+// are summed into one buffer per schedule slot (ForEachTile), and the slots
+// are added in a fixed order.
 #include <vector>
 
 #include "avatar/splat_kernels.h"
@@ -16,8 +17,10 @@ enum : int { kGradMx, kGradMy, kGradA, kGradB, kGradC, kGradO, kGradFeatures };
 
 template <typename T>
 struct TileScratch {
-  std::vector<T> behind;  // [C][256] colour composited behind the current Gaussian
-  std::vector<T> v_pix;   // [C][256] d loss / d image
+  using V = typename Lanes<T>::Vec;
+  std::vector<V> behind;  // [C][16] colour composited behind the current Gaussian
+  std::vector<V> v_pix;   // [C][16] d loss / d image
+  std::vector<V> g_f;     // [C] per-Gaussian feature gradient, lane-wise
 };
 
 template <typename T>
@@ -26,49 +29,46 @@ void BackwardTile(int64_t tile, int tiles_x, int width, int height, int channels
                   const T* background, const int32_t* offsets, const int32_t* ids,
                   const T* transmittance, const int32_t* last, const T* v_image, const T* v_alpha,
                   TileScratch<T>& scratch, T* grads /* [N][6 + C] */) {
+  using V = typename Lanes<T>::Vec;
+  using M = typename Lanes<T>::Mask;
   const int x0 = static_cast<int>(tile % tiles_x) * kTile;
   const int y0 = static_cast<int>(tile / tiles_x) * kTile;
   const int cols = std::min(kTile, width - x0), rows = std::min(kTile, height - y0);
   const int64_t plane = int64_t(width) * height;
-  alignas(64) T trans[kTilePixels];
-  alignas(64) T v_alpha_final[kTilePixels];  // d loss / d alpha_i through the alpha output, times (1 - alpha_i)
-  alignas(64) int32_t count[kTilePixels];
-  T* behind = scratch.behind.data();
-  T* v_pix = scratch.v_pix.data();
+  const V lane = LaneIndex<V>();
+  V trans[kTile];
+  V v_alpha_final[kTile];  // d loss / d alpha output, times T_final
+  M count[kTile];
+  V* behind = scratch.behind.data();
+  V* v_pix = scratch.v_pix.data();
+  V* g_f = scratch.g_f.data();
   int32_t max_count = 0;
-  for (int p = 0; p < kTilePixels; ++p) {
-    trans[p] = 1;
-    count[p] = 0;
-    v_alpha_final[p] = 0;
+  for (int row = 0; row < kTile; ++row) {
+    trans[row] = Splat<V>(T(1));
+    v_alpha_final[row] = V{};
+    count[row] = M{};
+    for (int ch = 0; ch < channels; ++ch) v_pix[ch * kTile + row] = V{};
   }
-  std::fill_n(v_pix, int64_t(channels) * kTilePixels, T(0));
   for (int row = 0; row < rows; ++row) {
     const int64_t pixel = int64_t(y0 + row) * width + x0;
     for (int j = 0; j < cols; ++j) {
-      const int p = row * kTile + j;
-      trans[p] = transmittance[pixel + j];
-      count[p] = last[pixel + j];
-      // alpha = 1 - T_final: d alpha / d alpha_i = T_final / (1 - alpha_i).
-      v_alpha_final[p] = v_alpha[pixel + j] * trans[p];
-      max_count = std::max(max_count, count[p]);
+      trans[row][j] = transmittance[pixel + j];
+      count[row][j] = last[pixel + j];
+      // alpha = 1 - T_final, so d alpha / d alpha_i = T_final / (1 - alpha_i).
+      v_alpha_final[row][j] = v_alpha[pixel + j] * transmittance[pixel + j];
+      max_count = std::max(max_count, last[pixel + j]);
     }
     for (int ch = 0; ch < channels; ++ch) {
       const T* in = v_image + ch * plane + pixel;
-      T* out = v_pix + ch * kTilePixels + row * kTile;
-      for (int j = 0; j < cols; ++j) out[j] = in[j];
+      for (int j = 0; j < cols; ++j) v_pix[ch * kTile + row][j] = in[j];
     }
   }
   for (int ch = 0; ch < channels; ++ch) {
-    const T bg = background[ch];
-    T* b = behind + ch * kTilePixels;
-    for (int p = 0; p < kTilePixels; ++p) b[p] = trans[p] * bg;
+    for (int row = 0; row < kTile; ++row) behind[ch * kTile + row] = trans[row] * background[ch];
   }
 
   const int32_t begin = offsets[tile];
   const T min_alpha = static_cast<T>(kMinAlpha), max_alpha = static_cast<T>(kMaxAlpha);
-  alignas(64) T weight[kTile], inv_one_minus[kTile], t_before[kTile], v_alpha_pix[kTile];
-  alignas(64) T dx_lane[kTile], vis_lane[kTile];
-  alignas(64) int32_t use_lane[kTile];
   for (int32_t index = max_count - 1; index >= 0; --index) {
     const int32_t g = ids[begin + index];
     const T mx = means2d[2 * g] - x0, my = means2d[2 * g + 1] - y0;
@@ -77,62 +77,55 @@ void BackwardTile(int64_t tile, int tiles_x, int width, int height, int channels
     int r0, r1;
     if (!RowBounds(my + y0, a, b, c, o, y0, &r0, &r1)) continue;
     const T* f = features + int64_t(g) * channels;
-    T* grad = grads + int64_t(g) * (kGradFeatures + channels);
-    T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
+    const V dx = mx - lane;
+    const V adx2 = a * dx * dx;
+    const V dx2_half = T(0.5) * dx * dx;
+    V g_o = V{}, g_a = V{}, g_b = V{}, g_c = V{}, g_mx = V{}, g_my = V{};
+    bool touched = false;
     for (int row = r0; row <= r1; ++row) {
       const T dy = my - row;
-      const T cdy2 = c * dy * dy, bdy = b * dy;
-      T* t_row = trans + row * kTile;
-      const int32_t* n_row = count + row * kTile;
-      for (int j = 0; j < kTile; ++j) {
-        const T dx = mx - j;
-        const T sigma = T(0.5) * (a * dx * dx + cdy2) + bdy * dx;
-        const T vis = Exp(-sigma);
-        const T alpha = std::min(max_alpha, o * vis);
-        const bool use = index < n_row[j] && sigma >= 0 && alpha >= min_alpha;
-        const T r = T(1) / (T(1) - alpha);
-        const T t_i = use ? t_row[j] * r : t_row[j];
-        t_row[j] = t_i;
-        weight[j] = use ? alpha * t_i : T(0);
-        inv_one_minus[j] = r;
-        t_before[j] = t_i;
-        // Only unclamped alphas pass a gradient to opacity and sigma.
-        use_lane[j] = use && o * vis < max_alpha;
-        dx_lane[j] = dx;
-        vis_lane[j] = vis;
-        v_alpha_pix[j] = v_alpha_final[row * kTile + j] * r;
+      const V sigma = T(0.5) * (adx2 + c * dy * dy) + (b * dy) * dx;
+      const V vis = Exp(-sigma);
+      const V raw = o * vis;
+      const V alpha = Min(raw, Splat<V>(max_alpha));
+      const M use = (count[row] > index) & (sigma >= T(0)) & (alpha >= min_alpha);
+      if (!AnyLane(use)) continue;
+      if (!touched) {
+        std::fill_n(g_f, channels, V{});
+        touched = true;
       }
+      const V inv = T(1) / (T(1) - alpha);
+      const V t_i = Select(use, trans[row] * inv, trans[row]);
+      trans[row] = t_i;
+      const V w = Select(use, alpha * t_i, V{});
+      // d colour_c / d alpha_i = f_c T_i - behind_c / (1 - alpha_i).
+      V v_alpha_pix = v_alpha_final[row] * inv;
       for (int ch = 0; ch < channels; ++ch) {
-        const T fc = f[ch];
-        const T* v_row = v_pix + ch * kTilePixels + row * kTile;
-        T* b_row = behind + ch * kTilePixels + row * kTile;
-        T g_f = 0;
-        for (int j = 0; j < kTile; ++j) {
-          g_f += weight[j] * v_row[j];
-          v_alpha_pix[j] += v_row[j] * (fc * t_before[j] - b_row[j] * inv_one_minus[j]);
-          b_row[j] += fc * weight[j];
-        }
-        grad[kGradFeatures + ch] += g_f;
+        const V v = v_pix[ch * kTile + row];
+        V& bh = behind[ch * kTile + row];
+        g_f[ch] += w * v;
+        v_alpha_pix += v * (f[ch] * t_i - bh * inv);
+        bh += f[ch] * w;
       }
-      for (int j = 0; j < kTile; ++j) {
-        const T dx = dx_lane[j];
-        const T v_o = use_lane[j] ? v_alpha_pix[j] * vis_lane[j] : T(0);
-        // d alpha / d sigma = -o vis.
-        const T v_sigma = -v_o * o;
-        g_o += v_o;
-        g_a += v_sigma * T(0.5) * dx * dx;
-        g_b += v_sigma * dx * dy;
-        g_c += v_sigma * T(0.5) * dy * dy;
-        g_mx += v_sigma * (a * dx + b * dy);
-        g_my += v_sigma * (b * dx + c * dy);
-      }
+      // Only unclamped alphas pass a gradient to opacity and sigma.
+      const V v_o = Select(use & (raw < max_alpha), v_alpha_pix * vis, V{});
+      const V v_sigma = -o * v_o;  // d alpha / d sigma = -o vis
+      g_o += v_o;
+      g_a += v_sigma * dx2_half;
+      g_b += v_sigma * dx * dy;
+      g_c += v_sigma * (T(0.5) * dy * dy);
+      g_mx += v_sigma * (a * dx + b * dy);
+      g_my += v_sigma * (b * dx + c * dy);
     }
-    grad[kGradMx] += g_mx;
-    grad[kGradMy] += g_my;
-    grad[kGradA] += g_a;
-    grad[kGradB] += g_b;
-    grad[kGradC] += g_c;
-    grad[kGradO] += g_o;
+    if (!touched) continue;
+    T* grad = grads + int64_t(g) * (kGradFeatures + channels);
+    grad[kGradMx] += SumLanes(g_mx);
+    grad[kGradMy] += SumLanes(g_my);
+    grad[kGradA] += SumLanes(g_a);
+    grad[kGradB] += SumLanes(g_b);
+    grad[kGradC] += SumLanes(g_c);
+    grad[kGradO] += SumLanes(g_o);
+    for (int ch = 0; ch < channels; ++ch) grad[kGradFeatures + ch] += SumLanes(g_f[ch]);
   }
 }
 
@@ -157,8 +150,9 @@ void RasterizeBackward(const torch::Tensor& means2d, const torch::Tensor& conics
   AT_DISPATCH_FLOATING_TYPES(means2d.scalar_type(), "RasterizeBackward", [&] {
     std::vector<TileScratch<scalar_t>> scratch(slots);
     for (auto& s : scratch) {
-      s.behind.resize(size_t(channels) * kTilePixels);
-      s.v_pix.resize(size_t(channels) * kTilePixels);
+      s.behind.resize(size_t(channels) * kTile);
+      s.v_pix.resize(size_t(channels) * kTile);
+      s.g_f.resize(size_t(channels));
     }
     scalar_t* grad_data = grads.data_ptr<scalar_t>();
     ForEachTile(num_tiles, slots, [&](int slot, int64_t tile) {

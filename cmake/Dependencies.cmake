@@ -18,6 +18,9 @@ find_package(OpenMesh REQUIRED CONFIG)
 find_package(TinyGLTF REQUIRED CONFIG)
 find_package(tomlplusplus REQUIRED CONFIG)
 find_package(Torch REQUIRED)
+# at::parallel_for is a header template that runs serially unless its caller
+# is compiled with OpenMP (LibTorch's CPU backend here is OpenMP).
+find_package(OpenMP REQUIRED COMPONENTS CXX)
 find_package(Threads REQUIRED)
 
 if(HEADFORGE_BUILD_TESTS)
@@ -36,7 +39,7 @@ target_compile_definitions(headforge_hdf5 INTERFACE ${HDF5_DEFINITIONS})
 
 # LibTorch as one imported target, its compile flags (ABI) kept to its users.
 add_library(headforge_torch INTERFACE)
-target_link_libraries(headforge_torch INTERFACE ${TORCH_LIBRARIES})
+target_link_libraries(headforge_torch INTERFACE ${TORCH_LIBRARIES} OpenMP::OpenMP_CXX)
 target_include_directories(headforge_torch SYSTEM INTERFACE ${TORCH_INCLUDE_DIRS})
 separate_arguments(_torch_flags UNIX_COMMAND "${TORCH_CXX_FLAGS}")
 target_compile_options(headforge_torch INTERFACE ${_torch_flags})

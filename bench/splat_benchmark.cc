@@ -4,14 +4,20 @@
 // uniformly random rotations; opacity uniform in [0.1, 0.9]; features uniform
 // in [0, 1]; black background; seed 0. Arguments: N, image side, channels.
 //   build/bench/headforge_splat_bench                       (all sizes)
-//   build/bench/headforge_splat_bench --benchmark_filter='/100000/512/'
+//   build/bench/headforge_splat_bench --benchmark_filter='N:100000/side:512/'
+//   build/bench/headforge_splat_bench --markdown   (also prints README's table)
 // "peak_MiB" is the growth of the process's peak resident memory over one
-// iteration (VmHWM, reset through /proc/self/clear_refs before it).
+// iteration (VmHWM, reset through /proc/self/clear_refs before it), with
+// blocks over 256 KiB mapped and unmapped directly so freed memory leaves.
 #include <benchmark/benchmark.h>
 #include <torch/torch.h>
 
+#include <malloc.h>
+
 #include <cmath>
 #include <fstream>
+#include <map>
+#include <regex>
 #include <string>
 
 #include "avatar/splat_ops.h"
@@ -166,16 +172,84 @@ BENCHMARK(BM_SplatForward)->Apply(Sizes);
 BENCHMARK(BM_SplatBackward)->Apply(Sizes);
 BENCHMARK(BM_SplatForwardBackward)->Apply(Sizes);
 
+
+// The console output, then a markdown table: one row per size, forward,
+// backward, both, and the peak memory of forward + backward.
+class MarkdownReporter : public benchmark::ConsoleReporter {
+ public:
+  MarkdownReporter() : ConsoleReporter(OO_Tabular) {}
+  void ReportRuns(const std::vector<Run>& runs) override {
+    ConsoleReporter::ReportRuns(runs);
+    static const std::regex name(R"(BM_Splat(\w+)/N:(\d+)/side:(\d+)/C:(\d+))");
+    for (const Run& run : runs) {
+      std::smatch m;
+      const std::string full = run.benchmark_name();
+      if (run.error_occurred || !std::regex_search(full, m, name)) continue;
+      Row& row = rows_[{std::stoll(m[4]), std::stoll(m[2]), std::stoll(m[3])}];
+      const double ms = run.GetAdjustedRealTime();
+      if (m[1] == "Forward") row.forward = ms;
+      if (m[1] == "Backward") row.backward = ms;
+      if (m[1] == "ForwardBackward") {
+        row.both = ms;
+        const auto peak = run.counters.find("peak_MiB");
+        if (peak != run.counters.end()) row.peak_mib = peak->second.value;
+      }
+    }
+  }
+  void Finalize() override {
+    ConsoleReporter::Finalize();
+    auto& out = GetOutputStream();
+    out << "\n| C | N | image | forward | backward | forward + backward | peak memory |\n"
+        << "|---|---|---|---|---|---|---|\n";
+    auto cell = [](double v, const char* unit) {
+      if (v < 0) return std::string("-");
+      char text[32];
+      std::snprintf(text, sizeof(text), v < 10 ? "%.1f %s" : "%.0f %s", v, unit);
+      return std::string(text);
+    };
+    for (const auto& [key, row] : rows_) {
+      const auto& [channels, n, side] = key;
+      out << "| " << channels << " | " << n / 1000 << "k | " << side << "² | " << cell(row.forward, "ms")
+          << " | " << cell(row.backward, "ms") << " | " << cell(row.both, "ms") << " | "
+          << cell(row.peak_mib, "MiB") << " |\n";
+    }
+  }
+
+ private:
+  struct Row {
+    double forward = -1, backward = -1, both = -1, peak_mib = -1;
+  };
+  std::map<std::tuple<int64_t, int64_t, int64_t>, Row> rows_;
+};
+
 }  // namespace
 }  // namespace headforge
 
 int main(int argc, char** argv) {
+  // Large blocks straight from and back to the system, so that resident memory
+  // follows what is allocated and the per-iteration peak is meaningful.
+  mallopt(M_MMAP_THRESHOLD, 256 * 1024);
+  mallopt(M_TRIM_THRESHOLD, 256 * 1024);
   headforge::ConfigureTorchThreads(headforge::HardwareThreads());
+  bool markdown = false;
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--markdown") {
+      markdown = true;
+      for (int j = i; j + 1 < argc; ++j) argv[j] = argv[j + 1];
+      --argc;
+      break;
+    }
+  }
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   benchmark::AddCustomContext("torch", headforge::TorchDescription());
   benchmark::AddCustomContext("threads", std::to_string(headforge::HardwareThreads()));
-  benchmark::RunSpecifiedBenchmarks();
+  if (markdown) {
+    headforge::MarkdownReporter reporter;
+    benchmark::RunSpecifiedBenchmarks(&reporter);
+  } else {
+    benchmark::RunSpecifiedBenchmarks();
+  }
   benchmark::Shutdown();
   return 0;
 }

@@ -1,0 +1,70 @@
+// How a Gaussian scene grows and shrinks during fitting, as a strategy object
+// the trainer calls after every backward pass (the adaptive density control
+// of 3D Gaussian Splatting: clone small Gaussians and split large ones where
+// the screen-space gradient stays high, prune nearly transparent ones, and
+// reset opacities now and then).
+#pragma once
+
+#include <torch/types.h>
+
+#include <memory>
+#include <string>
+
+namespace headforge {
+
+// The fitted parameters; every tensor a leaf with requires_grad.
+struct GaussianParams {
+  torch::Tensor means;           // [N, 3] world, metres
+  torch::Tensor quats;           // [N, 4] (w, x, y, z)
+  torch::Tensor log_scales;      // [N, 3]
+  torch::Tensor opacity_logits;  // [N]; opacity = sigmoid
+  torch::Tensor colour_logits;   // [N, C]; colour = sigmoid
+
+  int64_t size() const { return means.defined() ? means.size(0) : 0; }
+  std::vector<torch::Tensor*> All() {
+    return {&means, &quats, &log_scales, &opacity_logits, &colour_logits};
+  }
+};
+
+// What a strategy asks the trainer to do after an optimiser step. The
+// trainer applies it to the parameters and to its per-Gaussian optimiser
+// state (kept rows follow their Gaussian, appended rows start from zero).
+struct DensifyPlan {
+  torch::Tensor keep;     // [K] int64 rows kept, in order; undefined: no change in size
+  GaussianParams append;  // rows added after the kept ones (plain tensors), or empty
+  // Clamp every opacity to at most this (and restart its optimiser state); 0: no reset.
+  double reset_opacity = 0;
+  std::string summary;    // a line for the log; empty when nothing happened
+};
+
+class DensifyStrategy {
+ public:
+  virtual ~DensifyStrategy() = default;
+  // After the backward pass: the screen-space gradient `means2d_grad` [N, 2]
+  // (pixels) and `radii` [N] of the view just rendered, its size in pixels.
+  virtual void AfterBackward(const torch::Tensor& means2d_grad, const torch::Tensor& radii,
+                             int width, int height) = 0;
+  // After the optimiser step `step` (counting from 1).
+  virtual DensifyPlan AfterStep(int step, const GaussianParams& params) = 0;
+};
+
+struct DefaultDensifyOptions {
+  int start = 500;          // first step that may densify
+  int stop = 15000;         // last one
+  int interval = 100;       // steps between densifications
+  int reset_every = 3000;   // steps between opacity resets (0: never)
+  // Mean screen-space gradient (in units of half the image size) above which
+  // a Gaussian is cloned or split.
+  double grad_threshold = 0.0002;
+  // Gaussians larger than this fraction of the scene extent are split, smaller
+  // ones cloned.
+  double split_scale = 0.01;
+  double prune_opacity = 0.005;
+  int64_t max_gaussians = 1000000;
+  double scene_extent = 1.0;  // metres
+  uint64_t seed = 0;
+};
+
+std::unique_ptr<DensifyStrategy> MakeDefaultDensify(const DefaultDensifyOptions& options);
+
+}  // namespace headforge

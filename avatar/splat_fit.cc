@@ -1,0 +1,267 @@
+#include "avatar/splat_fit.h"
+
+#include <torch/torch.h>
+
+#include <chrono>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "avatar/image_metrics.h"
+#include "avatar/splat_ops.h"
+#include "core/log.h"
+
+namespace headforge {
+namespace {
+
+// Adam with its moments kept per Gaussian row, so densification can gather
+// and extend them with the parameters.
+class RowAdam {
+ public:
+  struct Slot {
+    torch::Tensor* param;
+    double lr;
+    torch::Tensor m, v;
+  };
+
+  void Add(torch::Tensor* param, double lr) {
+    slots_.push_back({param, lr, torch::zeros_like(*param), torch::zeros_like(*param)});
+  }
+  void SetLr(size_t index, double lr) { slots_[index].lr = lr; }
+
+  void Step() {
+    torch::NoGradGuard no_grad;
+    ++t_;
+    const double c1 = 1 - std::pow(kBeta1, t_), c2 = 1 - std::pow(kBeta2, t_);
+    for (Slot& s : slots_) {
+      const torch::Tensor& g = s.param->grad();
+      if (!g.defined()) continue;
+      s.m.mul_(kBeta1).add_(g, 1 - kBeta1);
+      s.v.mul_(kBeta2).addcmul_(g, g, 1 - kBeta2);
+      const torch::Tensor denom = (s.v / c2).sqrt_().add_(kEps);
+      s.param->addcdiv_(s.m, denom, -s.lr / c1);
+    }
+  }
+
+  void ZeroGrad() {
+    for (Slot& s : slots_) {
+      if (s.param->grad().defined()) s.param->mutable_grad().zero_();
+    }
+  }
+
+  // Rows `keep` of every parameter and moment, then `append` rows (new
+  // parameters with fresh moments), in the order the slots were added.
+  void Edit(const torch::Tensor& keep, const std::vector<torch::Tensor>& append) {
+    torch::NoGradGuard no_grad;
+    for (size_t i = 0; i < slots_.size(); ++i) {
+      Slot& s = slots_[i];
+      const torch::Tensor& extra = append[i];
+      auto gather = [&](const torch::Tensor& t, const torch::Tensor& added) {
+        const torch::Tensor kept = keep.defined() ? t.index_select(0, keep) : t;
+        return added.defined() && added.size(0) > 0 ? torch::cat({kept, added}) : kept;
+      };
+      *s.param = gather(s.param->detach(), extra).requires_grad_(true);
+      const torch::Tensor zeros = extra.defined() ? torch::zeros_like(extra) : torch::Tensor();
+      s.m = gather(s.m, zeros);
+      s.v = gather(s.v, zeros);
+    }
+  }
+
+  void ResetMoments(size_t index) {
+    slots_[index].m.zero_();
+    slots_[index].v.zero_();
+  }
+
+ private:
+  static constexpr double kBeta1 = 0.9, kBeta2 = 0.999, kEps = 1e-15;
+  std::vector<Slot> slots_;
+  int64_t t_ = 0;
+};
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+struct Evaluation {
+  double psnr = 0, ssim = 0;
+  std::vector<double> view_psnr;
+  std::vector<torch::Tensor> renders;
+};
+
+Evaluation Evaluate(const GaussianParams& params, const std::vector<PosedImage>& views,
+                    const SplatOptions& splat) {
+  Evaluation e;
+  for (const PosedImage& v : views) {
+    const torch::Tensor render = RenderFitted(params, v.camera, splat);
+    const double psnr = Psnr(render, v.image);
+    e.view_psnr.push_back(psnr);
+    e.psnr += psnr / views.size();
+    e.ssim += Ssim(render, v.image).item<double>() / views.size();
+    e.renders.push_back(render);
+  }
+  return e;
+}
+
+}  // namespace
+
+bool SplatFitOptions::Check(std::string* why) const {
+  if (iterations < 1) {
+    *why = "iterations must be at least 1";
+    return false;
+  }
+  if (!(ssim_weight >= 0 && ssim_weight <= 1)) {
+    *why = "ssim_weight must be in [0, 1]";
+    return false;
+  }
+  if (!(lr_means >= 0 && lr_quats >= 0 && lr_scales >= 0 && lr_opacity >= 0 && lr_colours >= 0)) {
+    *why = "learning rates must be zero or positive";
+    return false;
+  }
+  if (!(init_opacity > 0 && init_opacity < 1)) {
+    *why = "init_opacity must be in (0, 1)";
+    return false;
+  }
+  if (log_every < 1 || eval_every < 0) {
+    *why = "log_every must be >= 1 and eval_every >= 0";
+    return false;
+  }
+  return splat.Check(why);
+}
+
+torch::Tensor RenderFitted(const GaussianParams& params, const SplatCamera& camera,
+                           const SplatOptions& options) {
+  torch::NoGradGuard no_grad;
+  SplatRenderOptions render;
+  render.splat = options;
+  return RenderGaussians(params.means, params.quats, params.log_scales,
+                         torch::sigmoid(params.opacity_logits), torch::sigmoid(params.colour_logits),
+                         {}, camera, render)
+      .image.clamp(0, 1);
+}
+
+Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& train,
+                 const std::vector<PosedImage>& test, const InitPoints& init,
+                 const std::function<void(const std::string&)>& stats, Progress* progress,
+                 SplatFitResult* result) {
+  std::string why;
+  if (!options.Check(&why)) return Status::InvalidArgument("splat-fit: " + why);
+  if (train.empty()) return Status::InvalidArgument("splat-fit: no training views");
+  if (!init.positions.defined() || init.positions.size(0) == 0) {
+    return Status::InvalidArgument("splat-fit: no initial points");
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  GaussianParams& p = result->params;
+  {
+    torch::NoGradGuard no_grad;
+    const int64_t n = init.positions.size(0);
+    const auto opts = torch::TensorOptions().dtype(torch::kFloat32);
+    p.means = init.positions.to(opts).clone();
+    p.quats = torch::zeros({n, 4}, opts);
+    p.quats.select(1, 0).fill_(1.0);
+    p.log_scales = init.sizes.to(opts).clamp_min(1e-6).log().unsqueeze(1).repeat({1, 3});
+    p.opacity_logits = torch::full({n}, std::log(options.init_opacity / (1 - options.init_opacity)), opts);
+    p.colour_logits = torch::logit(init.colours.to(opts).clamp(0.01, 0.99));
+    for (torch::Tensor* t : p.All()) t->requires_grad_(true);
+  }
+  const double extent = options.densify.scene_extent;
+  RowAdam adam;
+  adam.Add(&p.means, options.lr_means * extent);
+  adam.Add(&p.quats, options.lr_quats);
+  adam.Add(&p.log_scales, options.lr_scales);
+  adam.Add(&p.opacity_logits, options.lr_opacity);
+  adam.Add(&p.colour_logits, options.lr_colours);
+  const auto densify = MakeDefaultDensify(options.densify);
+
+  auto gen = at::detail::createCPUGenerator(options.seed);
+  torch::Tensor order;
+  SplatRenderOptions render_options;
+  render_options.splat = options.splat;
+  progress->Start("splat-fit", options.iterations);
+  int step = 0;
+  double loss_sum = 0, l1_sum = 0;
+  int loss_count = 0;
+  for (step = 1; step <= options.iterations; ++step) {
+    const int64_t slot = (step - 1) % int64_t(train.size());
+    if (slot == 0) order = torch::randperm(int64_t(train.size()), gen);
+    const PosedImage& view = train[order[slot].item<int64_t>()];
+    adam.SetLr(0, options.lr_means * extent * std::pow(0.01, double(step) / options.iterations));
+
+    const auto out = RenderGaussians(p.means, p.quats, p.log_scales, torch::sigmoid(p.opacity_logits),
+                                     torch::sigmoid(p.colour_logits), {}, view.camera,
+                                     render_options);
+    out.means2d.retain_grad();
+    const torch::Tensor l1 = (out.image - view.image).abs().mean();
+    const torch::Tensor loss =
+        (1 - options.ssim_weight) * l1 + options.ssim_weight * (1 - Ssim(out.image, view.image));
+    const double loss_value = loss.item<double>();
+    if (!std::isfinite(loss_value)) {
+      progress->Finish("diverged");
+      return Status::Internal("splat-fit: the loss became " + std::to_string(loss_value) + " at step " +
+                              std::to_string(step) +
+                              "; lower the learning rates (--lr-means, --lr-scales) or start from "
+                              "smaller Gaussians");
+    }
+    loss.backward();
+    densify->AfterBackward(out.means2d.grad(), out.radii, view.camera.width, view.camera.height);
+    adam.Step();
+    adam.ZeroGrad();
+    const DensifyPlan plan = densify->AfterStep(step, p);
+    if (plan.keep.defined()) {
+      adam.Edit(plan.keep, {plan.append.means, plan.append.quats, plan.append.log_scales,
+                            plan.append.opacity_logits, plan.append.colour_logits});
+    }
+    if (plan.reset_opacity > 0) {
+      torch::NoGradGuard no_grad;
+      const double cap = std::log(plan.reset_opacity / (1 - plan.reset_opacity));
+      p.opacity_logits.clamp_max_(cap);
+      adam.ResetMoments(3);
+    }
+    if (!plan.summary.empty()) HF_LOG(Debug) << "splat-fit step " << step << ": " << plan.summary;
+
+    loss_sum += loss_value;
+    l1_sum += l1.item<double>();
+    ++loss_count;
+    progress->Advance();
+    const bool out_of_time = options.max_minutes > 0 && Seconds(t0) > 60.0 * options.max_minutes;
+    const bool last = step == options.iterations || out_of_time;
+    if (step % options.log_every == 0 || last) {
+      nlohmann::json line = {{"step", step},
+                             {"loss", loss_sum / loss_count},
+                             {"l1", l1_sum / loss_count},
+                             {"gaussians", p.size()},
+                             {"seconds", Seconds(t0)}};
+      stats(line.dump());
+      loss_sum = l1_sum = 0;
+      loss_count = 0;
+    }
+    if (!last && options.eval_every > 0 && step % options.eval_every == 0 && !test.empty()) {
+      const Evaluation e = Evaluate(p, test, options.splat);
+      stats(nlohmann::json{{"step", step}, {"test_psnr", e.psnr}, {"test_ssim", e.ssim},
+                           {"gaussians", p.size()}, {"seconds", Seconds(t0)}}
+                .dump());
+      HF_LOG(Info) << "splat-fit: step " << step << ", " << p.size()
+                   << " Gaussians, held-out PSNR " << e.psnr << " dB";
+    }
+    if (out_of_time) {
+      HF_LOG(Info) << "splat-fit: time limit of " << options.max_minutes << " min reached at step "
+                   << step;
+      break;
+    }
+  }
+  result->steps = std::min(step, options.iterations);
+  result->train_seconds = Seconds(t0);
+  progress->Finish(std::to_string(result->steps) + " steps, " + std::to_string(p.size()) +
+                   " Gaussians");
+  if (!test.empty()) {
+    Evaluation e = Evaluate(p, test, options.splat);
+    result->test_psnr = e.psnr;
+    result->test_ssim = e.ssim;
+    result->view_psnr = e.view_psnr;
+    result->test_renders = std::move(e.renders);
+    stats(nlohmann::json{{"step", result->steps}, {"test_psnr", e.psnr}, {"test_ssim", e.ssim},
+                         {"gaussians", p.size()}, {"seconds", result->train_seconds}, {"final", true}}
+              .dump());
+  }
+  return Status::Ok();
+}
+
+}  // namespace headforge

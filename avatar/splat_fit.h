@@ -1,0 +1,71 @@
+// Fitting a static Gaussian scene to posed images: L1 + SSIM loss, Adam,
+// densification through a DensifyStrategy, held-out evaluation, and one JSON
+// line of statistics per log tick.
+#pragma once
+
+#include <torch/types.h>
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "avatar/densify.h"
+#include "avatar/splat_camera.h"
+#include "core/progress.h"
+#include "core/status.h"
+
+namespace headforge {
+
+struct PosedImage {
+  SplatCamera camera;
+  torch::Tensor image;  // [3, H, W] float RGB in [0, 1]
+  std::string name;
+};
+
+// Starting points: positions, colours and a size each.
+struct InitPoints {
+  torch::Tensor positions;  // [N, 3] world, metres
+  torch::Tensor colours;    // [N, 3] RGB in [0, 1]
+  torch::Tensor sizes;      // [N] metres
+};
+
+struct SplatFitOptions {
+  int iterations = 30000;
+  // Stop early when this much wall time has passed (0: no limit); the
+  // evaluation after the last step is not counted.
+  double max_minutes = 0;
+  double ssim_weight = 0.2;  // loss = (1 - w) L1 + w (1 - SSIM)
+  // Adam learning rates; the means' decays exponentially to 1% over the run
+  // and scales with the scene extent.
+  double lr_means = 1.6e-4, lr_quats = 1e-3, lr_scales = 5e-3, lr_opacity = 5e-2,
+         lr_colours = 1e-2;
+  double init_opacity = 0.1;
+  int log_every = 100;    // steps between stats lines
+  int eval_every = 2000;  // steps between held-out evaluations (0: only at the end)
+  uint64_t seed = 0;
+  SplatOptions splat;
+  DefaultDensifyOptions densify;
+
+  bool Check(std::string* why) const;
+};
+
+struct SplatFitResult {
+  GaussianParams params;
+  int steps = 0;
+  double train_seconds = 0;
+  double test_psnr = 0, test_ssim = 0;  // means over the held-out views
+  std::vector<double> view_psnr;        // per held-out view
+  std::vector<torch::Tensor> test_renders;  // [3, H, W] per held-out view
+};
+
+// `stats` receives one JSON object per line (loss curve, evaluations).
+Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& train,
+                 const std::vector<PosedImage>& test, const InitPoints& init,
+                 const std::function<void(const std::string&)>& stats, Progress* progress,
+                 SplatFitResult* result);
+
+// Renders the fitted scene into `camera` ([3, H, W], no gradient).
+torch::Tensor RenderFitted(const GaussianParams& params, const SplatCamera& camera,
+                           const SplatOptions& options = {});
+
+}  // namespace headforge

@@ -43,6 +43,10 @@ class FaceModel {
   // Adds the expression offsets to an identity shape.
   void AddExpression(const Eigen::VectorXf& beta, Eigen::Matrix3Xf* vertices) const;
 
+  // The bases behind Identity() and AddExpression(): [3N, K] and [3N, E],
+  // columns already scaled by sqrt(variance); row 3v + d is vertex v, axis d.
+  const Eigen::MatrixXf& identity_basis() const { return identity_basis_; }
+  const Eigen::MatrixXf& expression_basis() const { return expression_basis_; }
   const Eigen::Matrix3Xf& neutral() const { return neutral_; }  // representer points [3, N]
   const Eigen::Matrix3Xi& triangles() const { return triangles_; }  // [3, T]
   const std::vector<std::string>& expression_names() const { return expression_names_; }

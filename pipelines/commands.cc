@@ -2,7 +2,9 @@
 
 #include <opencv2/core/utility.hpp>
 
+#include <algorithm>
 #include <cstdio>
+#include <cstring>
 #include <iostream>
 
 #include "avatar/torch_runtime.h"
@@ -19,11 +21,17 @@ const std::vector<Command>& Commands() {
       {"ingest", "Turn videos or image folders into frames, landmarks and masks.", IngestCommand},
       {"calibrate", "Estimate cameras: COLMAP, head pose (fixed camera) or a rig file.", CalibrateCommand},
       {"align", "Align the cameras to the face model's metric head frame (Procrustes).", AlignCommand},
+      {"track", "Fit the face model (identity, head motion, 53 expressions) to the landmarks.",
+       TrackCommand},
       {"simulate", "Render a synthetic head capture with ground truth from a scene file.",
        SimulateCommand},
       {"status", "Show the stages of a workspace: status, wall time, summary.", StatusCommand},
       {"embed-landmarks", "Measure where the landmark detector's points sit on the face model.",
        EmbedLandmarksCommand},
+      {"face-model", "Face model tools: import-ict converts ICT-FaceKit's folder into the model file.",
+       FaceModelCommand},
+      {"splat-fit", "Fit a static Gaussian scene to a simulated capture; report held-out PSNR.",
+       SplatFitCommand},
       {"bench", "Measure accuracy against time: bench calibrate.", BenchCommand},
       {"version", "Print the version and the libraries it was built with.", VersionCommand},
   };
@@ -98,7 +106,9 @@ void PrintMainHelp() {
       "       headforge <command> --help   options of one command, with defaults\n"
       "       headforge --version\n\nCommands:\n",
       HeadForgeVersion().c_str());
-  for (const auto& c : Commands()) std::printf("  %-10s %s\n", c.name, c.summary);
+  int width = 0;
+  for (const auto& c : Commands()) width = std::max(width, static_cast<int>(std::strlen(c.name)));
+  for (const auto& c : Commands()) std::printf("  %-*s  %s\n", width, c.name, c.summary);
   std::printf(
       "\nEvery stage reads and writes one workspace folder; a stage whose inputs and options\n"
       "are unchanged is skipped, and an interrupted run resumes. Exit codes: 0 done,\n"

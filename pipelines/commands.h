@@ -52,9 +52,12 @@ int RunCommand(const std::vector<std::string>& args);
 int IngestCommand(const std::vector<std::string>& args);
 int CalibrateCommand(const std::vector<std::string>& args);
 int AlignCommand(const std::vector<std::string>& args);
+int TrackCommand(const std::vector<std::string>& args);
 int SimulateCommand(const std::vector<std::string>& args);
 int EmbedLandmarksCommand(const std::vector<std::string>& args);
+int FaceModelCommand(const std::vector<std::string>& args);
 int BenchCommand(const std::vector<std::string>& args);
+int SplatFitCommand(const std::vector<std::string>& args);
 int StatusCommand(const std::vector<std::string>& args);
 int VersionCommand(const std::vector<std::string>& args);
 

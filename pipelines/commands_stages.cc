@@ -14,11 +14,13 @@ namespace {
 struct LaterStages {
   CalibrateOptions calibrate;
   AlignOptions align;
+  TrackStageOptions track;
   std::string face_model;
 
   void Add(OptionSet* o) {
     AddCalibrateOptions(o, &calibrate);
     AddAlignOptions(o, &align);
+    AddTrackOptions(o, &track);
     o->Add("face_model", &face_model,
            "Face model (Basel-layout HDF5); default DATA/ict_facekit/ict_face_model.h5.", "face-model",
            OptionSet::Effect::kRuntime);
@@ -111,6 +113,32 @@ int AlignCommand(const std::vector<std::string>& args) {
   return kExitOk;
 }
 
+int TrackCommand(const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  LaterStages stages;
+  AddCommonOptions(&options, &common, /*with_workspace=*/true);
+  stages.Add(&options);
+  const int parsed = ParseOrExit(
+      &options, args, "headforge track --workspace DIR [options]",
+      "Fits the face model to the detected landmarks over the whole sequence with Ceres: a\n"
+      "shared identity, each frame's head motion (held by head-pose cameras) and 53 blendshape\n"
+      "weights in [0, 1]. Writes tracking.json and overlay_<camera>.mp4 (the fitted mesh on\n"
+      "the frames).");
+  if (parsed >= 0) return parsed;
+  if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
+  stages.Resolve(common);
+  stages.track.fit.threads = Threads(common);
+  if (Status s = stages.track.Check(); !s.ok()) return ReportFailure(s);
+  ApplyCommonOptions(common);
+  std::unique_ptr<Workspace> workspace;
+  if (int code = OpenWorkspace(common, &workspace); code >= 0) return code;
+  StderrProgress progress;
+  if (Status s = RunTrackStage(workspace.get(), stages.track, stages.face_model, options, &progress); !s.ok())
+    return ReportFailure(s);
+  return kExitOk;
+}
+
 int RunCommand(const std::vector<std::string>& args) {
   OptionSet options;
   CommonOptions common;
@@ -122,15 +150,16 @@ int RunCommand(const std::vector<std::string>& args) {
   const std::string usage = "headforge run --video FILE|DIR... --workspace DIR [options]";
   const int parsed = ParseOrExit(
       &options, args, usage,
-      "Runs the pipeline's stages in order into one workspace: ingest, calibrate and align\n"
-      "(track, train and export follow as they become available). A stage whose inputs and\n"
+      "Runs the pipeline's stages in order into one workspace: ingest, calibrate, align and\n"
+      "track (train and export follow as they become available). A stage whose inputs and\n"
       "options are unchanged is skipped; a failed or interrupted one is redone.\n"
       "Options of every stage are accepted, by their short flag or their dotted key.");
   if (parsed >= 0) return parsed;
   if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
   ResolveIngestDefaults(common.data_dir, &ingest);
   stages.Resolve(common);
-  for (const Status& s : {ingest.Check(), stages.calibrate.Check(), stages.align.Check()})
+  stages.track.fit.threads = Threads(common);
+  for (const Status& s : {ingest.Check(), stages.calibrate.Check(), stages.align.Check(), stages.track.Check()})
     if (!s.ok()) return ReportFailure(s);
   ApplyCommonOptions(common);
   std::unique_ptr<Workspace> workspace;
@@ -143,7 +172,9 @@ int RunCommand(const std::vector<std::string>& args) {
     return ReportFailure(s);
   if (Status s = RunAlignStage(workspace.get(), stages.align, stages.face_model, options); !s.ok())
     return ReportFailure(s);
-  HF_LOG(Info) << "run: align is the last stage available in this version; results are in " << common.workspace
+  if (Status s = RunTrackStage(workspace.get(), stages.track, stages.face_model, options, &progress); !s.ok())
+    return ReportFailure(s);
+  HF_LOG(Info) << "run: track is the last stage available in this version; results are in " << common.workspace
                << " (headforge status " << common.workspace << ")";
   return kExitOk;
 }

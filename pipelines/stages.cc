@@ -105,4 +105,35 @@ Status RunAlignStage(Workspace* workspace, const AlignOptions& align, const std:
       &skipped);
 }
 
+Status RunTrackStage(Workspace* workspace, const TrackStageOptions& track, const std::string& face_model,
+                     const OptionSet& options, Progress* progress) {
+  HF_RETURN_IF_ERROR(track.Check());
+  std::string fingerprint;
+  HF_RETURN_IF_ERROR(ChainedFingerprint(*workspace, "track", {"ingest", "calibrate", "align"},
+                                        options.ToIni("track", true), face_model, &fingerprint));
+  bool skipped = false;
+  return RunStage(
+      workspace, "track", fingerprint, options.ToIni("track"),
+      [&](const fs::path& staging, StageResult* result) {
+        IngestedCapture capture;
+        HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace->root(), &capture));
+        CameraSet cameras;
+        HF_RETURN_IF_ERROR(CameraSet::Read(workspace->Path("cameras_head.json"), &cameras));
+        FaceModel model;
+        HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+        TrackSummary summary;
+        HF_RETURN_IF_ERROR(RunTrack(track, capture, cameras, model, staging, progress, &summary));
+        result->outputs = summary.outputs;
+        char text[200];
+        std::snprintf(text, sizeof(text),
+                      "%d frames, median landmark residual %.2f px, %d interpolated, %d low-confidence, %.1f s%s",
+                      summary.frames, summary.median_residual_px, summary.interpolated, summary.low_confidence,
+                      summary.seconds, summary.fixed_head ? ", head held by the cameras" : "");
+        result->message = text;
+        HF_LOG(Info) << "track: " << result->message;
+        return Status::Ok();
+      },
+      &skipped);
+}
+
 }  // namespace headforge

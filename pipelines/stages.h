@@ -8,6 +8,7 @@
 #include "core/options.h"
 #include "core/progress.h"
 #include "core/workspace.h"
+#include "reconstruction/track_stage.h"
 
 namespace headforge {
 
@@ -23,5 +24,9 @@ Status RunCalibrateStage(Workspace* workspace, const CalibrateOptions& calibrate
 // Runs (or skips) align on the workspace's cameras.
 Status RunAlignStage(Workspace* workspace, const AlignOptions& align, const std::string& face_model,
                      const OptionSet& options);
+
+// Runs (or skips) track on the workspace's landmarks and head-frame cameras.
+Status RunTrackStage(Workspace* workspace, const TrackStageOptions& track, const std::string& face_model,
+                     const OptionSet& options, Progress* progress);
 
 }  // namespace headforge

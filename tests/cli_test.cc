@@ -16,54 +16,12 @@
 #include "core/fs.h"
 #include "core/hash.h"
 #include "core/json_io.h"
-
-extern char** environ;
+#include "tests/run_headforge.h"
 
 namespace headforge {
 namespace {
 
 const fs::path kGrid = fs::path(HEADFORGE_TEST_SHARED_DATA) / "video" / "grid";
-
-struct Result {
-  int code = -1;
-  std::string out, err;
-};
-
-pid_t Spawn(const std::vector<std::string>& args, const fs::path& out, const fs::path& err) {
-  std::vector<std::string> full = {HEADFORGE_BINARY};
-  full.insert(full.end(), args.begin(), args.end());
-  std::vector<char*> argv;
-  for (auto& a : full) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_addopen(&actions, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  pid_t pid = -1;
-  EXPECT_EQ(posix_spawn(&pid, HEADFORGE_BINARY, &actions, nullptr, argv.data(), environ), 0);
-  posix_spawn_file_actions_destroy(&actions);
-  return pid;
-}
-
-std::string Slurp(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-Result Headforge(const std::vector<std::string>& args) {
-  const fs::path out = fs::temp_directory_path() / ("hf_cli_out_" + std::to_string(getpid()));
-  const fs::path err = fs::temp_directory_path() / ("hf_cli_err_" + std::to_string(getpid()));
-  const pid_t pid = Spawn(args, out, err);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  Result r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = Slurp(out);
-  r.err = Slurp(err);
-  return r;
-}
 
 bool Contains(const std::string& text, const std::string& part) {
   return text.find(part) != std::string::npos;
@@ -134,9 +92,12 @@ TEST_F(CliTest, GridClipIngestsAllFramesWithLandmarks) {
   EXPECT_TRUE(Contains(status.out, "calibrate  done")) << status.out;
   EXPECT_TRUE(Contains(status.out, "head-pose")) << status.out;
   EXPECT_TRUE(Contains(status.out, "align      done")) << status.out;
-  EXPECT_TRUE(Contains(status.out, "track      pending")) << status.out;
+  EXPECT_TRUE(Contains(status.out, "track      done")) << status.out;
+  EXPECT_TRUE(Contains(status.out, "train      pending")) << status.out;
   EXPECT_TRUE(fs::exists(reference_ / "cameras.json"));
   EXPECT_TRUE(fs::exists(reference_ / "alignment.json"));
+  EXPECT_TRUE(fs::exists(reference_ / "tracking.json"));
+  EXPECT_TRUE(fs::exists(reference_ / "overlay_cam0.mp4"));
 }
 
 TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
@@ -231,8 +192,13 @@ TEST_F(CliTest, ConfigFileSetsDottedKeysAndCommandLineWins) {
 TEST(Cli, HelpVersionAndUsageErrors) {
   const Result help = Headforge({"--help"});
   EXPECT_EQ(help.code, 0);
-  for (const char* command : {"run", "ingest", "calibrate", "align", "simulate", "bench", "status", "version"})
+  for (const char* command : {"run", "ingest", "calibrate", "align", "track", "simulate", "splat-fit", "face-model",
+                              "bench", "status", "version"})
     EXPECT_TRUE(Contains(help.out, command));
+  const Result track_help = Headforge({"track", "--help"});
+  EXPECT_EQ(track_help.code, 0);
+  for (const char* text : {"--identity-modes, --track.identity_modes", "default: 20", "--overlay"})
+    EXPECT_TRUE(Contains(track_help.out, text)) << text;
 
   const Result ingest_help = Headforge({"ingest", "--help"});
   EXPECT_EQ(ingest_help.code, 0);
@@ -303,6 +269,47 @@ TEST(SimulateThenIngest, IngestAcceptsTheSimulatorsOutputUnchanged) {
   const double median = errors[errors.size() / 2];
   std::printf("median detected-vs-true landmark distance: %.2f px of the 512 px simulator frame\n", median);
   EXPECT_LT(median, 6.0);
+}
+
+// splat-fit end to end on a small orbit: the fit improves on held-out views,
+// writes its loss curve, a report and a PLY with the reported count.
+TEST(SplatFit, FitsHeldOutViewsAndWritesItsOutputs) {
+  const fs::path out = fs::temp_directory_path() / "hf_cli_splat_fit";
+  fs::remove_all(out);
+  const fs::path scene = fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / "orbit_360.toml";
+  const Result fit = Headforge({"splat-fit", "--scene", scene.string(), "--out", out.string(), "--resolution", "48",
+                                "--frames", "48", "--iterations", "500", "--eval-every", "100", "--init-points",
+                                "3000", "--densify-until", "400", "--log-every", "50"});
+  ASSERT_EQ(fit.code, 0) << fit.err;
+  nlohmann::json report;
+  ASSERT_TRUE(ReadJson(out / "report.json", &report).ok());
+  EXPECT_EQ(report["test_views"], 6);
+  EXPECT_EQ(report["train_views"], 42);
+  EXPECT_EQ(report["steps"], 500);
+
+  std::vector<nlohmann::json> evals, losses;
+  std::ifstream stats(out / "stats.jsonl");
+  for (std::string line; std::getline(stats, line);) {
+    const auto j = nlohmann::json::parse(line);
+    (j.contains("test_psnr") ? evals : losses).push_back(j);
+  }
+  ASSERT_EQ(losses.size(), 10u);
+  ASSERT_EQ(evals.size(), 5u);  // steps 100..400, and the final one
+  EXPECT_LT(losses.back()["loss"].get<double>(), 0.8 * losses.front()["loss"].get<double>());
+  const double first = evals.front()["test_psnr"], last = report["test_psnr"];
+  std::printf("splat-fit held-out PSNR: %.2f dB at step 100, %.2f dB at step 500\n", first, last);
+  EXPECT_GT(last, first + 1.0);
+  EXPECT_GT(last, 14.0);
+  EXPECT_GT(report["test_ssim"].get<double>(), 0.3);
+
+  // The PLY holds the reported number of Gaussians.
+  std::ifstream ply(out / "gaussians.ply", std::ios::binary);
+  int64_t vertices = -1;
+  for (std::string line; std::getline(ply, line) && line != "end_header";) {
+    if (line.rfind("element vertex ", 0) == 0) vertices = std::stoll(line.substr(15));
+  }
+  EXPECT_EQ(vertices, report["gaussians"].get<int64_t>());
+  EXPECT_TRUE(fs::exists(out / "held_out" / "cam0_4.png"));
 }
 
 }  // namespace

@@ -1,0 +1,39 @@
+// The 68 detector landmarks as linear functions of the face model's identity
+// and expression coefficients, which is all tracking needs of the model:
+//   X_i(alpha, beta) = base_i + identity_i alpha + expression_i beta   (metres)
+// Each landmark is attached to the closest point of the model's surface
+// (barycentric coordinates in one triangle, plus the small offset from the
+// surface the detector's embedding has), so it moves with the mesh.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <vector>
+
+#include "core/face_model.h"
+#include "core/status.h"
+
+namespace headforge {
+
+struct LandmarkBasis {
+  int num_identity = 0, num_expressions = 0;
+  Eigen::Matrix3Xd base;  // [3, 68] head frame at alpha = 0, beta = 0
+  // Per landmark: [3, K] and [3, E] blocks.
+  std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> identity, expression;
+  // Where each landmark sits: triangle and barycentric coordinates.
+  std::vector<int> triangle;
+  std::vector<Eigen::Vector3d> barycentric;
+
+  int size() const { return static_cast<int>(base.cols()); }
+  Eigen::Vector3d Point(int i, const Eigen::VectorXd& alpha, const Eigen::VectorXd& beta) const;
+};
+
+// `points` are the detector's 68 landmarks on the mean face (an embedding, or
+// the model's landmark vertices); `identity_modes` how many identity modes to
+// keep (at most the model's). Landmarks attach to the closest surface point
+// among the triangles of the model's "face" region (the whole mesh when the
+// model has no regions).
+Status BuildLandmarkBasis(const FaceModel& model, const std::vector<Eigen::Vector3d>& points,
+                          int identity_modes, LandmarkBasis* basis);
+
+}  // namespace headforge

@@ -1,0 +1,299 @@
+#include "reconstruction/track_stage.h"
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <fstream>
+
+#include "calibration/landmark_embedding.h"
+#include "core/json_io.h"
+#include "core/log.h"
+#include "core/mesh_renderer.h"
+
+namespace headforge {
+namespace {
+
+TrackingCamera ToTrackingCamera(const CameraIntrinsics& in, const Eigen::Isometry3d& cam_from_head) {
+  TrackingCamera c;
+  c.fx = in.fx;
+  c.fy = in.fy > 0 ? in.fy : in.fx;
+  c.cx = in.cx;
+  c.cy = in.cy;
+  c.rotation = cam_from_head.linear();
+  c.translation = cam_from_head.translation();
+  return c;
+}
+
+nlohmann::json MatrixJson(const Eigen::Matrix4d& m) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (int r = 0; r < 4; ++r) rows.push_back({m(r, 0), m(r, 1), m(r, 2), m(r, 3)});
+  return rows;
+}
+
+// The fitted head drawn over one frame: the face shaded toward the camera at
+// half opacity, detected landmarks green, fitted ones red.
+cv::Mat Overlay(const cv::Mat& frame, const FaceModel& model, const Eigen::Matrix3Xf& vertices,
+                const std::vector<int16_t>& material, const TrackingCamera& camera,
+                const std::optional<std::array<Eigen::Vector2d, 68>>& detected,
+                const std::vector<Eigen::Vector2d>& fitted) {
+  Mesh mesh;
+  mesh.vertices = vertices;
+  mesh.triangles = model.triangles();
+  mesh.normals = VertexNormals(vertices, model.triangles());
+  mesh.material = material;
+  Material skin;
+  skin.colour = Eigen::Vector3f(0.75f, 0.8f, 0.85f);
+  mesh.materials = {skin};
+  PinholeCamera pinhole;
+  pinhole.fx = camera.fx;
+  pinhole.fy = camera.fy;
+  pinhole.cx = camera.cx;
+  pinhole.cy = camera.cy;
+  pinhole.width = frame.cols;
+  pinhole.height = frame.rows;
+  pinhole.cam_from_world.linear() = camera.rotation;
+  pinhole.cam_from_world.translation() = camera.translation;
+  RenderOptions options;
+  options.supersample = 1;
+  options.threads = 1;
+  options.lighting.enabled = true;
+  // Light from the camera: its viewing axis in the head frame, reversed.
+  options.lighting.direction = (-camera.rotation.transpose() * Eigen::Vector3d::UnitZ()).cast<float>();
+  RenderOutput out;
+  RenderMeshes({&mesh}, pinhole, options, &out);
+  cv::Mat image = frame.clone();
+  for (int y = 0; y < image.rows; ++y) {
+    for (int x = 0; x < image.cols; ++x) {
+      if (out.triangle.at<int32_t>(y, x) < 0) continue;
+      const cv::Vec3f c = out.color.at<cv::Vec3f>(y, x) * 255.0f;
+      cv::Vec3b& p = image.at<cv::Vec3b>(y, x);
+      for (int k = 0; k < 3; ++k) p[k] = cv::saturate_cast<uint8_t>(0.5f * p[k] + 0.5f * c[k]);
+    }
+  }
+  if (detected) {
+    for (const auto& p : *detected) cv::circle(image, cv::Point2d(p.x(), p.y()), 1, cv::Scalar(0, 255, 0), -1);
+  }
+  for (const auto& p : fitted) cv::circle(image, cv::Point2d(p.x(), p.y()), 1, cv::Scalar(0, 0, 255), -1);
+  return image;
+}
+
+Status WriteObj(const fs::path& path, const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& triangles) {
+  std::ostringstream text;
+  text.precision(6);
+  for (int i = 0; i < vertices.cols(); ++i)
+    text << "v " << vertices(0, i) << " " << vertices(1, i) << " " << vertices(2, i) << "\n";
+  for (int t = 0; t < triangles.cols(); ++t)
+    text << "f " << triangles(0, t) + 1 << " " << triangles(1, t) + 1 << " " << triangles(2, t) + 1 << "\n";
+  return WriteFileAtomic(path, text.str());
+}
+
+}  // namespace
+
+Status TrackStageOptions::Check() const {
+  std::string why;
+  if (!fit.Check(&why)) return Status::InvalidArgument("track: " + why);
+  return Status::Ok();
+}
+
+void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
+  o->Add("track.identity_modes", &t->fit.identity_modes, "Identity (shape) modes fitted, shared by the sequence.",
+         "identity-modes");
+  o->Add("track.identity_prior", &t->fit.identity_prior,
+         "Weight of the identity's unit Gaussian prior (pixels per standard deviation).", "identity-prior");
+  o->Add("track.expression_sparsity", &t->fit.expression_sparsity,
+         "L1-like prior on blendshape weights (squared pixels per unit of weight).", "expression-sparsity");
+  o->Add("track.rotation_smoothness", &t->fit.rotation_smoothness,
+         "Temporal smoothness of head rotation (pixels per radian between frames).", "rotation-smoothness");
+  o->Add("track.translation_smoothness", &t->fit.translation_smoothness,
+         "Temporal smoothness of head translation (pixels per metre between frames).", "translation-smoothness");
+  o->Add("track.expression_smoothness", &t->fit.expression_smoothness,
+         "Temporal smoothness of blendshape weights (pixels per unit between frames).", "expression-smoothness");
+  o->Add("track.robust_scale_px", &t->fit.robust_scale_px, "Huber scale of landmark residuals, pixels.",
+         "robust-scale");
+  o->Add("track.contour_weight", &t->fit.contour_weight, "Weight of the jaw-contour landmarks (0-16).",
+         "contour-weight");
+  o->Add("track.max_iterations", &t->fit.max_iterations, "Levenberg-Marquardt iterations at most.",
+         "track-iterations");
+  o->Add("track.landmark_embedding", &t->landmark_embedding,
+         "Where the detector's 68 landmarks sit on the face model (JSON); empty: the shipped embedding.",
+         "track-landmark-embedding");
+  o->Add("track.refine_head_pose", &t->refine_head_pose,
+         "With head-pose cameras, refine each frame's head pose with the fitted shape (false: hold it).",
+         "refine-head-pose");
+  o->Add("track.overlay", &t->overlay, "Write overlay_<camera>.mp4: the fitted mesh over the frames.", "overlay");
+  o->Add("track.meshes", &t->meshes, "Write meshes/<frame>.obj: the fitted head per frame (head frame).",
+         "meshes");
+}
+
+Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
+                const FaceModel& model, const fs::path& out_dir, Progress* progress, TrackSummary* summary) {
+  HF_RETURN_IF_ERROR(options.Check());
+  if (cameras.frame != "head") {
+    return Status::InvalidArgument("track: the cameras are not in the head frame; run align first (cameras_head.json)");
+  }
+  if (model.num_expressions() == 0) return Status::DataError("track: the face model has no expressions");
+  const std::string embedding =
+      options.landmark_embedding.empty() ? DefaultLandmarkEmbedding() : options.landmark_embedding;
+  LandmarkBasis basis;
+  HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, DetectorLandmarkPoints(model, embedding),
+                                        options.fit.identity_modes, &basis));
+  TrackOptions fit = options.fit;
+  fit.fixed_head = cameras.mode == "head-pose" && !options.refine_head_pose;
+
+  std::vector<TrackingView> views;
+  std::vector<std::pair<int, int>> view_source;  // camera index, frame index
+  for (size_t c = 0; c < capture.cameras.size(); ++c) {
+    const IngestedCamera& cam = capture.cameras[c];
+    const CameraIntrinsics* in = cameras.FindCamera(cam.name);
+    if (in == nullptr) return Status::DataError("track: no intrinsics for camera " + cam.name + " in the cameras");
+    for (const IngestedFrame& f : cam.frames) {
+      const CameraView* v = cameras.FindView(cam.name, f.index);
+      if (v == nullptr || !v->registered) continue;  // an unregistered view says nothing
+      TrackingView view;
+      view.frame = f.index;
+      view.camera = ToTrackingCamera(*in, v->cam_from_world);
+      if (f.landmarks) {
+        std::array<Eigen::Vector2d, 68> points;
+        for (int i = 0; i < 68; ++i) points[i] = Eigen::Vector2d((*f.landmarks)[i].x, (*f.landmarks)[i].y);
+        view.landmarks = points;
+      }
+      views.push_back(view);
+      view_source.emplace_back(int(c), f.index);
+    }
+  }
+  const int num_frames = capture.num_frames();
+  HF_LOG(Info) << "track: " << views.size() << " views of " << num_frames << " frames, " << options.fit.identity_modes
+               << " identity modes, " << model.num_expressions() << " expressions"
+               << (fit.fixed_head ? ", head held by the head-pose cameras" : "");
+  progress->Start("track: fitting", 0);
+  TrackResult result;
+  HF_RETURN_IF_ERROR(TrackSequence(basis, views, num_frames, fit, &result));
+  progress->Finish(result.solver_report);
+
+  // tracking.json
+  nlohmann::json frames = nlohmann::json::array();
+  int interpolated = 0, low = 0;
+  for (const TrackedFrame& f : result.frames) {
+    nlohmann::json weights = nlohmann::json::object();
+    for (int j = 0; j < f.expression.size(); ++j) weights[model.expression_names()[j]] = f.expression[j];
+    frames.push_back({{"frame", f.frame},
+                      {"head_motion", MatrixJson(f.head_motion.matrix())},
+                      {"expression", weights},
+                      {"residual_px", f.residual_px},
+                      {"landmarks", f.landmarks},
+                      {"interpolated", f.interpolated},
+                      {"low_confidence", f.low_confidence},
+                      {"why", f.why}});
+    interpolated += f.interpolated;
+    low += f.low_confidence;
+  }
+  const nlohmann::json json = {
+      {"face_model", model.path()},
+      {"identity_modes", options.fit.identity_modes},
+      {"identity", std::vector<double>(result.identity.data(), result.identity.data() + result.identity.size())},
+      {"expression_names", model.expression_names()},
+      {"head_held_by_cameras", fit.fixed_head},
+      {"median_residual_px", result.median_residual_px},
+      {"solver", result.solver_report},
+      {"seconds", result.seconds},
+      {"frames", frames}};
+  HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "tracking.json", json));
+  summary->outputs = {"tracking.json"};
+
+  const Eigen::VectorXf alpha = result.identity.cast<float>();
+  const Eigen::Matrix3Xf identity_shape = model.Identity(alpha);
+  if (options.meshes) {
+    HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "meshes"));
+    for (const TrackedFrame& f : result.frames) {
+      Eigen::Matrix3Xf v = identity_shape;
+      model.AddExpression(f.expression.cast<float>(), &v);
+      v = (f.head_motion.cast<float>() * v.colwise().homogeneous().eval()).topRows(3).eval();
+      char name[32];
+      std::snprintf(name, sizeof(name), "%06d.obj", f.frame);
+      HF_RETURN_IF_ERROR(WriteObj(out_dir / "meshes" / name, v, model.triangles()));
+    }
+    summary->outputs.push_back("meshes");
+  }
+  if (options.overlay) {
+    // Only the face is drawn (the rest of the head has no landmarks to follow).
+    std::vector<int16_t> material(model.num_triangles(), -1);
+    const FaceModel::Region* face = model.FindRegion("face");
+    for (int t = 0; t < model.num_triangles(); ++t) {
+      if (face == nullptr || face->ContainsTriangle(t)) material[t] = 0;
+    }
+    progress->Start("track: overlay video", int64_t(views.size()));
+    std::map<int, cv::VideoWriter> writers;
+    for (size_t i = 0; i < views.size(); ++i) {
+      const auto [c, frame] = view_source[i];
+      const IngestedCamera& cam = capture.cameras[c];
+      const cv::Mat image = cv::imread(capture.FramePath(cam.name, frame).string(), cv::IMREAD_COLOR);
+      if (image.empty()) return Status::IoError("track: cannot read frame " + capture.FramePath(cam.name, frame).string());
+      const TrackedFrame& f = result.frames[frame];
+      Eigen::Matrix3Xf v = identity_shape;
+      model.AddExpression(f.expression.cast<float>(), &v);
+      v = (f.head_motion.cast<float>() * v.colwise().homogeneous().eval()).topRows(3).eval();
+      std::vector<Eigen::Vector2d> fitted;
+      for (int l = 0; l < 68; ++l) {
+        const Eigen::Vector3d p = views[i].camera.rotation * (f.head_motion * basis.Point(l, result.identity, f.expression)) +
+                                  views[i].camera.translation;
+        fitted.emplace_back(views[i].camera.fx * p.x() / p.z() + views[i].camera.cx,
+                            views[i].camera.fy * p.y() / p.z() + views[i].camera.cy);
+      }
+      const cv::Mat drawn = Overlay(image, model, v, material, views[i].camera, views[i].landmarks, fitted);
+      auto it = writers.find(c);
+      if (it == writers.end()) {
+        const fs::path video = out_dir / ("overlay_" + cam.name + ".mp4");
+        cv::VideoWriter writer(video.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('m', 'p', '4', 'v'),
+                               capture.fps, drawn.size());
+        if (!writer.isOpened()) return Status::IoError("track: cannot open " + video.string() + " for writing");
+        it = writers.emplace(c, std::move(writer)).first;
+        summary->outputs.push_back(video.filename().string());
+      }
+      it->second.write(drawn);
+      progress->Advance();
+    }
+    progress->Finish();
+  }
+  summary->frames = num_frames;
+  summary->interpolated = interpolated;
+  summary->low_confidence = low;
+  summary->median_residual_px = result.median_residual_px;
+  summary->seconds = result.seconds;
+  summary->fixed_head = fit.fixed_head;
+  return Status::Ok();
+}
+
+Status ReadTracking(const fs::path& path, TrackingFile* tracking) {
+  nlohmann::json json;
+  HF_RETURN_IF_ERROR(ReadJson(path, &json));
+  try {
+    TrackingFile out;
+    out.expression_names = json.at("expression_names").get<std::vector<std::string>>();
+    const auto identity = json.at("identity").get<std::vector<double>>();
+    out.identity = Eigen::Map<const Eigen::VectorXd>(identity.data(), Eigen::Index(identity.size()));
+    for (const auto& f : json.at("frames")) {
+      TrackedFrame t;
+      t.frame = f.at("frame");
+      Eigen::Matrix4d m;
+      for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) m(r, c) = f.at("head_motion")[r][c];
+      t.head_motion.matrix() = m;
+      t.expression.resize(Eigen::Index(out.expression_names.size()));
+      for (size_t j = 0; j < out.expression_names.size(); ++j) t.expression[j] = f.at("expression").at(out.expression_names[j]);
+      t.residual_px = f.at("residual_px");
+      t.landmarks = f.at("landmarks");
+      t.interpolated = f.at("interpolated");
+      t.low_confidence = f.at("low_confidence");
+      t.why = f.at("why");
+      out.frames.push_back(t);
+    }
+    *tracking = std::move(out);
+  } catch (const nlohmann::json::exception& e) {
+    return Status::DataError("tracking file " + path.string() + " is malformed: " + e.what());
+  }
+  return Status::Ok();
+}
+
+}  // namespace headforge

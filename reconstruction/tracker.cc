@@ -1,0 +1,257 @@
+#include "reconstruction/tracker.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+
+#include "calibration/reprojection_cost.h"
+
+namespace headforge {
+namespace {
+
+struct FrameBlocks {
+  double rotation[3] = {0, 0, 0};
+  double translation[3] = {0, 0, 0};
+  std::vector<double> expression;
+  bool observed = false;
+};
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+Eigen::Isometry3d MotionOf(const FrameBlocks& b) {
+  Eigen::Isometry3d m = Eigen::Isometry3d::Identity();
+  const Eigen::Vector3d aa(b.rotation[0], b.rotation[1], b.rotation[2]);
+  if (aa.norm() > 0) m.linear() = Eigen::AngleAxisd(aa.norm(), aa.normalized()).toRotationMatrix();
+  m.translation() = Eigen::Vector3d(b.translation[0], b.translation[1], b.translation[2]);
+  return m;
+}
+
+ceres::LinearSolverType PickLinearSolver() {
+  for (auto library : {ceres::SUITE_SPARSE, ceres::EIGEN_SPARSE, ceres::ACCELERATE_SPARSE}) {
+    if (ceres::IsSparseLinearAlgebraLibraryTypeAvailable(library)) return ceres::SPARSE_NORMAL_CHOLESKY;
+  }
+  return ceres::ITERATIVE_SCHUR;
+}
+
+}  // namespace
+
+bool TrackOptions::Check(std::string* why) const {
+  if (identity_modes < 1) {
+    *why = "identity_modes must be at least 1";
+    return false;
+  }
+  if (!(identity_prior >= 0 && expression_sparsity >= 0 && sparsity_scale > 0 && rotation_smoothness >= 0 &&
+        translation_smoothness >= 0 && expression_smoothness >= 0 && robust_scale_px > 0 && contour_weight >= 0)) {
+    *why = "weights must be zero or positive (scales positive)";
+    return false;
+  }
+  if (max_iterations < 1 || threads < 1) {
+    *why = "max_iterations and threads must be at least 1";
+    return false;
+  }
+  return true;
+}
+
+double YawFromCamera(const TrackingCamera& camera, const Eigen::Isometry3d& head_motion) {
+  const Eigen::Vector3d facing = camera.rotation * head_motion.linear() * Eigen::Vector3d::UnitZ();
+  return std::atan2(facing.x(), -facing.z()) * 180.0 / M_PI;
+}
+
+Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>& views, int num_frames,
+                     const TrackOptions& options, TrackResult* result) {
+  std::string why;
+  if (!options.Check(&why)) return Status::InvalidArgument("track: " + why);
+  if (basis.size() != 68) return Status::InvalidArgument("track: the landmark basis must hold 68 landmarks");
+  if (num_frames < 1) return Status::InvalidArgument("track: no frames");
+  if (basis.num_identity < options.identity_modes) {
+    return Status::InvalidArgument("track: the landmark basis holds " + std::to_string(basis.num_identity) +
+                                   " identity modes, fewer than the " + std::to_string(options.identity_modes) +
+                                   " asked for");
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const int k = options.identity_modes, e = basis.num_expressions;
+  LandmarkBasis fit_basis = basis;
+  fit_basis.num_identity = k;
+  for (auto& m : fit_basis.identity) m = m.leftCols(k).eval();
+
+  std::vector<double> identity(k, 0.0);
+  std::vector<FrameBlocks> frames(num_frames);
+  for (auto& f : frames) f.expression.assign(e, 0.0);
+
+  ceres::Problem problem;
+  int observations = 0;
+  for (const TrackingView& view : views) {
+    if (view.frame < 0 || view.frame >= num_frames) {
+      return Status::InvalidArgument("track: a view refers to frame " + std::to_string(view.frame) + " of " +
+                                     std::to_string(num_frames));
+    }
+    if (!view.landmarks) continue;
+    FrameBlocks& f = frames[view.frame];
+    for (int i = 0; i < 68; ++i) {
+      const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
+      if (!(confidence > 0)) continue;
+      const Eigen::Vector2d& pixel = (*view.landmarks)[i];
+      if (!pixel.allFinite()) continue;
+      const double weight = confidence * (i < 17 ? options.contour_weight : 1.0);
+      if (!(weight > 0)) continue;
+      problem.AddResidualBlock(
+          LandmarkReprojectionCost::Create(fit_basis, i, view.camera, pixel, weight),
+          new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, identity.data(),
+          f.expression.data());
+      f.observed = true;
+      ++observations;
+    }
+  }
+  if (observations == 0) {
+    return Status::DataError("track: no frame has landmarks; check that ingest found the face (landmarks.json)");
+  }
+
+  // Priors, bounds, smoothness between consecutive observed frames.
+  problem.AddResidualBlock(CoefficientPriorCost::Create(k, options.identity_prior), nullptr, identity.data());
+  int previous = -1;
+  for (int i = 0; i < num_frames; ++i) {
+    FrameBlocks& f = frames[i];
+    if (!f.observed) continue;
+    if (options.expression_sparsity > 0) {
+      // soft-L1 of scale a costs about 2 a |w| for |w| >> a; scaled so a weight
+      // w costs expression_sparsity * w (squared pixels), quadratic below a.
+      const double a = options.sparsity_scale;
+      problem.AddResidualBlock(CoefficientPriorCost::Create(e, 1.0),
+                               new ceres::ScaledLoss(new ceres::SoftLOneLoss(a), options.expression_sparsity / (2 * a),
+                                                     ceres::TAKE_OWNERSHIP),
+                               f.expression.data());
+    }
+    for (int j = 0; j < e; ++j) {
+      problem.SetParameterLowerBound(f.expression.data(), j, 0.0);
+      problem.SetParameterUpperBound(f.expression.data(), j, 1.0);
+    }
+    if (options.fixed_head) {
+      problem.SetParameterBlockConstant(f.rotation);
+      problem.SetParameterBlockConstant(f.translation);
+    }
+    if (previous >= 0) {
+      FrameBlocks& p = frames[previous];
+      // Gaps in the observed frames weaken the link in proportion.
+      const double gap = i - previous;
+      if (!options.fixed_head && (options.rotation_smoothness > 0 || options.translation_smoothness > 0)) {
+        problem.AddResidualBlock(PoseSmoothnessCost::Create(options.rotation_smoothness / gap,
+                                                            options.translation_smoothness / gap),
+                                 nullptr, p.rotation, p.translation, f.rotation, f.translation);
+      }
+      if (options.expression_smoothness > 0) {
+        problem.AddResidualBlock(CoefficientSmoothnessCost::Create(e, options.expression_smoothness / gap), nullptr,
+                                 p.expression.data(), f.expression.data());
+      }
+    }
+    previous = i;
+  }
+
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = PickLinearSolver();
+  solver.max_num_iterations = options.max_iterations;
+  solver.num_threads = options.threads;
+  solver.function_tolerance = 1e-8;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+  if (summary.termination_type == ceres::FAILURE || !std::isfinite(summary.final_cost)) {
+    return Status::Internal("track: the solver failed: " + summary.message);
+  }
+  for (double a : identity) {
+    if (!std::isfinite(a)) return Status::Internal("track: the identity became non-finite");
+  }
+
+  TrackResult out;
+  out.identity = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
+  out.iterations = static_cast<int>(summary.iterations.size());
+  out.solver_report = summary.BriefReport();
+  // Residuals and flags per observed frame.
+  std::vector<std::vector<double>> residuals(num_frames);
+  std::vector<int> seen(num_frames, 0);
+  std::vector<std::string> reasons(num_frames);
+  const Eigen::VectorXd alpha = out.identity;
+  for (const TrackingView& view : views) {
+    if (!view.landmarks) continue;
+    const FrameBlocks& f = frames[view.frame];
+    const Eigen::Isometry3d motion = MotionOf(f);
+    const Eigen::VectorXd beta = Eigen::Map<const Eigen::VectorXd>(f.expression.data(), e);
+    Eigen::MatrixXd seen_points(2, 0);
+    for (int i = 0; i < 68; ++i) {
+      const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
+      if (!(confidence > 0) || !(*view.landmarks)[i].allFinite()) continue;
+      const Eigen::Vector3d p = view.camera.rotation * (motion * fit_basis.Point(i, alpha, beta)) +
+                                view.camera.translation;
+      const Eigen::Vector2d pixel(view.camera.fx * p.x() / p.z() + view.camera.cx,
+                                  view.camera.fy * p.y() / p.z() + view.camera.cy);
+      residuals[view.frame].push_back((pixel - (*view.landmarks)[i]).norm());
+      seen_points.conservativeResize(2, seen_points.cols() + 1);
+      seen_points.col(seen_points.cols() - 1) = (*view.landmarks)[i];
+      ++seen[view.frame];
+    }
+    if (std::abs(YawFromCamera(view.camera, motion)) > options.max_yaw_deg) {
+      reasons[view.frame] += "profile view; ";
+    }
+    if (seen_points.cols() >= 3) {
+      const Eigen::MatrixXd centred = seen_points.colwise() - seen_points.rowwise().mean();
+      const Eigen::JacobiSVD<Eigen::MatrixXd> svd(centred);
+      const Eigen::Vector2d s = svd.singularValues();
+      if (s[1] < 0.1 * s[0]) reasons[view.frame] += "landmarks nearly collinear; ";
+    }
+  }
+  std::vector<double> all;
+  std::vector<int> observed;
+  for (int i = 0; i < num_frames; ++i) {
+    TrackedFrame t;
+    t.frame = i;
+    t.head_motion = MotionOf(frames[i]);
+    t.expression = Eigen::Map<const Eigen::VectorXd>(frames[i].expression.data(), e);
+    t.landmarks = seen[i];
+    if (frames[i].observed) {
+      observed.push_back(i);
+      t.residual_px = Median(residuals[i]);
+      all.insert(all.end(), residuals[i].begin(), residuals[i].end());
+      std::string r = reasons[i];
+      if (t.landmarks < options.min_landmarks) r += "few landmarks; ";
+      if (t.residual_px > options.flag_residual_px) r += "high residual; ";
+      if (!r.empty()) {
+        t.low_confidence = true;
+        t.why = r.substr(0, r.size() - 2);
+      }
+    }
+    out.frames.push_back(t);
+  }
+  // Frames without landmarks: linear interpolation between the nearest
+  // observed frames (constant beyond the ends).
+  for (int i = 0; i < num_frames; ++i) {
+    if (frames[i].observed) continue;
+    const auto next = std::lower_bound(observed.begin(), observed.end(), i);
+    const int after = next == observed.end() ? -1 : *next;
+    const int before = next == observed.begin() ? -1 : *(next - 1);
+    const int a = before >= 0 ? before : after, b = after >= 0 ? after : before;
+    const double w = (a == b) ? 0.0 : double(i - a) / double(b - a);
+    const FrameBlocks& fa = frames[a];
+    const FrameBlocks& fb = frames[b];
+    FrameBlocks mix;
+    for (int d = 0; d < 3; ++d) {
+      mix.rotation[d] = (1 - w) * fa.rotation[d] + w * fb.rotation[d];
+      mix.translation[d] = (1 - w) * fa.translation[d] + w * fb.translation[d];
+    }
+    TrackedFrame& t = out.frames[i];
+    t.head_motion = MotionOf(mix);
+    t.expression.resize(e);
+    for (int j = 0; j < e; ++j) t.expression[j] = (1 - w) * fa.expression[j] + w * fb.expression[j];
+    t.interpolated = true;
+    t.low_confidence = true;
+    t.why = "no landmarks: interpolated";
+  }
+  out.median_residual_px = Median(all);
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  *result = std::move(out);
+  return Status::Ok();
+}
+
+}  // namespace headforge

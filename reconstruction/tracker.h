@@ -1,0 +1,95 @@
+// 3DMM tracking: a Ceres fit over a whole sequence of the face model's shared
+// identity, each frame's head motion and each frame's 53 blendshape weights,
+// to the detected 68 landmarks of every view, through calibrated cameras.
+#pragma once
+
+#include <Eigen/Geometry>
+
+#include <array>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/progress.h"
+#include "core/status.h"
+#include "reconstruction/landmark_basis.h"
+#include "reconstruction/tracking_costs.h"
+
+namespace headforge {
+
+// One camera's view of one frame.
+struct TrackingView {
+  int frame = 0;
+  TrackingCamera camera;  // intrinsics and cam_from_head for this frame
+  // Detected landmarks in pixels, or nothing where the face was not found.
+  std::optional<std::array<Eigen::Vector2d, 68>> landmarks;
+  // Per-landmark confidence in [0, 1] (0: ignore); all 1 when empty.
+  std::vector<double> confidence;
+};
+
+struct TrackOptions {
+  // Identity modes fitted (shared by the sequence), with a unit Gaussian
+  // prior of this weight (pixels per standard deviation).
+  int identity_modes = 20;
+  double identity_prior = 2.0;
+  // Sparsity of the blendshape weights: an L1-like prior costing this many
+  // squared pixels per unit of weight (quadratic below `sparsity_scale`).
+  double expression_sparsity = 30.0;
+  double sparsity_scale = 0.05;
+  // Temporal smoothness between consecutive frames: pixels per radian and per
+  // metre of head motion, and per unit of blendshape weight.
+  double rotation_smoothness = 100.0;
+  double translation_smoothness = 300.0;
+  double expression_smoothness = 3.0;
+  // Huber scale of the landmark residuals, pixels.
+  double robust_scale_px = 2.0;
+  // Weight of the jaw contour (landmarks 0-16), whose detector definition
+  // slides along the cheek with the view.
+  double contour_weight = 0.5;
+  // The cameras already carry the head's motion (head-pose calibration):
+  // hold each frame's head motion at the identity.
+  bool fixed_head = false;
+  int max_iterations = 100;
+  int threads = 1;
+  // A frame is flagged low-confidence when its median residual exceeds this
+  // (pixels), fewer than `min_landmarks` landmarks were seen, the head turns
+  // more than `max_yaw_deg` from a camera, or its landmarks are nearly
+  // collinear.
+  double flag_residual_px = 3.0;
+  int min_landmarks = 34;
+  double max_yaw_deg = 60.0;
+
+  bool Check(std::string* why) const;
+};
+
+struct TrackedFrame {
+  int frame = 0;
+  // The head's motion in the head frame: X' = rotation * X + translation.
+  Eigen::Isometry3d head_motion = Eigen::Isometry3d::Identity();
+  Eigen::VectorXd expression;   // [E] in [0, 1]
+  double residual_px = 0;       // median landmark residual over its views (0 when interpolated)
+  int landmarks = 0;            // landmarks observed over its views
+  bool interpolated = false;    // no landmarks: values from the neighbouring frames
+  bool low_confidence = false;
+  std::string why;              // reasons for the flag
+};
+
+struct TrackResult {
+  Eigen::VectorXd identity;  // [K]
+  std::vector<TrackedFrame> frames;
+  double median_residual_px = 0;
+  int iterations = 0;
+  double seconds = 0;
+  std::string solver_report;  // Ceres' one-line summary
+};
+
+// Frames are 0 .. num_frames-1; `views` may hold several views per frame
+// (multi-view frames are fitted jointly) and none for some.
+Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>& views,
+                     int num_frames, const TrackOptions& options, TrackResult* result);
+
+// The head rotation about the camera's vertical axis (degrees): 0 facing the
+// camera.
+double YawFromCamera(const TrackingCamera& camera, const Eigen::Isometry3d& head_motion);
+
+}  // namespace headforge

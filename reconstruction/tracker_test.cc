@@ -1,0 +1,314 @@
+// Tracking on synthetic landmark sequences made from the face model itself:
+// recovered expressions, head motion and landmark positions against the
+// truth, and the hard cases staying finite and flagged.
+#include "reconstruction/tracker.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "calibration/landmark_embedding.h"
+#include "core/face_model.h"
+
+namespace headforge {
+namespace {
+
+const FaceModel& Model() {
+  static const FaceModel* model = [] {
+    auto* m = new FaceModel();
+    const Status s = FaceModel::Load(std::string(HEADFORGE_TEST_SHARED_DATA) + "/ict_facekit/ict_face_model.h5", m);
+    if (!s.ok()) throw std::runtime_error(s.message());
+    return m;
+  }();
+  return *model;
+}
+
+const LandmarkBasis& Basis() {
+  static const LandmarkBasis* basis = [] {
+    auto* b = new LandmarkBasis();
+    const auto points = DetectorLandmarkPoints(Model(), DefaultLandmarkEmbedding());
+    const Status s = BuildLandmarkBasis(Model(), points, 20, b);
+    if (!s.ok()) throw std::runtime_error(s.message());
+    return b;
+  }();
+  return *basis;
+}
+
+// A camera `distance` metres in front of the face, turned by `yaw_deg` about
+// the head's vertical axis, OpenCV axes.
+TrackingCamera CameraAt(double yaw_deg, double focal = 900, double distance = 0.6) {
+  TrackingCamera c;
+  c.fx = c.fy = focal;
+  c.cx = 255.5;
+  c.cy = 255.5;
+  const Eigen::Matrix3d flip = Eigen::Vector3d(1, -1, -1).asDiagonal();  // head +y up, +z toward the camera
+  const Eigen::Matrix3d head_from_cam_rot =
+      Eigen::AngleAxisd(yaw_deg * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix() * flip;
+  const Eigen::Vector3d centre =
+      Eigen::AngleAxisd(yaw_deg * M_PI / 180, Eigen::Vector3d::UnitY()) * Eigen::Vector3d(0, 0, distance);
+  c.rotation = head_from_cam_rot.transpose();
+  c.translation = -c.rotation * centre;
+  return c;
+}
+
+struct Truth {
+  Eigen::VectorXd alpha;
+  std::vector<Eigen::Isometry3d> motion;
+  std::vector<Eigen::VectorXd> beta;
+};
+
+const std::vector<std::string> kAnimated = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"};
+
+Truth MakeTruth(int frames, double head_motion, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n(0.0, 1.0);
+  Truth t;
+  t.alpha = Eigen::VectorXd::Zero(20);
+  for (int k = 0; k < 20; ++k) t.alpha[k] = 0.8 * n(rng);
+  for (int f = 0; f < frames; ++f) {
+    const double s = f / double(frames);
+    Eigen::Isometry3d m = Eigen::Isometry3d::Identity();
+    m.linear() = (Eigen::AngleAxisd(head_motion * 0.2 * std::sin(2 * M_PI * s), Eigen::Vector3d::UnitY()) *
+                  Eigen::AngleAxisd(head_motion * 0.1 * std::sin(4 * M_PI * s + 1), Eigen::Vector3d::UnitX()))
+                     .toRotationMatrix();
+    m.translation() = head_motion * Eigen::Vector3d(0.01 * std::sin(2 * M_PI * s), 0.005 * std::cos(2 * M_PI * s), 0);
+    t.motion.push_back(m);
+    Eigen::VectorXd beta = Eigen::VectorXd::Zero(Basis().num_expressions);
+    const auto set = [&](const std::string& name, double v) { beta[Model().ExpressionIndex(name)] = v; };
+    set("jawOpen", 0.5 + 0.5 * std::sin(6 * M_PI * s));
+    const double blink = std::max(0.0, std::cos(10 * M_PI * s) * 2 - 1);
+    set("eyeBlink_L", blink);
+    set("eyeBlink_R", blink);
+    set("mouthSmile_L", 0.3 + 0.3 * std::sin(2 * M_PI * s + 0.5));
+    set("mouthSmile_R", 0.3 + 0.3 * std::sin(2 * M_PI * s + 0.7));
+    t.beta.push_back(beta);
+  }
+  return t;
+}
+
+std::vector<TrackingView> Observe(const Truth& t, const std::vector<TrackingCamera>& cameras, double noise_px,
+                                  uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n(0.0, noise_px);
+  std::vector<TrackingView> views;
+  for (size_t f = 0; f < t.motion.size(); ++f) {
+    for (const TrackingCamera& c : cameras) {
+      TrackingView v;
+      v.frame = int(f);
+      v.camera = c;
+      std::array<Eigen::Vector2d, 68> points;
+      for (int i = 0; i < 68; ++i) {
+        const Eigen::Vector3d p = c.rotation * (t.motion[f] * Basis().Point(i, t.alpha, t.beta[f])) + c.translation;
+        points[i] = Eigen::Vector2d(c.fx * p.x() / p.z() + c.cx + n(rng), c.fy * p.y() / p.z() + c.cy + n(rng));
+      }
+      v.landmarks = points;
+      views.push_back(v);
+    }
+  }
+  return views;
+}
+
+double RotationErrorDeg(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle() * 180 / M_PI;
+}
+
+struct Scores {
+  double residual = 0, expression_mae = 0, rotation_deg = 0, landmark_mm = 0;
+};
+
+Scores Score(const Truth& t, const TrackResult& r) {
+  Scores s;
+  std::vector<double> rot;
+  double mae = 0, mm = 0;
+  int count = 0, points = 0;
+  for (size_t f = 0; f < t.motion.size(); ++f) {
+    rot.push_back(RotationErrorDeg(t.motion[f], r.frames[f].head_motion));
+    for (const auto& name : kAnimated) {
+      const int j = Model().ExpressionIndex(name);
+      mae += std::abs(t.beta[f][j] - r.frames[f].expression[j]);
+      ++count;
+    }
+    // Shape error: both point sets about their own centroid (one view cannot
+    // tell a head's distance from its size exactly, so absolute positions may
+    // slide along the view axis).
+    Eigen::Matrix3Xd truth(3, 68), fit(3, 68);
+    for (int i = 0; i < 68; ++i) {
+      truth.col(i) = t.motion[f] * Basis().Point(i, t.alpha, t.beta[f]);
+      fit.col(i) = r.frames[f].head_motion * Basis().Point(i, r.identity, r.frames[f].expression);
+    }
+    truth.colwise() -= truth.rowwise().mean();
+    fit.colwise() -= fit.rowwise().mean();
+    for (int i = 0; i < 68; ++i) {
+      mm += 1000 * (truth.col(i) - fit.col(i)).norm();
+      ++points;
+    }
+  }
+  std::nth_element(rot.begin(), rot.begin() + rot.size() / 2, rot.end());
+  s.rotation_deg = rot[rot.size() / 2];
+  s.expression_mae = mae / count;
+  s.landmark_mm = mm / points;
+  s.residual = r.median_residual_px;
+  return s;
+}
+
+TEST(Tracker, MonocularSequenceRecoversExpressionsAndMotion) {
+  const Truth truth = MakeTruth(40, 1.0, 1);
+  const auto views = Observe(truth, {CameraAt(0)}, 0.5, 2);
+  TrackOptions options;
+  TrackResult result;
+  const Status status = TrackSequence(Basis(), views, 40, options, &result);
+  ASSERT_TRUE(status.ok()) << status.message();
+  const Scores s = Score(truth, result);
+  std::printf("mono: residual %.2f px, expression MAE %.3f, rotation %.2f deg, landmarks %.2f mm, %d it, %.2f s\n",
+              s.residual, s.expression_mae, s.rotation_deg, s.landmark_mm, result.iterations, result.seconds);
+  EXPECT_LT(s.residual, 1.0);
+  EXPECT_LT(s.expression_mae, 0.1);
+  EXPECT_LT(s.rotation_deg, 1.5);
+  EXPECT_LT(s.landmark_mm, 3.0);
+  for (const auto& f : result.frames) EXPECT_FALSE(f.low_confidence) << f.frame << ": " << f.why;
+}
+
+TEST(Tracker, MultiViewFramesAreFittedJointly) {
+  const Truth truth = MakeTruth(20, 1.0, 3);
+  const auto views = Observe(truth, {CameraAt(-40), CameraAt(0), CameraAt(40)}, 0.5, 4);
+  TrackResult result;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 20, TrackOptions(), &result).ok());
+  const Scores s = Score(truth, result);
+  std::printf("3 views: residual %.2f px, expression MAE %.3f, rotation %.2f deg, landmarks %.2f mm\n", s.residual,
+              s.expression_mae, s.rotation_deg, s.landmark_mm);
+  EXPECT_LT(s.residual, 1.0);
+  EXPECT_LT(s.expression_mae, 0.06);
+  EXPECT_LT(s.rotation_deg, 0.5);
+  EXPECT_LT(s.landmark_mm, 1.0);
+}
+
+TEST(Tracker, HeadHeldByTheCamerasStaysFixed) {
+  // Head-pose calibration: each frame's camera carries the head's motion.
+  Truth truth = MakeTruth(20, 1.0, 5);
+  std::vector<TrackingView> views;
+  for (int f = 0; f < 20; ++f) {
+    TrackingCamera c = CameraAt(0);
+    Truth still = truth;
+    const Eigen::Isometry3d motion = truth.motion[f];
+    c.translation = c.rotation * motion.translation() + c.translation;
+    c.rotation = c.rotation * motion.linear();
+    still.motion.assign(20, Eigen::Isometry3d::Identity());
+    auto v = Observe(still, {c}, 0.3, 6 + f);
+    views.push_back(v[f]);
+  }
+  TrackOptions options;
+  options.fixed_head = true;
+  TrackResult result;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 20, options, &result).ok());
+  for (const auto& f : result.frames) EXPECT_TRUE(f.head_motion.isApprox(Eigen::Isometry3d::Identity()));
+  EXPECT_LT(result.median_residual_px, 0.8);
+}
+
+TEST(Tracker, FramesWithoutLandmarksAreInterpolatedAndFlagged) {
+  const Truth truth = MakeTruth(30, 1.0, 7);
+  auto views = Observe(truth, {CameraAt(0)}, 0.5, 8);
+  for (int f : {0, 10, 11, 12, 29}) views[f].landmarks.reset();
+  TrackResult result;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 30, TrackOptions(), &result).ok());
+  for (int f : {0, 10, 11, 12, 29}) {
+    EXPECT_TRUE(result.frames[f].interpolated && result.frames[f].low_confidence) << f;
+    EXPECT_EQ(result.frames[f].landmarks, 0);
+  }
+  // Interpolated frames sit between their neighbours.
+  const double j = Model().ExpressionIndex("jawOpen");
+  const double a = result.frames[9].expression[j], b = result.frames[13].expression[j];
+  EXPECT_NEAR(result.frames[11].expression[j], 0.5 * (a + b), 1e-9);
+  EXPECT_LT(RotationErrorDeg(result.frames[11].head_motion, truth.motion[11]), 2.0);
+}
+
+TEST(Tracker, NoLandmarksAtAllIsAClearError) {
+  const Truth truth = MakeTruth(5, 1.0, 9);
+  auto views = Observe(truth, {CameraAt(0)}, 0.5, 10);
+  for (auto& v : views) v.landmarks.reset();
+  TrackResult result;
+  const Status s = TrackSequence(Basis(), views, 5, TrackOptions(), &result);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("no frame has landmarks"), std::string::npos);
+}
+
+// Hard cases: finite results, flagged where the data cannot support them.
+bool AllFinite(const TrackResult& r) {
+  if (!r.identity.allFinite()) return false;
+  for (const auto& f : r.frames) {
+    if (!f.expression.allFinite() || !f.head_motion.matrix().allFinite()) return false;
+  }
+  return true;
+}
+
+TEST(TrackerHardCases, LargeYawWithTheFarSideHidden) {
+  for (double yaw : {-80.0, 80.0}) {
+    const Truth truth = MakeTruth(10, 0.3, 11);
+    auto views = Observe(truth, {CameraAt(yaw)}, 0.5, 12);
+    // Landmarks on the side turned away (head-frame x against the camera) are unseen.
+    for (auto& v : views) {
+      v.confidence.assign(68, 1.0);
+      for (int i = 0; i < 68; ++i) {
+        if (Basis().base(0, i) * yaw < -0.005) v.confidence[i] = 0.0;
+      }
+    }
+    TrackResult result;
+    ASSERT_TRUE(TrackSequence(Basis(), views, 10, TrackOptions(), &result).ok()) << yaw;
+    EXPECT_TRUE(AllFinite(result));
+    for (const auto& f : result.frames) {
+      EXPECT_TRUE(f.low_confidence) << yaw;
+      EXPECT_NE(f.why.find("profile view"), std::string::npos) << f.why;
+    }
+    EXPECT_LT(Score(truth, result).rotation_deg, 5.0) << yaw;
+  }
+}
+
+TEST(TrackerHardCases, HalfTheLandmarksMissing) {
+  const Truth truth = MakeTruth(20, 1.0, 13);
+  auto views = Observe(truth, {CameraAt(0)}, 0.5, 14);
+  std::mt19937 rng(15);
+  for (auto& v : views) {
+    v.confidence.assign(68, 1.0);
+    std::vector<int> order(68);
+    std::iota(order.begin(), order.end(), 0);
+    std::shuffle(order.begin(), order.end(), rng);
+    for (int i = 0; i < 34; ++i) v.confidence[order[i]] = 0.0;
+  }
+  TrackResult result;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 20, TrackOptions(), &result).ok());
+  EXPECT_TRUE(AllFinite(result));
+  const Scores s = Score(truth, result);
+  EXPECT_LT(s.rotation_deg, 2.0);
+  EXPECT_LT(s.expression_mae, 0.15);
+}
+
+TEST(TrackerHardCases, NearlyCollinearLandmarksAreFlagged) {
+  // Only the nose bridge and chin (points 27-30 and 8) in a profile view.
+  const Truth truth = MakeTruth(8, 0.3, 16);
+  auto views = Observe(truth, {CameraAt(85)}, 0.3, 17);
+  for (auto& v : views) {
+    v.confidence.assign(68, 0.0);
+    for (int i : {8, 27, 28, 29, 30}) v.confidence[i] = 1.0;
+  }
+  TrackResult result;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 8, TrackOptions(), &result).ok());
+  EXPECT_TRUE(AllFinite(result));
+  for (const auto& f : result.frames) {
+    EXPECT_TRUE(f.low_confidence);
+    EXPECT_NE(f.why.find("few landmarks"), std::string::npos) << f.why;
+  }
+}
+
+TEST(TrackerHardCases, NoMotionAndAVeryLongFocalLength) {
+  // A still head seen through a 50 000 px lens from 30 m: nearly orthographic.
+  const Truth truth = MakeTruth(10, 0.0, 18);
+  const auto views = Observe(truth, {CameraAt(0, 50000, 30.0)}, 0.5, 19);
+  TrackResult result;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 10, TrackOptions(), &result).ok());
+  EXPECT_TRUE(AllFinite(result));
+  const Scores s = Score(truth, result);
+  EXPECT_LT(s.residual, 1.0);
+  EXPECT_LT(s.rotation_deg, 1.0);
+}
+
+}  // namespace
+}  // namespace headforge

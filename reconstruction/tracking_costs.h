@@ -1,0 +1,137 @@
+// Ceres cost functions of 3DMM tracking, each a templated functor with a
+// static Create(). Parameter blocks, in order, are named in each comment.
+#pragma once
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include <Eigen/Core>
+
+#include "reconstruction/landmark_basis.h"
+
+namespace headforge {
+
+// A pinhole camera looking at the head frame: pixel = K (R X + t).
+struct TrackingCamera {
+  double fx = 500, fy = 500, cx = 0, cy = 0;
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();  // cam_from_head
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+};
+
+// One detected landmark against the model's landmark i, moved by the head's
+// motion (angle-axis rotation and translation applied in the head frame) and
+// seen by a fixed camera. Residuals: 2, pixels times `weight`.
+// Parameters: rotation[3], translation[3], identity[K], expression[E].
+struct LandmarkReprojectionCost {
+  static constexpr int kStride = 8;
+
+  LandmarkReprojectionCost(const LandmarkBasis& basis, int landmark, const TrackingCamera& camera,
+                           const Eigen::Vector2d& pixel, double weight)
+      : base_(basis.base.col(landmark)),
+        identity_(basis.identity[landmark]),
+        expression_(basis.expression[landmark]),
+        camera_(camera),
+        pixel_(pixel),
+        weight_(weight) {}
+
+  template <typename T>
+  bool operator()(T const* const* parameters, T* residual) const {
+    const T* rotation = parameters[0];
+    const T* translation = parameters[1];
+    const T* alpha = parameters[2];
+    const T* beta = parameters[3];
+    T x[3];
+    for (int d = 0; d < 3; ++d) {
+      x[d] = T(base_[d]);
+      for (int k = 0; k < identity_.cols(); ++k) x[d] += T(identity_(d, k)) * alpha[k];
+      for (int e = 0; e < expression_.cols(); ++e) x[d] += T(expression_(d, e)) * beta[e];
+    }
+    T moved[3];
+    ceres::AngleAxisRotatePoint(rotation, x, moved);
+    T p[3];
+    for (int r = 0; r < 3; ++r) {
+      p[r] = T(camera_.translation[r]);
+      for (int c = 0; c < 3; ++c) p[r] += T(camera_.rotation(r, c)) * (moved[c] + translation[c]);
+    }
+    // A landmark at or behind the camera has no pixel: reject the step.
+    if (!(p[2] > T(1e-6))) return false;
+    residual[0] = T(weight_) * (T(camera_.fx) * p[0] / p[2] + T(camera_.cx) - T(pixel_.x()));
+    residual[1] = T(weight_) * (T(camera_.fy) * p[1] / p[2] + T(camera_.cy) - T(pixel_.y()));
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const LandmarkBasis& basis, int landmark,
+                                     const TrackingCamera& camera, const Eigen::Vector2d& pixel,
+                                     double weight) {
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<LandmarkReprojectionCost, kStride>(
+        new LandmarkReprojectionCost(basis, landmark, camera, pixel, weight));
+    cost->AddParameterBlock(3);
+    cost->AddParameterBlock(3);
+    cost->AddParameterBlock(basis.num_identity);
+    cost->AddParameterBlock(basis.num_expressions);
+    cost->SetNumResiduals(2);
+    return cost;
+  }
+
+ private:
+  Eigen::Vector3d base_;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> identity_, expression_;
+  TrackingCamera camera_;
+  Eigen::Vector2d pixel_;
+  double weight_;
+};
+
+// Temporal smoothness of consecutive coefficient vectors (expressions):
+// weight * (b - a). Parameters: a[n], b[n]. Residuals: n.
+struct CoefficientSmoothnessCost {
+  explicit CoefficientSmoothnessCost(double weight) : weight_(weight) {}
+
+  template <typename T>
+  bool operator()(T const* const* parameters, T* residual) const {
+    for (int i = 0; i < size_; ++i) residual[i] = T(weight_) * (parameters[1][i] - parameters[0][i]);
+    return true;
+  }
+
+  static ceres::CostFunction* Create(int size, double weight) {
+    auto* functor = new CoefficientSmoothnessCost(weight);
+    functor->size_ = size;
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<CoefficientSmoothnessCost, 8>(functor);
+    cost->AddParameterBlock(size);
+    cost->AddParameterBlock(size);
+    cost->SetNumResiduals(size);
+    return cost;
+  }
+
+ private:
+  double weight_;
+  int size_ = 0;
+};
+
+// A prior pulling coefficients toward zero: weight * x. With a squared loss
+// this is a Gaussian prior (identity, x ~ N(0, 1/weight^2)); under
+// ceres::SoftLOneLoss it becomes a sparsity prior (expressions).
+// Parameters: x[n]. Residuals: n.
+struct CoefficientPriorCost {
+  explicit CoefficientPriorCost(double weight) : weight_(weight) {}
+
+  template <typename T>
+  bool operator()(T const* const* parameters, T* residual) const {
+    for (int i = 0; i < size_; ++i) residual[i] = T(weight_) * parameters[0][i];
+    return true;
+  }
+
+  static ceres::CostFunction* Create(int size, double weight) {
+    auto* functor = new CoefficientPriorCost(weight);
+    functor->size_ = size;
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<CoefficientPriorCost, 8>(functor);
+    cost->AddParameterBlock(size);
+    cost->SetNumResiduals(size);
+    return cost;
+  }
+
+ private:
+  double weight_;
+  int size_ = 0;
+};
+
+}  // namespace headforge

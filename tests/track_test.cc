@@ -1,0 +1,160 @@
+// Tracking end to end through the real binary: on simulated captures against
+// their ground truth, and on real GRID clips (landmark residuals, overlay
+// video, jawOpen against the mouth opening measured from the landmarks).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numeric>
+
+#include "core/json_io.h"
+#include "tests/run_headforge.h"
+
+namespace headforge {
+namespace {
+
+const fs::path kGrid = fs::path(HEADFORGE_TEST_SHARED_DATA) / "video" / "grid";
+
+fs::path Scratch(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("hf_track_" + name);
+  fs::remove_all(dir);
+  return dir;
+}
+
+nlohmann::json Json(const fs::path& path) {
+  nlohmann::json j;
+  EXPECT_TRUE(ReadJson(path, &j).ok()) << path;
+  return j;
+}
+
+double Median(std::vector<double> v) {
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+double Correlation(const std::vector<double>& a, const std::vector<double>& b) {
+  const double ma = std::accumulate(a.begin(), a.end(), 0.0) / a.size();
+  const double mb = std::accumulate(b.begin(), b.end(), 0.0) / b.size();
+  double sab = 0, saa = 0, sbb = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    sab += (a[i] - ma) * (b[i] - mb);
+    saa += (a[i] - ma) * (a[i] - ma);
+    sbb += (b[i] - mb) * (b[i] - mb);
+  }
+  return sab / std::sqrt(saa * sbb);
+}
+
+// Inner-lip gap (points 61-63 against 67-65) over the eye-corner distance.
+double MouthOpening(const nlohmann::json& points) {
+  auto d = [&](int a, int b) {
+    return std::hypot(points[a][0].get<double>() - points[b][0].get<double>(),
+                      points[a][1].get<double>() - points[b][1].get<double>());
+  };
+  return (d(61, 67) + d(62, 66) + d(63, 65)) / 3.0 / d(36, 45);
+}
+
+class GridTrack : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(GridTrack, FitsTheLandmarksAndFollowsTheMouth) {
+  const fs::path ws = Scratch(GetParam());
+  const Result run = Headforge({"run", "--video", (kGrid / (GetParam() + ".mpg")).string(), "--workspace", ws.string()});
+  ASSERT_EQ(run.code, 0) << run.err;
+  const auto tracking = Json(ws / "tracking.json");
+  const auto landmarks = Json(ws / "landmarks.json");
+  const auto capture = Json(ws / "capture.json");
+  // Frame pixels are the crop scaled by `scale`; report source (360x288) pixels.
+  const double scale = capture["cameras"][0]["crop"]["scale"];
+  const double residual = tracking["median_residual_px"].get<double>() / scale;
+  std::vector<double> jaw, mouth;
+  const auto& frames = tracking["frames"];
+  for (size_t f = 0; f < frames.size(); ++f) {
+    const auto& detected = landmarks["cameras"]["cam0"][f];
+    if (!detected["found"].get<bool>()) continue;
+    jaw.push_back(frames[f]["expression"]["jawOpen"]);
+    mouth.push_back(MouthOpening(detected["points"]));
+  }
+  const double correlation = Correlation(jaw, mouth);
+  std::printf("%s: median landmark residual %.2f px (360x288), jawOpen vs mouth opening r = %.2f over %zu frames\n",
+              GetParam().c_str(), residual, correlation, jaw.size());
+  EXPECT_LT(residual, 3.0);
+  // The mouth also opens through other blendshapes (mouthLowerDown, funnel...),
+  // so jawOpen follows it loosely on some speakers.
+  EXPECT_GT(correlation, 0.3);
+  EXPECT_GT(fs::file_size(ws / "overlay_cam0.mp4"), 10000u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Clips, GridTrack, ::testing::Values("bbaf2n", "lbax4n", "swiz3n"));
+
+// A simulated capture through ingest, calibrate, align and track, against the
+// simulator's truth: landmark residuals, the animated blendshapes, and the
+// head's rotation relative to each camera.
+struct SimulatedScores {
+  double residual_px = 0, rotation_deg = 0;
+  std::map<std::string, double> mae;
+};
+
+SimulatedScores RunSimulated(const std::string& scene, int frames, const std::vector<std::string>& animated) {
+  SimulatedScores s;
+  const fs::path root = Scratch(scene);
+  const fs::path capture_dir = root / "capture";
+  const Result sim = Headforge({"simulate", "--scene", (fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / (scene + ".toml")).string(),
+                                "--out", capture_dir.string(), "--frames", std::to_string(frames)});
+  EXPECT_EQ(sim.code, 0) << sim.err;
+  const auto truth = Json(capture_dir / "ground_truth.json");
+  std::vector<std::string> args = {"run", "--workspace", (root / "ws").string(), "--video"};
+  for (const auto& cam : truth["cameras"]) args.push_back((capture_dir / cam["input"].get<std::string>()).string());
+  const Result run = Headforge(args);
+  EXPECT_EQ(run.code, 0) << run.err;
+  const auto tracking = Json(root / "ws" / "tracking.json");
+  const auto capture = Json(root / "ws" / "capture.json");
+  const auto cameras = Json(root / "ws" / "cameras_head.json");
+  s.residual_px = tracking["median_residual_px"].get<double>() / capture["cameras"][0]["crop"]["scale"].get<double>();
+  std::vector<double> rotation;
+  for (const auto& name : animated) {
+    double sum = 0;
+    int n = 0;
+    for (const auto& f : tracking["frames"]) {
+      const int source = capture["cameras"][0]["frames"][f["frame"].get<int>()]["source_frame"];
+      sum += std::abs(f["expression"][name].get<double>() - truth["frames"][source]["expression"][name].get<double>());
+      ++n;
+    }
+    s.mae[name] = sum / n;
+  }
+  for (const auto& v : cameras["views"]) {
+    if (!v["registered"].get<bool>()) continue;
+    const int frame = v["frame"];
+    const std::string cam = v["camera"];
+    int cam_index = 0;
+    for (size_t c = 0; c < capture["cameras"].size(); ++c)
+      if (capture["cameras"][c]["name"] == cam) cam_index = int(c);
+    const int source = capture["cameras"][cam_index]["frames"][frame]["source_frame"];
+    const Eigen::Isometry3d motion = PoseFromJson(tracking["frames"][frame]["head_motion"]);
+    const Eigen::Matrix3d est = PoseFromJson(v["cam_from_world"]).linear() * motion.linear();
+    const auto& tf = truth["frames"][source];
+    const Eigen::Matrix3d real =
+        (PoseFromJson(tf["views"][cam]["cam_from_world"]) * PoseFromJson(tf["world_from_head"])).linear();
+    rotation.push_back(Eigen::AngleAxisd(est.transpose() * real).angle() * 180 / M_PI);
+  }
+  s.rotation_deg = Median(rotation);
+  std::printf("%s (%d frames): median landmark residual %.2f px, head rotation %.2f deg, blendshape MAE:", scene.c_str(),
+              frames, s.residual_px, s.rotation_deg);
+  for (const auto& [name, mae] : s.mae) std::printf(" %s %.3f", name.c_str(), mae);
+  std::printf("\n");
+  return s;
+}
+
+TEST(SimulatedTrack, TalkingStatic) {
+  const SimulatedScores s = RunSimulated(
+      "talking_static", 125, {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"});
+  EXPECT_LT(s.residual_px, 1.5);
+  EXPECT_LT(s.mae.at("jawOpen"), 0.1);
+  EXPECT_LT(s.mae.at("mouthSmile_L"), 0.1);
+  EXPECT_LT(s.mae.at("mouthSmile_R"), 0.1);
+  EXPECT_LT(s.mae.at("eyeBlink_L"), 0.12);
+  EXPECT_LT(s.mae.at("eyeBlink_R"), 0.12);
+  // Bounded by the head-pose cameras (their focal length is 23% long on this
+  // scene, docs/calibration.md); the target of 1.5 deg is not reached yet.
+  EXPECT_LT(s.rotation_deg, 2.5);
+}
+
+}  // namespace
+}  // namespace headforge

@@ -171,6 +171,12 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   TrackResult result;
   HF_RETURN_IF_ERROR(TrackSequence(basis, views, num_frames, fit, &result));
   progress->Finish(result.solver_report);
+  // The cameras as the fit saw them (their translations times the rig scale).
+  for (TrackingView& v : views) v.camera.translation *= result.rig_scale;
+  if (result.rig_scale != 1.0) {
+    HF_LOG(Info) << "track: camera positions scaled by " << result.rig_scale
+                 << " (align's metric scale, refined over the sequence)";
+  }
 
   // tracking.json
   nlohmann::json frames = nlohmann::json::array();
@@ -195,6 +201,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
       {"identity", std::vector<double>(result.identity.data(), result.identity.data() + result.identity.size())},
       {"expression_names", model.expression_names()},
       {"head_held_by_cameras", fit.fixed_head},
+      {"camera_scale", result.rig_scale},
       {"median_residual_px", result.median_residual_px},
       {"solver", result.solver_report},
       {"seconds", result.seconds},

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <set>
 
 #include "calibration/reprojection_cost.h"
 
@@ -80,18 +81,39 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   for (auto& m : fit_basis.identity) m = m.leftCols(k).eval();
 
   std::vector<double> identity(k, 0.0);
+  double rig_scale = 1.0;
+  std::set<std::pair<double, double>> camera_centres;  // distinct cameras, by position
   std::vector<FrameBlocks> frames(num_frames);
   for (auto& f : frames) f.expression.assign(e, 0.0);
 
+  // Frames seen nearly frontally by some camera ignore their near-profile
+  // views, where the detector's landmarks are least reliable.
+  std::vector<bool> has_frontal(num_frames, false);
+  for (const TrackingView& view : views) {
+    if (view.frame >= 0 && view.frame < num_frames && view.landmarks &&
+        std::abs(YawFromCamera(view.camera, Eigen::Isometry3d::Identity())) <= options.max_fit_yaw_deg) {
+      has_frontal[view.frame] = true;
+    }
+  }
+  std::vector<bool> used(views.size(), false);
+
   ceres::Problem problem;
   int observations = 0;
-  for (const TrackingView& view : views) {
+  for (size_t v = 0; v < views.size(); ++v) {
+    const TrackingView& view = views[v];
     if (view.frame < 0 || view.frame >= num_frames) {
       return Status::InvalidArgument("track: a view refers to frame " + std::to_string(view.frame) + " of " +
                                      std::to_string(num_frames));
     }
     if (!view.landmarks) continue;
+    if (has_frontal[view.frame] &&
+        std::abs(YawFromCamera(view.camera, Eigen::Isometry3d::Identity())) > options.max_fit_yaw_deg) {
+      continue;
+    }
+    used[v] = true;
     FrameBlocks& f = frames[view.frame];
+    const Eigen::Vector3d centre = -view.camera.rotation.transpose() * view.camera.translation;
+    camera_centres.emplace(std::round(centre.x() * 1e3), std::round(centre.z() * 1e3));
     for (int i = 0; i < 68; ++i) {
       const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
       if (!(confidence > 0)) continue;
@@ -101,7 +123,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
       if (!(weight > 0)) continue;
       problem.AddResidualBlock(
           LandmarkReprojectionCost::Create(fit_basis, i, view.camera, pixel, weight),
-          new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, identity.data(),
+          new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, &rig_scale, identity.data(),
           f.expression.data());
       f.observed = true;
       ++observations;
@@ -109,6 +131,16 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   }
   if (observations == 0) {
     return Status::DataError("track: no frame has landmarks; check that ingest found the face (landmarks.json)");
+  }
+
+  // The rig's scale is observable only from several cameras that see the head
+  // move together; otherwise it trades with the face's size.
+  const bool fit_scale = options.fit_rig_scale && !options.fixed_head && camera_centres.size() > 1;
+  if (!fit_scale) {
+    problem.SetParameterBlockConstant(&rig_scale);
+  } else {
+    problem.SetParameterLowerBound(&rig_scale, 0, 0.5);
+    problem.SetParameterUpperBound(&rig_scale, 0, 2.0);
   }
 
   // Priors, bounds, smoothness between consecutive observed frames.
@@ -167,6 +199,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
 
   TrackResult out;
   out.identity = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
+  out.rig_scale = rig_scale;
   out.iterations = static_cast<int>(summary.iterations.size());
   out.solver_report = summary.BriefReport();
   // Residuals and flags per observed frame.
@@ -174,8 +207,9 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   std::vector<int> seen(num_frames, 0);
   std::vector<std::string> reasons(num_frames);
   const Eigen::VectorXd alpha = out.identity;
-  for (const TrackingView& view : views) {
-    if (!view.landmarks) continue;
+  for (size_t v = 0; v < views.size(); ++v) {
+    const TrackingView& view = views[v];
+    if (!used[v]) continue;
     const FrameBlocks& f = frames[view.frame];
     const Eigen::Isometry3d motion = MotionOf(f);
     const Eigen::VectorXd beta = Eigen::Map<const Eigen::VectorXd>(f.expression.data(), e);
@@ -184,7 +218,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
       const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
       if (!(confidence > 0) || !(*view.landmarks)[i].allFinite()) continue;
       const Eigen::Vector3d p = view.camera.rotation * (motion * fit_basis.Point(i, alpha, beta)) +
-                                view.camera.translation;
+                                rig_scale * view.camera.translation;
       const Eigen::Vector2d pixel(view.camera.fx * p.x() / p.z() + view.camera.cx,
                                   view.camera.fy * p.y() / p.z() + view.camera.cy);
       residuals[view.frame].push_back((pixel - (*view.landmarks)[i]).norm());

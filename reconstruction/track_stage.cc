@@ -114,6 +114,9 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
          "robust-scale");
   o->Add("track.contour_weight", &t->fit.contour_weight, "Weight of the jaw-contour landmarks (0-16).",
          "contour-weight");
+  o->Add("track.max_view_yaw", &t->fit.max_fit_yaw_deg,
+         "A frame seen within this yaw of frontal (degrees) by some camera ignores its other views.",
+         "max-view-yaw");
   o->Add("track.max_iterations", &t->fit.max_iterations, "Levenberg-Marquardt iterations at most.",
          "track-iterations");
   o->Add("track.landmark_embedding", &t->landmark_embedding,

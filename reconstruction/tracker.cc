@@ -96,6 +96,8 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
     }
   }
   std::vector<bool> used(views.size(), false);
+  int out_dropped_views = 0;
+  std::vector<std::vector<ceres::ResidualBlockId>> view_blocks(views.size());
 
   ceres::Problem problem;
   int observations = 0;
@@ -121,10 +123,10 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
       if (!pixel.allFinite()) continue;
       const double weight = confidence * (i < 17 ? options.contour_weight : 1.0);
       if (!(weight > 0)) continue;
-      problem.AddResidualBlock(
+      view_blocks[v].push_back(problem.AddResidualBlock(
           LandmarkReprojectionCost::Create(fit_basis, i, view.camera, pixel, weight),
           new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, &rig_scale, identity.data(),
-          f.expression.data());
+          f.expression.data()));
       f.observed = true;
       ++observations;
     }
@@ -190,6 +192,46 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   solver.function_tolerance = 1e-8;
   ceres::Solver::Summary summary;
   ceres::Solve(solver, &problem, &summary);
+
+  // A view whose landmarks disagree with the others of its frame (a detector
+  // failure, typically on a turned face) is dropped, and the fit repeated.
+  if (summary.termination_type != ceres::FAILURE) {
+    std::vector<double> view_median(views.size(), 0.0), all_used;
+    for (size_t v = 0; v < views.size(); ++v) {
+      if (!used[v]) continue;
+      const TrackingView& view = views[v];
+      const FrameBlocks& f = frames[view.frame];
+      const Eigen::Isometry3d motion = MotionOf(f);
+      const Eigen::VectorXd a = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
+      const Eigen::VectorXd b = Eigen::Map<const Eigen::VectorXd>(f.expression.data(), e);
+      std::vector<double> r;
+      for (int i = 0; i < 68; ++i) {
+        const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
+        if (!(confidence > 0) || !(*view.landmarks)[i].allFinite()) continue;
+        const Eigen::Vector3d p =
+            view.camera.rotation * (motion * fit_basis.Point(i, a, b)) + rig_scale * view.camera.translation;
+        r.push_back((Eigen::Vector2d(view.camera.fx * p.x() / p.z() + view.camera.cx,
+                                     view.camera.fy * p.y() / p.z() + view.camera.cy) -
+                     (*view.landmarks)[i]).norm());
+      }
+      view_median[v] = Median(r);
+      all_used.push_back(view_median[v]);
+    }
+    const double limit = std::max(options.flag_residual_px, 3.0 * Median(all_used));
+    std::vector<int> inliers(num_frames, 0);
+    for (size_t v = 0; v < views.size(); ++v) inliers[views[v].frame] += used[v] && view_median[v] <= limit;
+    int dropped = 0;
+    for (size_t v = 0; v < views.size(); ++v) {
+      if (!used[v] || view_median[v] <= limit || inliers[views[v].frame] == 0) continue;
+      for (ceres::ResidualBlockId id : view_blocks[v]) problem.RemoveResidualBlock(id);
+      used[v] = false;
+      ++dropped;
+    }
+    if (dropped > 0) {
+      ceres::Solve(solver, &problem, &summary);
+      out_dropped_views = dropped;
+    }
+  }
   if (summary.termination_type == ceres::FAILURE || !std::isfinite(summary.final_cost)) {
     return Status::Internal("track: the solver failed: " + summary.message);
   }
@@ -198,6 +240,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   }
 
   TrackResult out;
+  out.dropped_views = out_dropped_views;
   out.identity = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
   out.rig_scale = rig_scale;
   out.iterations = static_cast<int>(summary.iterations.size());

@@ -51,7 +51,7 @@ struct TrackOptions {
   bool fixed_head = false;
   // A frame that some camera sees within this yaw of frontal (degrees, with
   // the cameras' initial head pose) ignores its views beyond it.
-  double max_fit_yaw_deg = 50.0;
+  double max_fit_yaw_deg = 35.0;
   // With several cameras, refine the metric scale of their positions (align's
   // scale) as one shared factor. Off by default: on rig_8cam it has not yet
   // been shown to move the scale the right way.
@@ -88,6 +88,9 @@ struct TrackResult {
   double rig_scale = 1.0;
   std::vector<TrackedFrame> frames;
   double median_residual_px = 0;
+  // Views dropped after a first fit because their landmarks disagreed with
+  // the rest of their frame (median residual over 3x the overall median).
+  int dropped_views = 0;
   int iterations = 0;
   double seconds = 0;
   std::string solver_report;  // Ceres' one-line summary

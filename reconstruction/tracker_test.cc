@@ -170,9 +170,10 @@ TEST(Tracker, MonocularSequenceRecoversExpressionsAndMotion) {
 
 TEST(Tracker, MultiViewFramesAreFittedJointly) {
   const Truth truth = MakeTruth(20, 1.0, 3);
-  const auto views = Observe(truth, {CameraAt(-40), CameraAt(0), CameraAt(40)}, 0.5, 4);
+  const auto views = Observe(truth, {CameraAt(-30), CameraAt(0), CameraAt(30)}, 0.5, 4);
   TrackResult result;
   ASSERT_TRUE(TrackSequence(Basis(), views, 20, TrackOptions(), &result).ok());
+  EXPECT_EQ(result.dropped_views, 0);
   const Scores s = Score(truth, result);
   std::printf("3 views: residual %.2f px, expression MAE %.3f, rotation %.2f deg, landmarks %.2f mm\n", s.residual,
               s.expression_mae, s.rotation_deg, s.landmark_mm);
@@ -180,6 +181,32 @@ TEST(Tracker, MultiViewFramesAreFittedJointly) {
   EXPECT_LT(s.expression_mae, 0.06);
   EXPECT_LT(s.rotation_deg, 0.5);
   EXPECT_LT(s.landmark_mm, 1.0);
+}
+
+// A detector failure in one camera (its landmarks scrambled by tens of
+// pixels) and near-profile cameras are left out of the fit.
+TEST(Tracker, DisagreeingAndNearProfileViewsAreLeftOut) {
+  const Truth truth = MakeTruth(20, 1.0, 30);
+  auto views = Observe(truth, {CameraAt(-25), CameraAt(0), CameraAt(25), CameraAt(70)}, 0.5, 31);
+  std::mt19937 rng(32);
+  std::normal_distribution<double> wild(0.0, 25.0);
+  for (auto& v : views) {
+    if (v.camera.rotation.isApprox(CameraAt(25).rotation) && v.frame % 2 == 0) {
+      for (auto& p : *v.landmarks) p += Eigen::Vector2d(wild(rng), wild(rng));
+    }
+    if (v.camera.rotation.isApprox(CameraAt(70).rotation)) {
+      for (auto& p : *v.landmarks) p += Eigen::Vector2d(30, -20);  // a consistently wrong profile
+    }
+  }
+  TrackResult result;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 20, TrackOptions(), &result).ok());
+  EXPECT_EQ(result.dropped_views, 10);
+  const Scores s = Score(truth, result);
+  std::printf("with bad views: residual %.2f px, expression MAE %.3f, rotation %.2f deg\n", s.residual,
+              s.expression_mae, s.rotation_deg);
+  EXPECT_LT(s.residual, 1.0);
+  EXPECT_LT(s.expression_mae, 0.06);
+  EXPECT_LT(s.rotation_deg, 0.5);
 }
 
 TEST(Tracker, HeadHeldByTheCamerasStaysFixed) {

@@ -10,6 +10,8 @@
 #include <memory>
 #include <string>
 
+#include "avatar/splat_fit_options.h"
+
 namespace headforge {
 
 // The fitted parameters; every tensor a leaf with requires_grad.
@@ -48,22 +50,6 @@ class DensifyStrategy {
   virtual DensifyPlan AfterStep(int step, const GaussianParams& params) = 0;
 };
 
-struct DefaultDensifyOptions {
-  int start = 500;          // first step that may densify
-  int stop = 15000;         // last one
-  int interval = 100;       // steps between densifications
-  int reset_every = 3000;   // steps between opacity resets (0: never)
-  // Mean screen-space gradient (in units of half the image size) above which
-  // a Gaussian is cloned or split.
-  double grad_threshold = 0.0002;
-  // Gaussians larger than this fraction of the scene extent are split, smaller
-  // ones cloned.
-  double split_scale = 0.01;
-  double prune_opacity = 0.005;
-  int64_t max_gaussians = 1000000;
-  double scene_extent = 1.0;  // metres
-  uint64_t seed = 0;
-};
 
 std::unique_ptr<DensifyStrategy> MakeDefaultDensify(const DefaultDensifyOptions& options);
 

@@ -11,6 +11,7 @@
 
 #include "avatar/densify.h"
 #include "avatar/splat_camera.h"
+#include "avatar/splat_fit_options.h"
 #include "core/progress.h"
 #include "core/status.h"
 
@@ -29,25 +30,6 @@ struct InitPoints {
   torch::Tensor sizes;      // [N] metres
 };
 
-struct SplatFitOptions {
-  int iterations = 30000;
-  // Stop early when this much wall time has passed (0: no limit); the
-  // evaluation after the last step is not counted.
-  double max_minutes = 0;
-  double ssim_weight = 0.2;  // loss = (1 - w) L1 + w (1 - SSIM)
-  // Adam learning rates; the means' decays exponentially to 1% over the run
-  // and scales with the scene extent.
-  double lr_means = 1.6e-4, lr_quats = 1e-3, lr_scales = 5e-3, lr_opacity = 5e-2,
-         lr_colours = 1e-2;
-  double init_opacity = 0.1;
-  int log_every = 100;    // steps between stats lines
-  int eval_every = 2000;  // steps between held-out evaluations (0: only at the end)
-  uint64_t seed = 0;
-  SplatOptions splat;
-  DefaultDensifyOptions densify;
-
-  bool Check(std::string* why) const;
-};
 
 struct SplatFitResult {
   GaussianParams params;

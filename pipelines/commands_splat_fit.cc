@@ -1,13 +1,12 @@
 // `headforge splat-fit`: fits a static Gaussian scene to a simulated capture
 // with its ground-truth cameras, and reports held-out PSNR and SSIM.
-#include <torch/torch.h>
-
 #include <algorithm>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <opencv2/imgproc.hpp>
+#include <opencv2/core.hpp>
+#include <random>
 
-#include "avatar/splat_fit.h"
+#include "avatar/splat_fit_job.h"
 #include "capture/simulator.h"
 #include "core/image_io.h"
 #include "core/log.h"
@@ -18,59 +17,37 @@
 namespace headforge {
 namespace {
 
-// An 8-bit BGR frame as a [3, H, W] RGB tensor in [0, 1].
-torch::Tensor ToTensor(const cv::Mat& bgr) {
-  cv::Mat rgb;
-  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  rgb.convertTo(rgb, CV_32FC3, 1.0 / 255.0);
-  return torch::from_blob(rgb.data, {rgb.rows, rgb.cols, 3}, torch::kFloat32).permute({2, 0, 1}).clone();
-}
-
-cv::Mat ToImage(const torch::Tensor& rgb) {
-  const torch::Tensor hwc = (rgb.clamp(0, 1) * 255.0).round().to(torch::kUInt8).permute({1, 2, 0}).contiguous();
-  cv::Mat image(int(hwc.size(0)), int(hwc.size(1)), CV_8UC3, hwc.data_ptr());
-  cv::Mat bgr;
-  cv::cvtColor(image, bgr, cv::COLOR_RGB2BGR);
-  return bgr;
-}
-
 // Points back-projected from the simulator's depth at random pixels of a view,
 // each sized to the spacing of the samples.
-void AddDepthPoints(const SimulatedView& view, int count, at::Generator& gen,
-                    std::vector<float>* positions, std::vector<float>* colours,
-                    std::vector<float>* sizes) {
+void AddDepthPoints(const SimulatedView& view, int count, std::mt19937_64& rng, SplatFitPoints* points) {
   const cv::Mat& depth = view.render.depth;
   const PinholeCamera& cam = view.camera;
   const Eigen::Isometry3d world_from_cam = cam.cam_from_world.inverse();
   const double spacing = std::sqrt(double(depth.rows) * depth.cols / std::max(count, 1));
-  const torch::Tensor picks = torch::randint(int64_t(depth.rows) * depth.cols, {count}, gen);
-  const auto pick = picks.accessor<int64_t, 1>();
+  const uint64_t pixels = uint64_t(depth.rows) * depth.cols;
   for (int i = 0; i < count; ++i) {
-    const int y = int(pick[i] / depth.cols), x = int(pick[i] % depth.cols);
+    const uint64_t pick = rng() % pixels;
+    const int y = int(pick / depth.cols), x = int(pick % depth.cols);
     const float z = depth.at<float>(y, x);
     if (!(z > 0)) continue;
     const Eigen::Vector3d p = world_from_cam * Eigen::Vector3d((x - cam.cx) / cam.fx * z, (y - cam.cy) / cam.fy * z, z);
     const cv::Vec3b bgr = view.image.at<cv::Vec3b>(y, x);
-    positions->insert(positions->end(), {float(p.x()), float(p.y()), float(p.z())});
-    colours->insert(colours->end(), {bgr[2] / 255.0f, bgr[1] / 255.0f, bgr[0] / 255.0f});
-    sizes->push_back(float(0.5 * spacing * z / cam.fx));
+    points->positions.insert(points->positions.end(), {float(p.x()), float(p.y()), float(p.z())});
+    points->colours.insert(points->colours.end(), {bgr[2] / 255.0f, bgr[1] / 255.0f, bgr[0] / 255.0f});
+    points->sizes.push_back(float(0.5 * spacing * z / cam.fx));
   }
 }
 
-GaussianCloud ToCloud(const GaussianParams& p) {
-  torch::NoGradGuard no_grad;
-  auto flat = [](const torch::Tensor& t) {
-    const torch::Tensor c = t.detach().to(torch::kFloat32).contiguous();
-    return std::vector<float>(c.data_ptr<float>(), c.data_ptr<float>() + c.numel());
-  };
+GaussianCloud ToCloud(const SplatFitOutput& fit) {
   GaussianCloud cloud;
   cloud.sh_degree = 0;
-  cloud.means = flat(p.means);
+  cloud.means = fit.means;
   // Colour = 0.5 + C0 * dc with C0 the degree-0 spherical harmonic, 1 / (2 sqrt(pi)).
-  cloud.sh_dc = flat((torch::sigmoid(p.colour_logits) - 0.5) / 0.28209479177387814);
-  cloud.opacities = flat(p.opacity_logits);
-  cloud.log_scales = flat(p.log_scales);
-  cloud.rotations = flat(p.quats / p.quats.norm(2, 1, true));
+  cloud.sh_dc.reserve(fit.colours.size());
+  for (float c : fit.colours) cloud.sh_dc.push_back((c - 0.5f) / 0.28209479177387814f);
+  cloud.opacities = fit.opacity_logits;
+  cloud.log_scales = fit.log_scales;
+  cloud.rotations = fit.rotations;
   return cloud;
 }
 
@@ -155,15 +132,14 @@ int SplatFitCommand(const std::vector<std::string>& args) {
   if (Status s = Simulator::Create(scene, model, threads, &simulator); !s.ok()) return ReportFailure(s);
   const int num_frames = frames > 0 ? std::min(frames, simulator->num_frames()) : simulator->num_frames();
 
-  std::vector<PosedImage> train, test;
+  std::vector<SplatFitView> train, test;
   std::vector<SimulatedView> init_sources;
   StderrProgress progress;
   progress.Start("rendering views", int64_t(num_frames) * simulator->num_cameras());
   for (int f = 0; f < num_frames; ++f) {
     for (int c = 0; c < simulator->num_cameras(); ++c) {
       SimulatedView view = simulator->RenderView(f, c);
-      PosedImage posed{SplatCamera::FromPinhole(view.camera), ToTensor(view.image),
-                       simulator->CameraName(c) + "_" + std::to_string(f)};
+      SplatFitView posed{view.image.clone(), view.camera, simulator->CameraName(c) + "_" + std::to_string(f)};
       const bool held_out = f % holdout_every == holdout_every / 2;
       (held_out ? test : train).push_back(posed);
       if (!held_out) init_sources.push_back(std::move(view));
@@ -174,18 +150,14 @@ int SplatFitCommand(const std::vector<std::string>& args) {
                   " held-out views at " + std::to_string(in.width) + "x" + std::to_string(in.height));
 
   // Starting points from evenly spread training views.
-  std::vector<float> positions, colours, sizes;
-  auto gen = at::detail::createCPUGenerator(fit.seed + 2);
+  SplatFitPoints init;
+  std::mt19937_64 rng(fit.seed + 2);
   const int sources = init_views > 0 ? std::min<int>(init_views, int(init_sources.size())) : int(init_sources.size());
   for (int i = 0; i < sources; ++i) {
     const SimulatedView& v = init_sources[size_t(i) * init_sources.size() / sources];
-    AddDepthPoints(v, init_points / sources, gen, &positions, &colours, &sizes);
+    AddDepthPoints(v, init_points / sources, rng, &init);
   }
-  InitPoints init;
-  const int64_t n = int64_t(sizes.size());
-  init.positions = torch::from_blob(positions.data(), {n, 3}, torch::kFloat32).clone();
-  init.colours = torch::from_blob(colours.data(), {n, 3}, torch::kFloat32).clone();
-  init.sizes = torch::from_blob(sizes.data(), {n}, torch::kFloat32).clone();
+  const size_t n = init.sizes.size();
   // The extent of the cameras (as in 3D Gaussian Splatting): how far they sit
   // from their centroid, which scales position steps and the clone/split size.
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
@@ -198,19 +170,19 @@ int SplatFitCommand(const std::vector<std::string>& args) {
   if (Status s = EnsureDirectory(fs::path(out_dir) / "held_out"); !s.ok()) return ReportFailure(s);
   std::ofstream stats_file(fs::path(out_dir) / "stats.jsonl");
   if (!stats_file) return ReportFailure(Status::IoError("cannot write " + (fs::path(out_dir) / "stats.jsonl").string()));
-  SplatFitResult result;
-  const Status status = FitSplats(fit, train, test, init,
+  SplatFitOutput result;
+  const Status status = RunSplatFit(fit, train, test, init,
                                   [&](const std::string& line) { stats_file << line << "\n" << std::flush; },
                                   &progress, &result);
   if (!status.ok()) return ReportFailure(status);
 
-  if (Status s = WriteGaussianPly(fs::path(out_dir) / "gaussians.ply", ToCloud(result.params)); !s.ok()) {
+  if (Status s = WriteGaussianPly(fs::path(out_dir) / "gaussians.ply", ToCloud(result)); !s.ok()) {
     return ReportFailure(s);
   }
   nlohmann::json views = nlohmann::json::array();
   for (size_t i = 0; i < test.size(); ++i) {
     cv::Mat side;
-    cv::hconcat(ToImage(result.test_renders[i]), ToImage(test[i].image), side);
+    cv::hconcat(result.test_renders[i], test[i].image, side);
     if (Status s = WriteImageAtomic(fs::path(out_dir) / "held_out" / (test[i].name + ".png"), side); !s.ok()) {
       return ReportFailure(s);
     }
@@ -222,8 +194,8 @@ int SplatFitCommand(const std::vector<std::string>& args) {
                                  {"train_views", train.size()},
                                  {"test_views", test.size()},
                                  {"steps", result.steps},
-                                 {"gaussians", result.params.size()},
-                                 {"fit_seconds", result.train_seconds},
+                                 {"gaussians", result.size},
+                                 {"fit_seconds", result.seconds},
                                  {"threads", threads},
                                  {"test_psnr", result.test_psnr},
                                  {"test_ssim", result.test_ssim},
@@ -231,8 +203,8 @@ int SplatFitCommand(const std::vector<std::string>& args) {
   if (Status s = WriteFileAtomic(fs::path(out_dir) / "report.json", report.dump(2) + "\n"); !s.ok()) {
     return ReportFailure(s);
   }
-  HF_LOG(Info) << "splat-fit: " << result.steps << " steps in " << int(result.train_seconds) << " s, "
-               << result.params.size() << " Gaussians; held-out PSNR " << result.test_psnr << " dB, SSIM "
+  HF_LOG(Info) << "splat-fit: " << result.steps << " steps in " << int(result.seconds) << " s, "
+               << result.size << " Gaussians; held-out PSNR " << result.test_psnr << " dB, SSIM "
                << result.test_ssim << " (" << test.size() << " views); wrote " << out_dir;
   return kExitOk;
 }

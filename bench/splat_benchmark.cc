@@ -50,12 +50,13 @@ BenchScene MakeScene(int64_t n, int side, int64_t channels) {
   return s;
 }
 
-// Peak resident memory in KiB, and its reset to the current value.
-int64_t PeakRssKiB() {
+// A field of /proc/self/status in KiB ("VmHWM:" the peak resident memory,
+// "VmRSS:" the current one).
+int64_t StatusKiB(const std::string& field) {
   std::ifstream status("/proc/self/status");
   std::string key;
   while (status >> key) {
-    if (key == "VmHWM:") {
+    if (key == field) {
       int64_t kib = 0;
       status >> kib;
       return kib;
@@ -64,19 +65,8 @@ int64_t PeakRssKiB() {
   }
   return 0;
 }
-int64_t CurrentRssKiB() {
-  std::ifstream status("/proc/self/status");
-  std::string key;
-  while (status >> key) {
-    if (key == "VmRSS:") {
-      int64_t kib = 0;
-      status >> kib;
-      return kib;
-    }
-    status.ignore(1 << 10, '\n');
-  }
-  return 0;
-}
+int64_t PeakRssKiB() { return StatusKiB("VmHWM:"); }
+int64_t CurrentRssKiB() { return StatusKiB("VmRSS:"); }
 void ResetPeakRss() { std::ofstream("/proc/self/clear_refs") << "5"; }
 
 void SetCounters(benchmark::State& state, const BenchScene& s, double peak_mib) {

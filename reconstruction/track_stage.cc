@@ -6,6 +6,7 @@
 #include <opencv2/videoio.hpp>
 
 #include <fstream>
+#include <numeric>
 
 #include "calibration/landmark_embedding.h"
 #include "core/json_io.h"
@@ -34,18 +35,9 @@ nlohmann::json MatrixJson(const Eigen::Matrix4d& m) {
 
 // The fitted head drawn over one frame: the face shaded toward the camera at
 // half opacity, detected landmarks green, fitted ones red.
-cv::Mat Overlay(const cv::Mat& frame, const FaceModel& model, const Eigen::Matrix3Xf& vertices,
-                const std::vector<int16_t>& material, const TrackingCamera& camera,
+cv::Mat Overlay(const cv::Mat& frame, const Mesh& mesh, const TrackingCamera& camera,
                 const std::optional<std::array<Eigen::Vector2d, 68>>& detected,
                 const std::vector<Eigen::Vector2d>& fitted) {
-  Mesh mesh;
-  mesh.vertices = vertices;
-  mesh.triangles = model.triangles();
-  mesh.normals = VertexNormals(vertices, model.triangles());
-  mesh.material = material;
-  Material skin;
-  skin.colour = Eigen::Vector3f(0.75f, 0.8f, 0.85f);
-  mesh.materials = {skin};
   PinholeCamera pinhole;
   pinhole.fx = camera.fx;
   pinhole.fy = camera.fy;
@@ -174,12 +166,6 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   TrackResult result;
   HF_RETURN_IF_ERROR(TrackSequence(basis, views, num_frames, fit, &result));
   progress->Finish(result.solver_report);
-  // The cameras as the fit saw them (their translations times the rig scale).
-  for (TrackingView& v : views) v.camera.translation *= result.rig_scale;
-  if (result.rig_scale != 1.0) {
-    HF_LOG(Info) << "track: camera positions scaled by " << result.rig_scale
-                 << " (align's metric scale, refined over the sequence)";
-  }
 
   // tracking.json
   nlohmann::json frames = nlohmann::json::array();
@@ -204,7 +190,6 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
       {"identity", std::vector<double>(result.identity.data(), result.identity.data() + result.identity.size())},
       {"expression_names", model.expression_names()},
       {"head_held_by_cameras", fit.fixed_head},
-      {"camera_scale", result.rig_scale},
       {"median_residual_px", result.median_residual_px},
       {"solver", result.solver_report},
       {"seconds", result.seconds},
@@ -214,44 +199,57 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
 
   const Eigen::VectorXf alpha = result.identity.cast<float>();
   const Eigen::Matrix3Xf identity_shape = model.Identity(alpha);
+  // The fitted head of a frame, moved by its head motion.
+  auto fitted_vertices = [&](const TrackedFrame& f) {
+    Eigen::Matrix3Xf v = identity_shape;
+    model.AddExpression(f.expression.cast<float>(), &v);
+    return Eigen::Matrix3Xf((f.head_motion.cast<float>() * v.colwise().homogeneous()).topRows(3));
+  };
   if (options.meshes) {
     HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "meshes"));
     for (const TrackedFrame& f : result.frames) {
-      Eigen::Matrix3Xf v = identity_shape;
-      model.AddExpression(f.expression.cast<float>(), &v);
-      v = (f.head_motion.cast<float>() * v.colwise().homogeneous().eval()).topRows(3).eval();
       char name[32];
       std::snprintf(name, sizeof(name), "%06d.obj", f.frame);
-      HF_RETURN_IF_ERROR(WriteObj(out_dir / "meshes" / name, v, model.triangles()));
+      HF_RETURN_IF_ERROR(WriteObj(out_dir / "meshes" / name, fitted_vertices(f), model.triangles()));
     }
     summary->outputs.push_back("meshes");
   }
   if (options.overlay) {
     // Only the face is drawn (the rest of the head has no landmarks to follow).
-    std::vector<int16_t> material(model.num_triangles(), -1);
+    Mesh mesh;
+    mesh.triangles = model.triangles();
+    mesh.material.assign(model.num_triangles(), -1);
     const FaceModel::Region* face = model.FindRegion("face");
     for (int t = 0; t < model.num_triangles(); ++t) {
-      if (face == nullptr || face->ContainsTriangle(t)) material[t] = 0;
+      if (face == nullptr || face->ContainsTriangle(t)) mesh.material[t] = 0;
     }
+    Material skin;
+    skin.colour = Eigen::Vector3f(0.75f, 0.8f, 0.85f);
+    mesh.materials = {skin};
+    // Frame by frame, so each frame's mesh is built once for all its views.
+    std::vector<size_t> order(views.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](size_t a, size_t b) { return view_source[a].second < view_source[b].second; });
     progress->Start("track: overlay video", int64_t(views.size()));
     std::map<int, cv::VideoWriter> writers;
-    for (size_t i = 0; i < views.size(); ++i) {
+    int mesh_frame = -1;
+    for (const size_t i : order) {
       const auto [c, frame] = view_source[i];
       const IngestedCamera& cam = capture.cameras[c];
       const cv::Mat image = cv::imread(capture.FramePath(cam.name, frame).string(), cv::IMREAD_COLOR);
       if (image.empty()) return Status::IoError("track: cannot read frame " + capture.FramePath(cam.name, frame).string());
       const TrackedFrame& f = result.frames[frame];
-      Eigen::Matrix3Xf v = identity_shape;
-      model.AddExpression(f.expression.cast<float>(), &v);
-      v = (f.head_motion.cast<float>() * v.colwise().homogeneous().eval()).topRows(3).eval();
+      if (frame != mesh_frame) {
+        mesh.vertices = fitted_vertices(f);
+        mesh.normals = VertexNormals(mesh.vertices, mesh.triangles);
+        mesh_frame = frame;
+      }
       std::vector<Eigen::Vector2d> fitted;
       for (int l = 0; l < 68; ++l) {
-        const Eigen::Vector3d p = views[i].camera.rotation * (f.head_motion * basis.Point(l, result.identity, f.expression)) +
-                                  views[i].camera.translation;
-        fitted.emplace_back(views[i].camera.fx * p.x() / p.z() + views[i].camera.cx,
-                            views[i].camera.fy * p.y() / p.z() + views[i].camera.cy);
+        fitted.push_back(views[i].camera.Pixel(f.head_motion * basis.Point(l, result.identity, f.expression)));
       }
-      const cv::Mat drawn = Overlay(image, model, v, material, views[i].camera, views[i].landmarks, fitted);
+      const cv::Mat drawn = Overlay(image, mesh, views[i].camera, views[i].landmarks, fitted);
       auto it = writers.find(c);
       if (it == writers.end()) {
         const fs::path video = out_dir / ("overlay_" + cam.name + ".mp4");

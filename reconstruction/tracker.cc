@@ -4,7 +4,6 @@
 #include <chrono>
 #include <cmath>
 #include <map>
-#include <set>
 
 #include "calibration/reprojection_cost.h"
 
@@ -30,6 +29,28 @@ Eigen::Isometry3d MotionOf(const FrameBlocks& b) {
   if (aa.norm() > 0) m.linear() = Eigen::AngleAxisd(aa.norm(), aa.normalized()).toRotationMatrix();
   m.translation() = Eigen::Vector3d(b.translation[0], b.translation[1], b.translation[2]);
   return m;
+}
+
+// Whether landmark i of a view enters the fit.
+bool Usable(const TrackingView& view, int i) {
+  const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
+  return confidence > 0 && (*view.landmarks)[i].allFinite();
+}
+
+// Pixel distances between a view's usable landmarks and the model's, with
+// the indices they belong to.
+std::vector<double> ViewResiduals(const TrackingView& view, const LandmarkBasis& basis,
+                                  const Eigen::VectorXd& alpha, const FrameBlocks& frame,
+                                  std::vector<int>* indices = nullptr) {
+  const Eigen::Isometry3d motion = MotionOf(frame);
+  const Eigen::VectorXd beta = Eigen::Map<const Eigen::VectorXd>(frame.expression.data(), frame.expression.size());
+  std::vector<double> r;
+  for (int i = 0; i < 68; ++i) {
+    if (!Usable(view, i)) continue;
+    r.push_back((view.camera.Pixel(motion * basis.Point(i, alpha, beta)) - (*view.landmarks)[i]).norm());
+    if (indices) indices->push_back(i);
+  }
+  return r;
 }
 
 ceres::LinearSolverType PickLinearSolver() {
@@ -81,8 +102,6 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   for (auto& m : fit_basis.identity) m = m.leftCols(k).eval();
 
   std::vector<double> identity(k, 0.0);
-  double rig_scale = 1.0;
-  std::set<std::pair<double, double>> camera_centres;  // distinct cameras, by position
   std::vector<FrameBlocks> frames(num_frames);
   for (auto& f : frames) f.expression.assign(e, 0.0);
 
@@ -114,18 +133,15 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
     }
     used[v] = true;
     FrameBlocks& f = frames[view.frame];
-    const Eigen::Vector3d centre = -view.camera.rotation.transpose() * view.camera.translation;
-    camera_centres.emplace(std::round(centre.x() * 1e3), std::round(centre.z() * 1e3));
     for (int i = 0; i < 68; ++i) {
-      const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
-      if (!(confidence > 0)) continue;
+      if (!Usable(view, i)) continue;
       const Eigen::Vector2d& pixel = (*view.landmarks)[i];
-      if (!pixel.allFinite()) continue;
+      const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
       const double weight = confidence * (i < 17 ? options.contour_weight : 1.0);
       if (!(weight > 0)) continue;
       view_blocks[v].push_back(problem.AddResidualBlock(
           LandmarkReprojectionCost::Create(fit_basis, i, view.camera, pixel, weight),
-          new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, &rig_scale, identity.data(),
+          new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, identity.data(),
           f.expression.data()));
       f.observed = true;
       ++observations;
@@ -133,16 +149,6 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   }
   if (observations == 0) {
     return Status::DataError("track: no frame has landmarks; check that ingest found the face (landmarks.json)");
-  }
-
-  // The rig's scale is observable only from several cameras that see the head
-  // move together; otherwise it trades with the face's size.
-  const bool fit_scale = options.fit_rig_scale && !options.fixed_head && camera_centres.size() > 1;
-  if (!fit_scale) {
-    problem.SetParameterBlockConstant(&rig_scale);
-  } else {
-    problem.SetParameterLowerBound(&rig_scale, 0, 0.5);
-    problem.SetParameterUpperBound(&rig_scale, 0, 2.0);
   }
 
   // Priors, bounds, smoothness between consecutive observed frames.
@@ -197,24 +203,10 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   // failure, typically on a turned face) is dropped, and the fit repeated.
   if (summary.termination_type != ceres::FAILURE) {
     std::vector<double> view_median(views.size(), 0.0), all_used;
+    const Eigen::VectorXd alpha = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
     for (size_t v = 0; v < views.size(); ++v) {
       if (!used[v]) continue;
-      const TrackingView& view = views[v];
-      const FrameBlocks& f = frames[view.frame];
-      const Eigen::Isometry3d motion = MotionOf(f);
-      const Eigen::VectorXd a = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
-      const Eigen::VectorXd b = Eigen::Map<const Eigen::VectorXd>(f.expression.data(), e);
-      std::vector<double> r;
-      for (int i = 0; i < 68; ++i) {
-        const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
-        if (!(confidence > 0) || !(*view.landmarks)[i].allFinite()) continue;
-        const Eigen::Vector3d p =
-            view.camera.rotation * (motion * fit_basis.Point(i, a, b)) + rig_scale * view.camera.translation;
-        r.push_back((Eigen::Vector2d(view.camera.fx * p.x() / p.z() + view.camera.cx,
-                                     view.camera.fy * p.y() / p.z() + view.camera.cy) -
-                     (*view.landmarks)[i]).norm());
-      }
-      view_median[v] = Median(r);
+      view_median[v] = Median(ViewResiduals(views[v], fit_basis, alpha, frames[views[v].frame]));
       all_used.push_back(view_median[v]);
     }
     const double limit = std::max(options.flag_residual_px, 3.0 * Median(all_used));
@@ -242,7 +234,6 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   TrackResult out;
   out.dropped_views = out_dropped_views;
   out.identity = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
-  out.rig_scale = rig_scale;
   out.iterations = static_cast<int>(summary.iterations.size());
   out.solver_report = summary.BriefReport();
   // Residuals and flags per observed frame.
@@ -253,22 +244,13 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   for (size_t v = 0; v < views.size(); ++v) {
     const TrackingView& view = views[v];
     if (!used[v]) continue;
-    const FrameBlocks& f = frames[view.frame];
-    const Eigen::Isometry3d motion = MotionOf(f);
-    const Eigen::VectorXd beta = Eigen::Map<const Eigen::VectorXd>(f.expression.data(), e);
-    Eigen::MatrixXd seen_points(2, 0);
-    for (int i = 0; i < 68; ++i) {
-      const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
-      if (!(confidence > 0) || !(*view.landmarks)[i].allFinite()) continue;
-      const Eigen::Vector3d p = view.camera.rotation * (motion * fit_basis.Point(i, alpha, beta)) +
-                                rig_scale * view.camera.translation;
-      const Eigen::Vector2d pixel(view.camera.fx * p.x() / p.z() + view.camera.cx,
-                                  view.camera.fy * p.y() / p.z() + view.camera.cy);
-      residuals[view.frame].push_back((pixel - (*view.landmarks)[i]).norm());
-      seen_points.conservativeResize(2, seen_points.cols() + 1);
-      seen_points.col(seen_points.cols() - 1) = (*view.landmarks)[i];
-      ++seen[view.frame];
-    }
+    std::vector<int> indices;
+    const std::vector<double> r = ViewResiduals(view, fit_basis, alpha, frames[view.frame], &indices);
+    residuals[view.frame].insert(residuals[view.frame].end(), r.begin(), r.end());
+    seen[view.frame] += int(indices.size());
+    Eigen::MatrixXd seen_points(2, indices.size());
+    for (size_t j = 0; j < indices.size(); ++j) seen_points.col(Eigen::Index(j)) = (*view.landmarks)[indices[j]];
+    const Eigen::Isometry3d motion = MotionOf(frames[view.frame]);
     if (std::abs(YawFromCamera(view.camera, motion)) > options.max_yaw_deg) {
       reasons[view.frame] += "profile view; ";
     }

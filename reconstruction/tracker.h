@@ -52,10 +52,6 @@ struct TrackOptions {
   // A frame that some camera sees within this yaw of frontal (degrees, with
   // the cameras' initial head pose) ignores its views beyond it.
   double max_fit_yaw_deg = 35.0;
-  // With several cameras, refine the metric scale of their positions (align's
-  // scale) as one shared factor. Off by default: on rig_8cam it has not yet
-  // been shown to move the scale the right way.
-  bool fit_rig_scale = false;
   int max_iterations = 100;
   int threads = 1;
   // A frame is flagged low-confidence when its median residual exceeds this
@@ -83,9 +79,6 @@ struct TrackedFrame {
 
 struct TrackResult {
   Eigen::VectorXd identity;  // [K]
-  // The factor applied to every camera's translation (1 unless fitted): the
-  // head frame's metric scale relative to the cameras, corrected.
-  double rig_scale = 1.0;
   std::vector<TrackedFrame> frames;
   double median_residual_px = 0;
   // Views dropped after a first fit because their landmarks disagreed with

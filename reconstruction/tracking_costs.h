@@ -16,14 +16,18 @@ struct TrackingCamera {
   double fx = 500, fy = 500, cx = 0, cy = 0;
   Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();  // cam_from_head
   Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+
+  // Pixel of a head-frame point.
+  Eigen::Vector2d Pixel(const Eigen::Vector3d& head_point) const {
+    const Eigen::Vector3d p = rotation * head_point + translation;
+    return {fx * p.x() / p.z() + cx, fy * p.y() / p.z() + cy};
+  }
 };
 
 // One detected landmark against the model's landmark i, moved by the head's
 // motion (angle-axis rotation and translation applied in the head frame) and
-// seen by a camera whose translation is multiplied by a shared `scale` (the
-// metric scale of a multi-camera rig, as align estimated it, refined).
-// Residuals: 2, pixels times `weight`.
-// Parameters: rotation[3], translation[3], scale[1], identity[K], expression[E].
+// seen by a fixed camera. Residuals: 2, pixels times `weight`.
+// Parameters: rotation[3], translation[3], identity[K], expression[E].
 struct LandmarkReprojectionCost {
   static constexpr int kStride = 8;
 
@@ -40,9 +44,8 @@ struct LandmarkReprojectionCost {
   bool operator()(T const* const* parameters, T* residual) const {
     const T* rotation = parameters[0];
     const T* translation = parameters[1];
-    const T* scale = parameters[2];
-    const T* alpha = parameters[3];
-    const T* beta = parameters[4];
+    const T* alpha = parameters[2];
+    const T* beta = parameters[3];
     T x[3];
     for (int d = 0; d < 3; ++d) {
       x[d] = T(base_[d]);
@@ -53,7 +56,7 @@ struct LandmarkReprojectionCost {
     ceres::AngleAxisRotatePoint(rotation, x, moved);
     T p[3];
     for (int r = 0; r < 3; ++r) {
-      p[r] = scale[0] * T(camera_.translation[r]);
+      p[r] = T(camera_.translation[r]);
       for (int c = 0; c < 3; ++c) p[r] += T(camera_.rotation(r, c)) * (moved[c] + translation[c]);
     }
     // A landmark at or behind the camera has no pixel: reject the step.
@@ -70,7 +73,6 @@ struct LandmarkReprojectionCost {
         new LandmarkReprojectionCost(basis, landmark, camera, pixel, weight));
     cost->AddParameterBlock(3);
     cost->AddParameterBlock(3);
-    cost->AddParameterBlock(1);
     cost->AddParameterBlock(basis.num_identity);
     cost->AddParameterBlock(basis.num_expressions);
     cost->SetNumResiduals(2);

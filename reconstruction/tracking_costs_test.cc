@@ -55,11 +55,10 @@ TEST(TrackingCosts, LandmarkReprojectionGradients) {
   const double rotation[3] = {0.1, -0.2, 0.05}, translation[3] = {0.01, 0.02, -0.03};
   const double alpha[4] = {0.5, -1.0, 0.3, 2.0};
   const double beta[5] = {0.1, 0.9, 0.0, 0.5, 0.3};
-  const double scale[1] = {1.1};
   for (int landmark : {0, 30, 67}) {
     std::unique_ptr<ceres::CostFunction> cost(LandmarkReprojectionCost::Create(
         basis, landmark, camera, Eigen::Vector2d(255, 270), 0.7));
-    ExpectGradientsMatch(cost.get(), {rotation, translation, scale, alpha, beta});
+    ExpectGradientsMatch(cost.get(), {rotation, translation, alpha, beta});
   }
 }
 
@@ -69,8 +68,8 @@ TEST(TrackingCosts, LandmarkBehindTheCameraIsRejected) {
   camera.translation = Eigen::Vector3d(0, 0, -1.0);  // everything behind
   std::unique_ptr<ceres::CostFunction> cost(
       LandmarkReprojectionCost::Create(basis, 3, camera, Eigen::Vector2d(0, 0), 1.0));
-  const double zero3[3] = {0, 0, 0}, one[1] = {1}, alpha[2] = {0, 0}, beta[2] = {0, 0};
-  const double* parameters[] = {zero3, zero3, one, alpha, beta};
+  const double zero3[3] = {0, 0, 0}, alpha[2] = {0, 0}, beta[2] = {0, 0};
+  const double* parameters[] = {zero3, zero3, alpha, beta};
   double residual[2];
   EXPECT_FALSE(cost->Evaluate(parameters, residual, nullptr));
 }

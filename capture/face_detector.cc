@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <opencv2/dnn.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -57,6 +58,37 @@ class HogDetector {
     return faces;
   }
 
+  // dlib's own framing of the face inside `around` (a detector's box): HOG
+  // run on that neighbourhood, scaled so the face is about 160 px tall.
+  // The detection nearest the box's centre, if one overlaps it.
+  std::optional<cv::Rect2f> FrameAround(const cv::Mat& bgr, const cv::Rect2f& around) {
+    const cv::Rect2f grown(around.x - 0.5f * around.width, around.y - 0.5f * around.height, 2.0f * around.width,
+                           2.0f * around.height);
+    const cv::Rect region = cv::Rect(grown) & cv::Rect(0, 0, bgr.cols, bgr.rows);
+    if (region.width < 16 || region.height < 16) return std::nullopt;
+    const double scale = 160.0 / std::max(1.0f, around.height);
+    cv::Mat crop;
+    cv::resize(bgr(region), crop, cv::Size(), scale, scale, scale < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
+    dlib::cv_image<dlib::bgr_pixel> view(crop);
+    std::vector<dlib::rect_detection> found;
+    detector_(view, found, -0.5);  // a weaker face is still framed: the box is known
+    const cv::Point2f centre(around.x + 0.5f * around.width, around.y + 0.5f * around.height);
+    std::optional<cv::Rect2f> best;
+    float best_distance = 0;
+    for (const auto& d : found) {
+      const cv::Rect2f box(region.x + d.rect.left() / scale, region.y + d.rect.top() / scale, d.rect.width() / scale,
+                           d.rect.height() / scale);
+      const float overlap = (box & around).area() / std::min(box.area(), around.area());
+      const float distance = cv::norm(cv::Point2f(box.x + 0.5f * box.width, box.y + 0.5f * box.height) - centre);
+      if (overlap < 0.5f) continue;
+      if (!best || distance < best_distance) {
+        best = box;
+        best_distance = distance;
+      }
+    }
+    return best;
+  }
+
  private:
   dlib::frontal_face_detector detector_;
 };
@@ -104,6 +136,21 @@ class UltraFaceDetector : public FaceDetector {
       FaceDetection face;
       face.box = cv::Rect2f(rects[k]);
       face.landmark_box = HogFramingOf(face.box);
+      // dlib's landmark model expects its HOG detector's framing. On a turned
+      // head that box follows the visible face, which a fixed conversion of
+      // UltraFace's box cannot (landmarks drift by tens of pixels at 45 deg);
+      // on a frontal face the conversion is as good and steadier (HOG boxes
+      // sit on an 8-pixel grid). Blend by how far HOG's box moved sideways:
+      // up to 5% of the width, the conversion; from 15%, HOG's box.
+      if (options_.hog_framing)
+        if (const std::optional<cv::Rect2f> framed = hog_.FrameAround(bgr, face.box)) {
+          const cv::Rect2f& a = face.landmark_box;
+          const float shift = std::abs((framed->x + 0.5f * framed->width) - (a.x + 0.5f * a.width)) / a.width;
+          const float w = std::clamp((shift - 0.05f) / 0.10f, 0.0f, 1.0f);
+          face.landmark_box = cv::Rect2f(a.x + w * (framed->x - a.x), a.y + w * (framed->y - a.y),
+                                         a.width + w * (framed->width - a.width),
+                                         a.height + w * (framed->height - a.height));
+        }
       face.score = confidences[k];
       faces.push_back(face);
     }

@@ -23,6 +23,11 @@ struct FaceDetectorOptions {
   double score_threshold = 0.7;
   // Try dlib's HOG detector on frames where the main detector finds nothing.
   bool hog_fallback = true;
+  // Frame the landmark model's box with dlib's HOG detector around each
+  // UltraFace face where it fires and the head is turned (the framing the
+  // landmark model was trained with); elsewhere a fixed conversion of the
+  // UltraFace box.
+  bool hog_framing = true;
 
   Status Check() const;
   // The ONNX file the options select ("" for dlib-hog).

@@ -23,7 +23,7 @@
 namespace headforge {
 
 // Bumped when the stage's outputs change for the same inputs and options.
-constexpr const char* kIngestVersion = "ingest-1";
+constexpr const char* kIngestVersion = "ingest-2";
 
 Status IngestOptions::Check() const {
   if (inputs.empty())
@@ -83,6 +83,10 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
          "Minimum UltraFace face probability.", "detector-threshold");
   o->Add("ingest.hog_fallback", &in->detector.hog_fallback,
          "Try dlib's HOG detector on frames where UltraFace finds no face.", "hog-fallback");
+  o->Add("ingest.hog_framing", &in->detector.hog_framing,
+         "Frame the landmark model's box with dlib's HOG detector around each UltraFace face where it fires "
+         "(the framing the landmark model was trained with; keeps landmarks on turned heads).",
+         "hog-framing");
   o->Add("ingest.ultraface_dir", &in->detector.ultraface_dir,
          "Folder with the UltraFace ONNX models (default: DATA/models/ultraface).", "ultraface-dir",
          OptionSet::Effect::kRuntime);
@@ -115,6 +119,8 @@ void ResolveIngestDefaults(const std::string& data_dir, IngestOptions* in) {
     in->detector.ultraface_dir = (fs::path(data_dir) / "models" / "ultraface").string();
   if (in->landmark_model.empty()) in->landmark_model = DefaultLandmarkModel();
 }
+
+const char* IngestVersion() { return kIngestVersion; }
 
 Status IngestFingerprint(const IngestOptions& options, const std::string& options_ini,
                          std::string* fingerprint) {

@@ -65,6 +65,10 @@ void AddIngestOptions(OptionSet* options, IngestOptions* ingest);
 // Applies the shared data folder to options whose defaults live there.
 void ResolveIngestDefaults(const std::string& data_dir, IngestOptions* ingest);
 
+// The marker of ingest's outputs: it changes whenever the same inputs and
+// options would give other frames, landmarks or masks.
+const char* IngestVersion();
+
 // The fingerprint of the stage: its options (semantic INI text), the contents
 // of every input and mask, and the model files.
 Status IngestFingerprint(const IngestOptions& options, const std::string& options_ini,

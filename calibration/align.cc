@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <Eigen/SVD>
+#include <ceres/rotation.h>
 #include <map>
 #include <nlohmann/json.hpp>
 
 #include "calibration/landmark_embedding.h"
 #include "calibration/pnp.h"
+#include "calibration/reprojection_cost.h"
 #include "calibration/triangulation.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -19,6 +21,8 @@ Status AlignOptions::Check() const {
   if (!(max_reprojection_px > 0)) return Status::InvalidArgument("--max-reprojection must be positive");
   if (!(max_yaw_deg > 0)) return Status::InvalidArgument("--max-yaw must be positive");
   if (method != "views" && method != "landmarks") return Status::InvalidArgument("--align-method must be views or landmarks");
+  if (refine != "reprojection" && refine != "off") return Status::InvalidArgument("--align-refine must be reprojection or off");
+  if (!(refine_robust_px > 0)) return Status::InvalidArgument("--align-refine-robust must be positive");
   return Status::Ok();
 }
 
@@ -35,6 +39,12 @@ void AddAlignOptions(OptionSet* o, AlignOptions* a) {
          "align-method");
   o->Add("align.max_yaw_deg", &a->max_yaw_deg,
          "Use landmarks only from views whose head yaw is within this many degrees of frontal.", "max-yaw");
+  o->Add("align.refine", &a->refine,
+         "reprojection: with the rotation held, refine scale and translation by reprojecting the model's landmarks "
+         "into the views (no depth dilution from triangulation); off: the fit to triangulated landmarks.",
+         "align-refine");
+  o->Add("align.refine_robust_px", &a->refine_robust_px, "Huber scale of the reprojection refinement, pixels.",
+         "align-refine-robust");
 }
 
 CameraSet ToHeadFrame(const CameraSet& cameras, const Sim3& head_from_world) {
@@ -179,6 +189,53 @@ std::map<int, Eigen::Vector3d> TriangulateLandmarks(const std::vector<std::vecto
     if (r.ok && r.quality == TriangulationQuality::kGood && r.rms_px < max_px) points[i] = r.point;
   }
   return points;
+}
+
+// Refines head_from_world by reprojection: the model's landmark points, carried
+// into the world by the similarity, are compared with the detections in every
+// view of the group (robust loss). Unlike a fit to triangulated landmarks, the
+// noise stays in the images where it arises, so the scale is not diluted by
+// the triangulation's poorly measured depths.
+bool RefineByReprojection(const std::vector<std::vector<Observation>>& per_landmark,
+                          const std::vector<Eigen::Vector3d>& model_points, const std::vector<int>& landmarks,
+                          double robust_px, Sim3* head_from_world, double* median_px) {
+  const Sim3 start = head_from_world->Inverse();
+  double params[7];
+  ceres::RotationMatrixToAngleAxis(ceres::ColumnMajorAdapter3x3(start.rotation.data()), params);
+  for (int i = 0; i < 3; ++i) params[3 + i] = start.translation[i];
+  params[6] = std::log(start.scale);
+  ceres::Problem problem;
+  int count = 0;
+  for (int i : landmarks)
+    for (const auto& o : per_landmark[i]) {
+      problem.AddResidualBlock(SimilarityReprojectionCost::Create(model_points[i], o.projection, o.pixel, 1.0),
+                               new ceres::HuberLoss(robust_px), params);
+      ++count;
+    }
+  if (count < 12) return false;
+  // The rotation stays: landmark depth (what a free rotation would lean on)
+  // is what detectors measure worst, on oblique or unshaded faces.
+  problem.SetManifold(params, new ceres::SubsetManifold(7, {0, 1, 2}));
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = 100;
+  solver.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+  if (!summary.IsSolutionUsable()) return false;
+  Sim3 world_from_head;
+  ceres::AngleAxisToRotationMatrix(params, ceres::ColumnMajorAdapter3x3(world_from_head.rotation.data()));
+  world_from_head.translation = Eigen::Vector3d(params[3], params[4], params[5]);
+  world_from_head.scale = std::exp(params[6]);
+  const Sim3 refined = world_from_head.Inverse();
+  if (!std::isfinite(refined.scale) || !refined.rotation.allFinite() || !refined.translation.allFinite()) return false;
+  std::vector<double> errors;
+  for (int i : landmarks)
+    for (const auto& o : per_landmark[i]) errors.push_back(Reprojection(o, world_from_head * model_points[i]));
+  std::nth_element(errors.begin(), errors.begin() + errors.size() / 2, errors.end());
+  *median_px = errors[errors.size() / 2];
+  *head_from_world = refined;
+  return true;
 }
 
 }  // namespace
@@ -344,9 +401,29 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   if (!found)
     return Status::DataError("too few landmarks could be triangulated to align with the face model (need 4 rigid "
                              "landmarks seen in 2 or more registered views with enough parallax)");
-  best.cameras = ToHeadFrame(cameras, best.head_from_world);
   if (best.quality != SimilarityQuality::kGood)
     best.message = std::string("alignment quality: ") + SimilarityQualityName(best.quality);
+  if (options.refine == "reprojection") {
+    double median_px = 0;
+    if (RefineByReprojection(groups.at(per_frame ? best.reference_frame : 0), model_points, rigid,
+                             options.refine_robust_px, &best.head_from_world, &median_px)) {
+      best.method += "+reprojection";
+      best.reprojection_median_px = median_px;
+      std::vector<double> sorted;
+      double sum = 0;
+      for (size_t k = 0; k < best.landmarks_used.size(); ++k) {
+        const double e = 1000.0 * (model_points[best.landmarks_used[k]] - best.head_from_world * best.points[k]).norm();
+        best.residuals_mm[k] = e;
+        best.inlier[k] = e < options.inlier_mm;
+        sorted.push_back(e);
+        sum += e * e;
+      }
+      best.rms_mm = std::sqrt(sum / sorted.size());
+      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+      best.median_mm = sorted[sorted.size() / 2];
+    }
+  }
+  best.cameras = ToHeadFrame(cameras, best.head_from_world);
   *result = std::move(best);
   return Status::Ok();
 }
@@ -368,6 +445,7 @@ Status WriteAlignment(const AlignResult& r, const fs::path& path) {
       {"quality", SimilarityQualityName(r.quality)},
       {"method", r.method},
       {"reference_frame", r.reference_frame},
+      {"reprojection_median_px", r.reprojection_median_px},
       {"rms_mm", r.rms_mm},
       {"median_mm", r.median_mm},
       {"residuals", residuals},

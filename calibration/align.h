@@ -26,6 +26,11 @@ struct AlignOptions {
   std::string method = "views";
   // The detector's landmarks on the model (landmark_embedding.h); "" for the model's vertices.
   std::string landmark_embedding = DefaultLandmarkEmbedding();
+  // "reprojection": with the rotation held, refine scale and translation by
+  // the reprojection of the model's landmarks into every view used; "off":
+  // keep the fit to the triangulated landmarks.
+  std::string refine = "reprojection";
+  double refine_robust_px = 2.0;  // Huber scale of that refinement
   Status Check() const;
 };
 void AddAlignOptions(OptionSet* options, AlignOptions* align);
@@ -40,6 +45,7 @@ struct AlignResult {
   std::vector<bool> inlier;
   double rms_mm = 0.0, median_mm = 0.0;
   int reference_frame = -1;            // several cameras: the frame whose head pose defines the head frame
+  double reprojection_median_px = 0.0;  // landmark reprojection after the refinement (0: not refined)
   CameraSet cameras;                   // the views re-expressed in the head frame
   std::string message;
 };

@@ -312,7 +312,8 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
   }
   const std::string what = status.ok() ? "COLMAP registered only " + std::to_string(report.registered) + " of " +
                                              std::to_string(report.total) + " frames (below --min-registered " +
-                                             std::to_string(options.min_registered) + ")"
+                                             std::to_string(static_cast<int>(100 * options.min_registered + 0.5)) +
+                                             "%)"
                                        : status.message();
   if (options.mode != "auto" || capture.cameras.size() != 1)
     return Status::DataError(what + ". Try: more texture in the background, --max-features 8192, --matcher "

@@ -1,6 +1,7 @@
 // Hard cases of the geometric solvers stay numerically stable: each returns a
 // finite result with a quality flag, or a clear failure; never a silent NaN.
 // Random cases come from rapidcheck (shrunk to a minimal failing case).
+#include <ceres/gradient_checker.h>
 #include <gtest/gtest.h>
 #include <rapidcheck/gtest.h>
 
@@ -9,6 +10,7 @@
 #include <random>
 
 #include "calibration/pnp.h"
+#include "calibration/reprojection_cost.h"
 #include "calibration/similarity.h"
 #include "calibration/triangulation.h"
 
@@ -313,6 +315,24 @@ TEST(Pnp, LandmarksCloseToALineAreFlaggedOrRefused) {
   EXPECT_NE(on.message.find("collinear"), std::string::npos);
   EXPECT_TRUE(on.cam_from_object.matrix().allFinite());
   EXPECT_FALSE(SolvePnp({}, {}, kK).ok);
+}
+
+// The align refinement's cost: its derivatives against numeric differentiation.
+TEST(AlignCosts, SimilarityReprojectionGradients) {
+  Eigen::Matrix<double, 3, 4> projection;
+  projection << 800, 3, 250, 40, -2, 810, 260, -30, 0.01, -0.02, 1, 2.5;
+  const double world_from_head[7] = {0.3, -0.2, 0.1, 0.05, -0.1, 0.2, std::log(2.7)};
+  for (const Eigen::Vector3d point : {Eigen::Vector3d(0.03, 0.05, 0.1), Eigen::Vector3d(-0.07, -0.02, 0.01)}) {
+    std::unique_ptr<ceres::CostFunction> cost(
+        SimilarityReprojectionCost::Create(point, projection, Eigen::Vector2d(300, 240), 0.8));
+    ceres::NumericDiffOptions numeric;
+    const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
+    ceres::GradientChecker checker(cost.get(), no_manifolds, numeric);
+    ceres::GradientChecker::ProbeResults results;
+    const double* parameters[] = {world_from_head};
+    EXPECT_TRUE(checker.Probe(parameters, 1e-7, &results)) << results.error_log;
+    EXPECT_LT(results.maximum_relative_error, 1e-7);
+  }
 }
 
 }  // namespace

@@ -37,6 +37,45 @@ struct PointReprojectionCost {
   double weight_;
 };
 
+// A head-frame point carried into the world by a similarity and seen through
+// a fixed 3x4 projection matrix: x_world = exp(log_scale) R(w) x_head + t.
+// Parameters: world_from_head[7] = w[3] (angle-axis), t[3], log_scale.
+// Residuals: 2 pixels, scaled by `weight`.
+struct SimilarityReprojectionCost {
+  SimilarityReprojectionCost(const Eigen::Vector3d& point, const Eigen::Matrix<double, 3, 4>& projection,
+                             const Eigen::Vector2d& pixel, double weight)
+      : point_(point), projection_(projection), pixel_(pixel), weight_(weight) {}
+
+  template <typename T>
+  bool operator()(const T* world_from_head, T* residual) const {
+    const T x[3] = {T(point_.x()), T(point_.y()), T(point_.z())};
+    T rotated[3];
+    ceres::AngleAxisRotatePoint(world_from_head, x, rotated);
+    const T s = exp(world_from_head[6]);
+    T w[3];
+    for (int i = 0; i < 3; ++i) w[i] = s * rotated[i] + world_from_head[3 + i];
+    T p[3];
+    for (int r = 0; r < 3; ++r)
+      p[r] = T(projection_(r, 0)) * w[0] + T(projection_(r, 1)) * w[1] + T(projection_(r, 2)) * w[2] +
+             T(projection_(r, 3));
+    residual[0] = T(weight_) * (p[0] / p[2] - T(pixel_.x()));
+    residual[1] = T(weight_) * (p[1] / p[2] - T(pixel_.y()));
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const Eigen::Vector3d& point, const Eigen::Matrix<double, 3, 4>& projection,
+                                     const Eigen::Vector2d& pixel, double weight) {
+    return new ceres::AutoDiffCostFunction<SimilarityReprojectionCost, 2, 7>(
+        new SimilarityReprojectionCost(point, projection, pixel, weight));
+  }
+
+ private:
+  Eigen::Vector3d point_;
+  Eigen::Matrix<double, 3, 4> projection_;
+  Eigen::Vector2d pixel_;
+  double weight_;
+};
+
 // A known 3D point (head frame) seen by a pinhole camera with focal f and a
 // fixed principal point; the pose is an angle-axis rotation and a translation
 // (cam_from_head). Parameters: focal[1], rotation[3], translation[3].

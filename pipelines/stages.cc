@@ -94,10 +94,13 @@ Status RunAlignStage(Workspace* workspace, const AlignOptions& align, const std:
         HF_RETURN_IF_ERROR(WriteAlignment(aligned, staging / "alignment.json"));
         HF_RETURN_IF_ERROR(aligned.cameras.Write(staging / "cameras_head.json"));
         result->outputs = {"alignment.json", "cameras_head.json"};
-        char text[200];
-        std::snprintf(text, sizeof(text), "scale %.4g, %zu landmarks, median residual %.1f mm, rms %.1f mm%s",
+        char refined[80] = "";
+        if (aligned.reprojection_median_px > 0)
+          std::snprintf(refined, sizeof(refined), ", landmark reprojection %.1f px", aligned.reprojection_median_px);
+        char text[400];
+        std::snprintf(text, sizeof(text), "scale %.4g, %zu landmarks, median residual %.1f mm, rms %.1f mm%s%s",
                       aligned.head_from_world.scale, aligned.landmarks_used.size(), aligned.median_mm,
-                      aligned.rms_mm, aligned.message.empty() ? "" : (", " + aligned.message).c_str());
+                      aligned.rms_mm, refined, aligned.message.empty() ? "" : (", " + aligned.message).c_str());
         result->message = text;
         HF_LOG(Info) << "align: " << result->message;
         return Status::Ok();

@@ -149,11 +149,12 @@ TEST(SimulatedTrack, TalkingStatic) {
   EXPECT_LT(s.mae.at("jawOpen"), 0.1);
   EXPECT_LT(s.mae.at("mouthSmile_L"), 0.1);
   EXPECT_LT(s.mae.at("mouthSmile_R"), 0.1);
-  EXPECT_LT(s.mae.at("eyeBlink_L"), 0.12);
-  EXPECT_LT(s.mae.at("eyeBlink_R"), 0.12);
-  // Bounded by the head-pose cameras (their focal length is 23% long on this
-  // scene, docs/calibration.md); the target of 1.5 deg is not reached yet.
-  EXPECT_LT(s.rotation_deg, 2.5);
+  EXPECT_LT(s.mae.at("eyeBlink_L"), 0.1);
+  EXPECT_LT(s.mae.at("eyeBlink_R"), 0.1);
+  // The head-pose cameras' focal length is far off on this scene (see the
+  // camera table in README); the fit of the whole face still holds the head's
+  // rotation to this.
+  EXPECT_LT(s.rotation_deg, 1.5);
 }
 
 }  // namespace

@@ -403,6 +403,11 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
                              "landmarks seen in 2 or more registered views with enough parallax)");
   if (best.quality != SimilarityQuality::kGood)
     best.message = std::string("alignment quality: ") + SimilarityQualityName(best.quality);
+  // The refinement reprojects every rigid landmark, triangulated or not (it
+  // needs only their detections). Restricting it to the 3D fit's inliers was
+  // tried: that set is chosen under the diluted scale, often a few landmarks
+  // near the nose, and left the scale far worse determined; the Huber loss
+  // tempers the detections that stray.
   if (options.refine == "reprojection") {
     double median_px = 0;
     if (RefineByReprojection(groups.at(per_frame ? best.reference_frame : 0), model_points, rigid,

@@ -322,7 +322,7 @@ TEST(AlignCosts, SimilarityReprojectionGradients) {
   Eigen::Matrix<double, 3, 4> projection;
   projection << 800, 3, 250, 40, -2, 810, 260, -30, 0.01, -0.02, 1, 2.5;
   const double world_from_head[7] = {0.3, -0.2, 0.1, 0.05, -0.1, 0.2, std::log(2.7)};
-  for (const Eigen::Vector3d point : {Eigen::Vector3d(0.03, 0.05, 0.1), Eigen::Vector3d(-0.07, -0.02, 0.01)}) {
+  for (const Eigen::Vector3d& point : {Eigen::Vector3d(0.03, 0.05, 0.1), Eigen::Vector3d(-0.07, -0.02, 0.01)}) {
     std::unique_ptr<ceres::CostFunction> cost(
         SimilarityReprojectionCost::Create(point, projection, Eigen::Vector2d(300, 240), 0.8));
     ceres::NumericDiffOptions numeric;
@@ -331,8 +331,27 @@ TEST(AlignCosts, SimilarityReprojectionGradients) {
     ceres::GradientChecker::ProbeResults results;
     const double* parameters[] = {world_from_head};
     EXPECT_TRUE(checker.Probe(parameters, 1e-7, &results)) << results.error_log;
-    EXPECT_LT(results.maximum_relative_error, 1e-7);
   }
+  // The residual is zero where the pixel is the point's projection through
+  // x_world = exp(log_s) R(w) x_head + t, and a point behind the camera is refused.
+  const Eigen::Vector3d point(0.03, 0.05, 0.1);
+  Eigen::Matrix3d r;
+  ceres::AngleAxisToRotationMatrix(world_from_head, ceres::ColumnMajorAdapter3x3(r.data()));
+  const Eigen::Vector3d world =
+      std::exp(world_from_head[6]) * (r * point) + Eigen::Vector3d(world_from_head[3], world_from_head[4], world_from_head[5]);
+  const Eigen::Vector3d h = projection * world.homogeneous();
+  std::unique_ptr<ceres::CostFunction> exact(
+      SimilarityReprojectionCost::Create(point, projection, h.head<2>() / h.z(), 1.0));
+  const double* parameters[] = {world_from_head};
+  double residual[2];
+  ASSERT_TRUE(exact->Evaluate(parameters, residual, nullptr));
+  EXPECT_NEAR(residual[0], 0.0, 1e-9);
+  EXPECT_NEAR(residual[1], 0.0, 1e-9);
+  Eigen::Matrix<double, 3, 4> behind = projection;
+  behind.row(2) *= -1;
+  std::unique_ptr<ceres::CostFunction> refused(
+      SimilarityReprojectionCost::Create(point, behind, Eigen::Vector2d(300, 240), 1.0));
+  EXPECT_FALSE(refused->Evaluate(parameters, residual, nullptr));
 }
 
 }  // namespace

@@ -58,6 +58,7 @@ struct SimilarityReprojectionCost {
     for (int r = 0; r < 3; ++r)
       p[r] = T(projection_(r, 0)) * w[0] + T(projection_(r, 1)) * w[1] + T(projection_(r, 2)) * w[2] +
              T(projection_(r, 3));
+    if (!(p[2] > T(0))) return false;  // behind the camera: Ceres rejects the step
     residual[0] = T(weight_) * (p[0] / p[2] - T(pixel_.x()));
     residual[1] = T(weight_) * (p[1] / p[2] - T(pixel_.y()));
     return true;

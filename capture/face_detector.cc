@@ -136,26 +136,28 @@ class UltraFaceDetector : public FaceDetector {
       FaceDetection face;
       face.box = cv::Rect2f(rects[k]);
       face.landmark_box = HogFramingOf(face.box);
-      // dlib's landmark model expects its HOG detector's framing. On a turned
-      // head that box follows the visible face, which a fixed conversion of
-      // UltraFace's box cannot (landmarks drift by tens of pixels at 45 deg);
-      // on a frontal face the conversion is as good and steadier (HOG boxes
-      // sit on an 8-pixel grid). Blend by how far HOG's box moved sideways:
-      // up to 5% of the width, the conversion; from 15%, HOG's box.
-      if (options_.hog_framing)
-        if (const std::optional<cv::Rect2f> framed = hog_.FrameAround(bgr, face.box)) {
-          const cv::Rect2f& a = face.landmark_box;
-          const float shift = std::abs((framed->x + 0.5f * framed->width) - (a.x + 0.5f * a.width)) / a.width;
-          const float w = std::clamp((shift - 0.05f) / 0.10f, 0.0f, 1.0f);
-          face.landmark_box = cv::Rect2f(a.x + w * (framed->x - a.x), a.y + w * (framed->y - a.y),
-                                         a.width + w * (framed->width - a.width),
-                                         a.height + w * (framed->height - a.height));
-        }
       face.score = confidences[k];
       faces.push_back(face);
     }
     std::sort(faces.begin(), faces.end(),
               [](const FaceDetection& a, const FaceDetection& b) { return a.score > b.score; });
+    // dlib's landmark model expects its HOG detector's framing. On a turned
+    // head that box follows the visible face, which a fixed conversion of
+    // UltraFace's box cannot (landmarks drift by tens of pixels at 45 deg);
+    // on a frontal face the conversion is as good and steadier (HOG boxes sit
+    // on an 8-pixel grid). Blend by how far HOG's box moved sideways: up to 5%
+    // of the width, the conversion; from 15%, HOG's box. The best few faces
+    // only (ingest predicts landmarks for three).
+    constexpr size_t kFramed = 3;
+    for (size_t i = 0; options_.hog_framing && i < std::min(faces.size(), kFramed); ++i) {
+      const cv::Rect2f a = faces[i].landmark_box;
+      const std::optional<cv::Rect2f> framed = hog_.FrameAround(bgr, faces[i].box);
+      if (!framed || framed->width < 0.5f * a.width || framed->width > 2.0f * a.width) continue;
+      const float shift = std::abs((framed->x + 0.5f * framed->width) - (a.x + 0.5f * a.width)) / a.width;
+      const float w = std::clamp((shift - 0.05f) / 0.10f, 0.0f, 1.0f);
+      faces[i].landmark_box = cv::Rect2f(a.x + w * (framed->x - a.x), a.y + w * (framed->y - a.y),
+                                         a.width + w * (framed->width - a.width), a.height + w * (framed->height - a.height));
+    }
     if (faces.empty() && options_.hog_fallback) faces = hog_.Detect(bgr);
     return faces;
   }

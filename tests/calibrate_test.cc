@@ -230,9 +230,6 @@ TEST(Calibrate, RigFilesAreImportedThroughTheCrop) {
   EXPECT_NE(bad.message().find("640x480"), std::string::npos) << bad.message();
 }
 
-// The shipped embedding is what `headforge embed-landmarks` measures today, and
-// away from the jaw contour (a silhouette, other surface points from every
-// side) it differs from the model's landmark vertices by millimetres.
 const char* kTurnedRig = R"(
 name = "turned_rig"
 fps = 25
@@ -311,7 +308,9 @@ TEST(Landmarks, TurnedHeadsKeepTheirLandmarksWithHogFraming) {
     std::printf("%s: inner landmarks %.1f px off with HOG framing, %.1f px with the fixed conversion\n",
                 framed.cameras[c].name.c_str(), with, without);
     EXPECT_LT(with, c == 1 ? 4.0 : 8.0);
-    if (c != 1) EXPECT_LT(with, 0.5 * without);
+    if (c != 1) {
+      EXPECT_LT(with, 0.5 * without);
+    }
   }
 }
 
@@ -336,7 +335,8 @@ TEST(Align, RecoversTheSimilarityFromLandmarkViews) {
 
   auto make = [&](double noise_px, IngestedCapture* capture, CameraSet* cameras) {
     std::mt19937 rng(7);
-    std::normal_distribution<double> noise(0.0, noise_px);
+    std::normal_distribution<double> gaussian(0.0, 1.0);
+    auto noise = [&](std::mt19937& g) { return noise_px * gaussian(g); };
     IngestedCamera cam;
     cam.name = "cam0";
     cam.width = cam.height = cam.source_width = cam.source_height = 512;
@@ -382,6 +382,7 @@ TEST(Align, RecoversTheSimilarityFromLandmarkViews) {
     CameraSet cameras;
     make(noise_px, &capture, &cameras);
     double scale_error[2];
+    Eigen::Matrix3d rotation[2];
     for (int refine = 0; refine < 2; ++refine) {
       AlignOptions options;
       options.refine = refine ? "reprojection" : "off";
@@ -389,6 +390,7 @@ TEST(Align, RecoversTheSimilarityFromLandmarkViews) {
       const Status status = RunAlign(options, capture, cameras, Model(), &aligned);
       ASSERT_TRUE(status.ok()) << status.message();
       scale_error[refine] = std::abs(aligned.head_from_world.scale / truth.scale - 1);
+      rotation[refine] = aligned.head_from_world.rotation;
       const double rotation_deg =
           Eigen::AngleAxisd(aligned.head_from_world.rotation.transpose() * truth.rotation).angle() * 180 / M_PI;
       std::printf("noise %.1f px, refine %s: scale error %.3f%%, rotation %.3f deg, method %s\n", noise_px,
@@ -405,6 +407,8 @@ TEST(Align, RecoversTheSimilarityFromLandmarkViews) {
         EXPECT_LT(aligned.reprojection_median_px, 1.3 * noise_px + 0.01);  // the median of |2D Gaussian| is 1.18 sigma
       }
     }
+    // The refinement holds the rotation.
+    EXPECT_LT((rotation[1] - rotation[0]).norm(), 1e-9);
     if (noise_px > 0) {
       EXPECT_LT(scale_error[1], 0.01);
       EXPECT_LT(scale_error[1], scale_error[0]);
@@ -412,6 +416,9 @@ TEST(Align, RecoversTheSimilarityFromLandmarkViews) {
   }
 }
 
+// The shipped embedding is what `headforge embed-landmarks` measures today, and
+// away from the jaw contour (a silhouette, other surface points from every
+// side) it differs from the model's landmark vertices by millimetres.
 TEST(LandmarkEmbedding, ShippedFileMatchesAFreshMeasurement) {
   std::vector<Eigen::Vector3d> shipped, fresh;
   ASSERT_TRUE(ReadLandmarkEmbedding(DefaultLandmarkEmbedding(), &shipped).ok());

@@ -191,6 +191,16 @@ std::map<int, Eigen::Vector3d> TriangulateLandmarks(const std::vector<std::vecto
   return points;
 }
 
+// rms_mm and median_mm from residuals_mm (not empty).
+void SummariseResiduals(AlignResult* r) {
+  std::vector<double> sorted = r->residuals_mm;
+  double sum = 0;
+  for (double e : sorted) sum += e * e;
+  r->rms_mm = std::sqrt(sum / sorted.size());
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  r->median_mm = sorted[sorted.size() / 2];
+}
+
 // Refines head_from_world by reprojection: the model's landmark points, carried
 // into the world by the similarity, are compared with the detections in every
 // view of the group (robust loss). Unlike a fit to triangulated landmarks, the
@@ -306,12 +316,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       r.inlier.push_back(true);
     }
     if (r.landmarks_used.empty()) return Status::DataError("no frame has landmarks to measure the alignment with");
-    std::vector<double> sorted = r.residuals_mm;
-    double sum = 0;
-    for (double e : sorted) sum += e * e;
-    r.rms_mm = std::sqrt(sum / sorted.size());
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    r.median_mm = sorted[sorted.size() / 2];
+    SummariseResiduals(&r);
     r.cameras = cameras;
     r.message = "head-pose cameras: identity transform; residuals are distances from the landmarks' viewing rays";
     *result = std::move(r);
@@ -379,19 +384,12 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
     r.method = use_views ? "views" : "landmarks";
     r.landmarks_used = used;
     r.reference_frame = per_frame ? frame : -1;
-    std::vector<double> sorted;
-    double sum = 0;
     for (size_t k = 0; k < used.size(); ++k) {
-      const double e = 1000.0 * (tgt.col(k) - r.head_from_world * src.col(k)).norm();
-      r.residuals_mm.push_back(e);
+      r.residuals_mm.push_back(1000.0 * (tgt.col(k) - r.head_from_world * src.col(k)).norm());
       r.points.push_back(src.col(k));
       r.inlier.push_back(std::find(sim.inliers.begin(), sim.inliers.end(), static_cast<int>(k)) != sim.inliers.end());
-      sorted.push_back(e);
-      sum += e * e;
     }
-    r.rms_mm = std::sqrt(sum / used.size());
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    r.median_mm = sorted[sorted.size() / 2];
+    SummariseResiduals(&r);
     if (!found || r.median_mm < best.median_mm) {
       best = r;
       found = true;
@@ -414,18 +412,12 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
                              options.refine_robust_px, &best.head_from_world, &median_px)) {
       best.method += "+reprojection";
       best.reprojection_median_px = median_px;
-      std::vector<double> sorted;
-      double sum = 0;
       for (size_t k = 0; k < best.landmarks_used.size(); ++k) {
-        const double e = 1000.0 * (model_points[best.landmarks_used[k]] - best.head_from_world * best.points[k]).norm();
-        best.residuals_mm[k] = e;
-        best.inlier[k] = e < options.inlier_mm;
-        sorted.push_back(e);
-        sum += e * e;
+        best.residuals_mm[k] =
+            1000.0 * (model_points[best.landmarks_used[k]] - best.head_from_world * best.points[k]).norm();
+        best.inlier[k] = best.residuals_mm[k] < options.inlier_mm;
       }
-      best.rms_mm = std::sqrt(sum / sorted.size());
-      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-      best.median_mm = sorted[sorted.size() / 2];
+      SummariseResiduals(&best);
     }
   }
   best.cameras = ToHeadFrame(cameras, best.head_from_world);

@@ -217,7 +217,7 @@ int BenchCalibrate(const std::vector<std::string>& args) {
     std::printf("| scene | setting | wall time | registered | rotation error median / max (deg) | centre error median / max (mm) | align scale error | focal error | aligned rotation (deg) | aligned centre (mm) |\n");
     std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
   }
-  nlohmann::json rows = nlohmann::json::array(), subjects = nlohmann::json::array();
+  nlohmann::json rows = nlohmann::json::array();
   std::vector<std::pair<std::string, SubjectOffset>> offsets;
   for (const auto& scene : scenes) {
     IngestedCapture capture;
@@ -228,10 +228,6 @@ int BenchCalibrate(const std::vector<std::string>& args) {
         !s.ok())
       return ReportFailure(s.WithContext(scene));
     offsets.emplace_back(scene, MeasureSubjectOffset(model, truth));
-    if (offsets.back().second.ok)
-      subjects.push_back({{"scene", scene},
-                          {"face_scale", offsets.back().second.scale},
-                          {"face_rotation_deg", offsets.back().second.rotation_deg}});
     std::vector<Row> results;
     if (scene == "talking_static") {
       results.push_back(RunHeadPose(capture, truth, model, dir / "runs" / "head_pose", 0.0));
@@ -274,6 +270,9 @@ int BenchCalibrate(const std::vector<std::string>& args) {
     }
   }
   if (json) {
+    nlohmann::json subjects = nlohmann::json::array();
+    for (const auto& [scene, o] : offsets)
+      if (o.ok) subjects.push_back({{"scene", scene}, {"face_scale", o.scale}, {"face_rotation_deg", o.rotation_deg}});
     std::printf("%s\n", nlohmann::json{{"settings", rows}, {"subjects", subjects}}.dump(1).c_str());
   } else {
     std::printf("\n| scene | subject's face size / the mean face's | subject's face tilt against the mean face |\n");

@@ -19,8 +19,15 @@ namespace {
 
 // Points back-projected from the simulator's depth at random pixels of a view,
 // each sized to the spacing of the samples.
-void AddDepthPoints(const SimulatedView& view, int count, std::mt19937_64& rng, SplatFitPoints* points) {
-  const cv::Mat& depth = view.render.depth;
+// What a training view gives the initialisation: its depth, colours and camera
+// (the simulator's other render buffers are not kept).
+struct DepthSource {
+  cv::Mat depth, image;
+  PinholeCamera camera;
+};
+
+void AddDepthPoints(const DepthSource& view, int count, std::mt19937_64& rng, SplatFitPoints* points) {
+  const cv::Mat& depth = view.depth;
   const PinholeCamera& cam = view.camera;
   const Eigen::Isometry3d world_from_cam = cam.cam_from_world.inverse();
   const double spacing = std::sqrt(double(depth.rows) * depth.cols / std::max(count, 1));
@@ -133,7 +140,7 @@ int SplatFitCommand(const std::vector<std::string>& args) {
   const int num_frames = frames > 0 ? std::min(frames, simulator->num_frames()) : simulator->num_frames();
 
   std::vector<SplatFitView> train, test;
-  std::vector<SimulatedView> init_sources;
+  std::vector<DepthSource> init_sources;
   StderrProgress progress;
   progress.Start("rendering views", int64_t(num_frames) * simulator->num_cameras());
   for (int f = 0; f < num_frames; ++f) {
@@ -142,7 +149,7 @@ int SplatFitCommand(const std::vector<std::string>& args) {
       SplatFitView posed{view.image.clone(), view.camera, simulator->CameraName(c) + "_" + std::to_string(f)};
       const bool held_out = f % holdout_every == holdout_every / 2;
       (held_out ? test : train).push_back(posed);
-      if (!held_out) init_sources.push_back(std::move(view));
+      if (!held_out) init_sources.push_back({view.render.depth, view.image, view.camera});
       progress.Advance();
     }
   }
@@ -154,7 +161,7 @@ int SplatFitCommand(const std::vector<std::string>& args) {
   std::mt19937_64 rng(fit.seed + 2);
   const int sources = init_views > 0 ? std::min<int>(init_views, int(init_sources.size())) : int(init_sources.size());
   for (int i = 0; i < sources; ++i) {
-    const SimulatedView& v = init_sources[size_t(i) * init_sources.size() / sources];
+    const DepthSource& v = init_sources[size_t(i) * init_sources.size() / sources];
     AddDepthPoints(v, init_points / sources, rng, &init);
   }
   const size_t n = init.sizes.size();

@@ -20,17 +20,17 @@
 
 namespace headforge {
 
-struct VertexNormals::Mesh {
+struct HalfEdgeNormals::Mesh {
   OpenMesh::TriMesh_ArrayKernelT<> connectivity;
   // OpenMesh vertex index -> our vertex index; beyond num_vertices_ come the
   // duplicated corners of the triangles OpenMesh refused.
   std::vector<int> source;
 };
 
-VertexNormals::VertexNormals() = default;
-VertexNormals::~VertexNormals() = default;
-VertexNormals::VertexNormals(VertexNormals&&) noexcept = default;
-VertexNormals& VertexNormals::operator=(VertexNormals&&) noexcept = default;
+HalfEdgeNormals::HalfEdgeNormals() = default;
+HalfEdgeNormals::~HalfEdgeNormals() = default;
+HalfEdgeNormals::HalfEdgeNormals(HalfEdgeNormals&&) noexcept = default;
+HalfEdgeNormals& HalfEdgeNormals::operator=(HalfEdgeNormals&&) noexcept = default;
 
 namespace {
 
@@ -56,7 +56,7 @@ class QuietOpenMesh {
 
 }  // namespace
 
-Status VertexNormals::Init(int num_vertices, const Eigen::Matrix3Xi& triangles) {
+Status HalfEdgeNormals::Init(int num_vertices, const Eigen::Matrix3Xi& triangles) {
   mesh_.reset();
   num_vertices_ = 0;
   if (num_vertices < 0) return Status::InvalidArgument("vertex normals: negative vertex count");
@@ -90,7 +90,7 @@ Status VertexNormals::Init(int num_vertices, const Eigen::Matrix3Xi& triangles) 
   return Status::Ok();
 }
 
-Status VertexNormals::Compute(const Eigen::Matrix3Xf& vertices, Eigen::Matrix3Xf* normals) {
+Status HalfEdgeNormals::Compute(const Eigen::Matrix3Xf& vertices, Eigen::Matrix3Xf* normals) {
   if (!mesh_) return Status::InvalidArgument("vertex normals: Init() has not succeeded");
   if (vertices.cols() != num_vertices_)
     return Status::InvalidArgument("vertex normals: " + std::to_string(vertices.cols()) +
@@ -125,7 +125,7 @@ Status VertexNormals::Compute(const Eigen::Matrix3Xf& vertices, Eigen::Matrix3Xf
 
 Status ComputeVertexNormals(const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& triangles,
                             Eigen::Matrix3Xf* normals) {
-  VertexNormals computer;
+  HalfEdgeNormals computer;
   HF_RETURN_IF_ERROR(computer.Init(static_cast<int>(vertices.cols()), triangles));
   return computer.Compute(vertices, normals);
 }

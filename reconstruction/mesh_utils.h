@@ -26,12 +26,12 @@ namespace headforge {
 //
 // Builds the half-edge structure once; Compute() then only moves the points,
 // which suits a mesh whose vertices change every frame (tracking).
-class VertexNormals {
+class HalfEdgeNormals {
  public:
-  VertexNormals();
-  ~VertexNormals();
-  VertexNormals(VertexNormals&&) noexcept;
-  VertexNormals& operator=(VertexNormals&&) noexcept;
+  HalfEdgeNormals();
+  ~HalfEdgeNormals();
+  HalfEdgeNormals(HalfEdgeNormals&&) noexcept;
+  HalfEdgeNormals& operator=(HalfEdgeNormals&&) noexcept;
 
   // InvalidArgument when a triangle names a vertex outside [0, num_vertices).
   Status Init(int num_vertices, const Eigen::Matrix3Xi& triangles);
@@ -48,7 +48,7 @@ class VertexNormals {
   int num_vertices_ = 0;
 };
 
-// One-shot form of VertexNormals: vertices [3, N], triangles [3, T] -> [3, N].
+// One-shot form of HalfEdgeNormals: vertices [3, N], triangles [3, T] -> [3, N].
 Status ComputeVertexNormals(const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& triangles,
                             Eigen::Matrix3Xf* normals);
 

@@ -174,7 +174,7 @@ TEST(VertexNormals, NonManifoldTrianglesStillCount) {
 
 TEST(VertexNormals, FollowsTheMeshAfterInit) {
   const TestMesh mesh = UnitIcosphere(2);
-  VertexNormals computer;
+  HalfEdgeNormals computer;
   ASSERT_TRUE(computer.Init(static_cast<int>(mesh.vertices.cols()), mesh.triangles).ok());
   const Eigen::Matrix3f rotation = Eigen::AngleAxisf(0.7f, Eigen::Vector3f(1, 2, 3).normalized()).toRotationMatrix();
   Eigen::Matrix3Xf normals, moved_normals;
@@ -190,7 +190,7 @@ TEST(VertexNormals, BadInputIsReported) {
   bad(1, 3) = 12;  // one past the last vertex
   Eigen::Matrix3Xf normals;
   EXPECT_EQ(ComputeVertexNormals(mesh.vertices, bad, &normals).code(), Status::Code::kInvalidArgument);
-  VertexNormals computer;
+  HalfEdgeNormals computer;
   EXPECT_EQ(computer.Compute(mesh.vertices, &normals).code(), Status::Code::kInvalidArgument);  // no Init()
   ASSERT_TRUE(computer.Init(12, mesh.triangles).ok());
   EXPECT_EQ(computer.Compute(mesh.vertices.leftCols(11), &normals).code(), Status::Code::kInvalidArgument);

@@ -27,12 +27,6 @@ TrackingCamera ToTrackingCamera(const CameraIntrinsics& in, const Eigen::Isometr
   return c;
 }
 
-nlohmann::json MatrixJson(const Eigen::Matrix4d& m) {
-  nlohmann::json rows = nlohmann::json::array();
-  for (int r = 0; r < 4; ++r) rows.push_back({m(r, 0), m(r, 1), m(r, 2), m(r, 3)});
-  return rows;
-}
-
 // The fitted head drawn over one frame: the face shaded toward the camera at
 // half opacity, detected landmarks green, fitted ones red.
 cv::Mat Overlay(const cv::Mat& frame, const Mesh& mesh, const TrackingCamera& camera,
@@ -174,7 +168,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
     nlohmann::json weights = nlohmann::json::object();
     for (int j = 0; j < f.expression.size(); ++j) weights[model.expression_names()[j]] = f.expression[j];
     frames.push_back({{"frame", f.frame},
-                      {"head_motion", MatrixJson(f.head_motion.matrix())},
+                      {"head_motion", PoseToJson(f.head_motion)},
                       {"expression", weights},
                       {"residual_px", f.residual_px},
                       {"landmarks", f.landmarks},
@@ -270,37 +264,6 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   summary->median_residual_px = result.median_residual_px;
   summary->seconds = result.seconds;
   summary->fixed_head = fit.fixed_head;
-  return Status::Ok();
-}
-
-Status ReadTracking(const fs::path& path, TrackingFile* tracking) {
-  nlohmann::json json;
-  HF_RETURN_IF_ERROR(ReadJson(path, &json));
-  try {
-    TrackingFile out;
-    out.expression_names = json.at("expression_names").get<std::vector<std::string>>();
-    const auto identity = json.at("identity").get<std::vector<double>>();
-    out.identity = Eigen::Map<const Eigen::VectorXd>(identity.data(), Eigen::Index(identity.size()));
-    for (const auto& f : json.at("frames")) {
-      TrackedFrame t;
-      t.frame = f.at("frame");
-      Eigen::Matrix4d m;
-      for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) m(r, c) = f.at("head_motion")[r][c];
-      t.head_motion.matrix() = m;
-      t.expression.resize(Eigen::Index(out.expression_names.size()));
-      for (size_t j = 0; j < out.expression_names.size(); ++j) t.expression[j] = f.at("expression").at(out.expression_names[j]);
-      t.residual_px = f.at("residual_px");
-      t.landmarks = f.at("landmarks");
-      t.interpolated = f.at("interpolated");
-      t.low_confidence = f.at("low_confidence");
-      t.why = f.at("why");
-      out.frames.push_back(t);
-    }
-    *tracking = std::move(out);
-  } catch (const nlohmann::json::exception& e) {
-    return Status::DataError("tracking file " + path.string() + " is malformed: " + e.what());
-  }
   return Status::Ok();
 }
 

@@ -45,12 +45,4 @@ struct TrackSummary {
 Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
                 const FaceModel& model, const fs::path& out_dir, Progress* progress, TrackSummary* summary);
 
-// Reads tracking.json back: per frame the 53 named weights and the head motion.
-struct TrackingFile {
-  std::vector<std::string> expression_names;
-  Eigen::VectorXd identity;
-  std::vector<TrackedFrame> frames;
-};
-Status ReadTracking(const fs::path& path, TrackingFile* tracking);
-
 }  // namespace headforge

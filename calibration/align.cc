@@ -20,6 +20,9 @@ Status AlignOptions::Check() const {
   if (!(inlier_mm > 0)) return Status::InvalidArgument("--inlier-mm must be positive");
   if (!(max_reprojection_px > 0)) return Status::InvalidArgument("--max-reprojection must be positive");
   if (!(max_yaw_deg > 0)) return Status::InvalidArgument("--max-yaw must be positive");
+  if (!(max_elevation_deg > 0)) return Status::InvalidArgument("--max-elevation must be positive");
+  if (select_views != "geometry" && select_views != "pnp")
+    return Status::InvalidArgument("--align-select-views must be geometry or pnp");
   if (method != "views" && method != "landmarks") return Status::InvalidArgument("--align-method must be views or landmarks");
   if (refine != "reprojection" && refine != "off") return Status::InvalidArgument("--align-refine must be reprojection or off");
   if (!(refine_robust_px > 0)) return Status::InvalidArgument("--align-refine-robust must be positive");
@@ -39,6 +42,15 @@ void AddAlignOptions(OptionSet* o, AlignOptions* a) {
          "align-method");
   o->Add("align.max_yaw_deg", &a->max_yaw_deg,
          "Use landmarks only from views whose head yaw is within this many degrees of frontal.", "max-yaw");
+  o->Add("align.max_elevation_deg", &a->max_elevation_deg,
+         "With --align-select-views geometry: views more than this many degrees above or below the face give no "
+         "head pose.",
+         "max-elevation");
+  o->Add("align.select_views", &a->select_views,
+         "Which views' head poses give the rotation: geometry (the views whose cameras face the face within "
+         "--max-yaw and --max-elevation under the rotation so far, repeated until the choice settles) or pnp (the "
+         "views whose own PnP yaw is within --max-yaw).",
+         "align-select-views");
   o->Add("align.refine", &a->refine,
          "reprojection: with the rotation held, refine scale and translation by reprojecting the model's landmarks "
          "into the views (no depth dilution from triangulation); off: the fit to triangulated landmarks.",
@@ -90,7 +102,44 @@ Eigen::Vector2d UndistortPixel(const CameraIntrinsics& c, const Eigen::Vector2d&
 struct ViewPose {
   Eigen::Isometry3d cam_from_world;  // from calibrate
   Eigen::Isometry3d cam_from_head;   // from PnP of the view's landmarks against the model
+  bool frontal_by_pnp = false;       // PnP's own yaw is within the limit
+  double weight = 1.0;               // in the mean of the views' rotations
+  std::vector<Observation> landmarks;  // its 68 landmarks (undistorted) with its projection
 };
+
+// The views' landmarks grouped by landmark, as triangulation wants them.
+std::vector<std::vector<Observation>> ByLandmark(const std::vector<ViewPose>& views) {
+  std::vector<std::vector<Observation>> out(68);
+  for (const ViewPose& v : views)
+    for (size_t i = 0; i < v.landmarks.size() && i < 68; ++i) out[i].push_back(v.landmarks[i]);
+  return out;
+}
+
+// The views that see the face within about `max_yaw_deg` of frontal and
+// `max_elevation_deg` of level, judged by geometry: their camera centres as
+// seen from `face_centre` (world) in a head frame rotated by `head_from_world`.
+// Detectors shrink a turned head's pose toward frontal, so a view chosen by
+// its own PnP yaw may be far more turned than it says, and a set chosen that
+// way is lopsided wherever the detector gives way on one side. Each view is
+// weighted 1 up to 5 degrees inside a limit, falling to 0 at 5 degrees
+// outside it, so that the choice moves smoothly with the rotation (a hard
+// edge can settle with one side's last view out and the other's in).
+std::vector<ViewPose> ViewsFacing(const std::vector<ViewPose>& views, const Eigen::Matrix3d& head_from_world,
+                                  const Eigen::Vector3d& face_centre, double max_yaw_deg, double max_elevation_deg) {
+  constexpr double kTaperDeg = 5.0;
+  auto ramp = [](double angle, double limit) { return std::clamp((limit + kTaperDeg - angle) / (2 * kTaperDeg), 0.0, 1.0); };
+  std::vector<ViewPose> out;
+  for (const ViewPose& v : views) {
+    const Eigen::Vector3d d = head_from_world * (v.cam_from_world.inverse().translation() - face_centre);
+    const double yaw = std::atan2(d.x(), d.z()) * 180.0 / 3.14159265358979323846;
+    const double elevation = std::atan2(d.y(), std::hypot(d.x(), d.z())) * 180.0 / 3.14159265358979323846;
+    const double weight = ramp(std::abs(yaw), max_yaw_deg) * ramp(std::abs(elevation), max_elevation_deg);
+    if (weight <= 0) continue;
+    out.push_back(v);
+    out.back().weight = weight;
+  }
+  return out;
+}
 
 // head_from_world from the views' own head poses: each view gives a rotation
 // head_from_world = head_from_cam * cam_from_world, and their robust chordal
@@ -101,10 +150,10 @@ bool SimilarityFromViewPoses(const std::vector<ViewPose>& views, Sim3* head_from
   if (views.size() < 3) return false;
   std::vector<Eigen::Matrix3d> rotations;
   for (const auto& v : views) rotations.push_back(v.cam_from_head.linear().transpose() * v.cam_from_world.linear());
-  auto chordal_mean = [](const std::vector<Eigen::Matrix3d>& rs, const std::vector<bool>& use) {
+  auto chordal_mean = [&views](const std::vector<Eigen::Matrix3d>& rs, const std::vector<bool>& use) {
     Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
     for (size_t i = 0; i < rs.size(); ++i)
-      if (use[i]) sum += rs[i];
+      if (use[i]) sum += views[i].weight * rs[i];
     const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
     Eigen::Matrix3d r = svd.matrixU() * svd.matrixV().transpose();
     if (r.determinant() < 0) {
@@ -129,13 +178,14 @@ bool SimilarityFromViewPoses(const std::vector<ViewPose>& views, Sim3* head_from
   }
   // Scale and translation with the rotation fixed: least squares on the centres.
   Eigen::Vector3d mean_w = Eigen::Vector3d::Zero(), mean_h = Eigen::Vector3d::Zero();
-  int n = 0;
+  double n = 0;
   for (size_t i = 0; i < views.size(); ++i) {
     if (!use[i]) continue;
-    mean_w += views[i].cam_from_world.inverse().translation();
-    mean_h += views[i].cam_from_head.inverse().translation();
-    ++n;
+    mean_w += views[i].weight * views[i].cam_from_world.inverse().translation();
+    mean_h += views[i].weight * views[i].cam_from_head.inverse().translation();
+    n += views[i].weight;
   }
+  if (!(n > 0)) return false;
   mean_w /= n;
   mean_h /= n;
   double num = 0, den = 0;
@@ -143,8 +193,8 @@ bool SimilarityFromViewPoses(const std::vector<ViewPose>& views, Sim3* head_from
     if (!use[i]) continue;
     const Eigen::Vector3d w = rotation * (views[i].cam_from_world.inverse().translation() - mean_w);
     const Eigen::Vector3d h = views[i].cam_from_head.inverse().translation() - mean_h;
-    num += w.dot(h);
-    den += w.squaredNorm();
+    num += views[i].weight * w.dot(h);
+    den += views[i].weight * w.squaredNorm();
   }
   if (!(den > 0) || !(num > 0)) return false;
   head_from_world->rotation = rotation;
@@ -278,8 +328,15 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
         const PnpResult pose = SolvePnp(model_points, undistorted, in->K());
         if (!pose.ok) continue;
         const Eigen::Vector3d eye = pose.cam_from_object.inverse().translation();
-        if (std::abs(std::atan2(eye.x(), eye.z())) * 180.0 / 3.14159265358979323846 > options.max_yaw_deg) continue;
-        view_poses[per_frame ? f.index : 0].push_back({view->cam_from_world, pose.cam_from_object});
+        const bool frontal = std::abs(std::atan2(eye.x(), eye.z())) * 180.0 / 3.14159265358979323846 <= options.max_yaw_deg;
+        ViewPose v;
+        v.cam_from_world = view->cam_from_world;
+        v.cam_from_head = pose.cam_from_object;
+        v.frontal_by_pnp = frontal;
+        const Eigen::Matrix<double, 3, 4> p = in->K() * view->cam_from_world.matrix().topRows<3>();
+        for (int i = 0; i < 68; ++i) v.landmarks.push_back({p, undistorted[i]});
+        view_poses[per_frame ? f.index : 0].push_back(std::move(v));
+        if (!frontal) continue;
       }
       auto& group = groups[per_frame ? f.index : 0];
       group.resize(68);
@@ -323,26 +380,72 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
     return Status::Ok();
   }
 
-  AlignResult best;
-  bool found = false;
-  for (const auto& [frame, per_landmark] : groups) {
-    const auto points = TriangulateLandmarks(per_landmark, options.max_reprojection_px);
+  // The rigid landmarks triangulated from a group's views and matched to the
+  // model by Umeyama in RANSAC.
+  struct LandmarkFit {
     std::vector<int> used;
+    Eigen::Matrix3Xd src, tgt;  // triangulated (world) and model (head) points
+    SimilarityResult sim;
+  };
+  auto fit_landmarks = [&](const std::vector<std::vector<Observation>>& per_landmark, LandmarkFit* fit) {
+    const auto points = TriangulateLandmarks(per_landmark, options.max_reprojection_px);
+    fit->used.clear();
     for (int i : rigid)
-      if (points.count(i)) used.push_back(i);
-    if (used.size() < 4) continue;
-    Eigen::Matrix3Xd src(3, used.size()), tgt(3, used.size());
-    for (size_t k = 0; k < used.size(); ++k) {
-      src.col(k) = points.at(used[k]);
-      tgt.col(k) = model_points[used[k]];
+      if (points.count(i)) fit->used.push_back(i);
+    if (fit->used.size() < 4) return false;
+    fit->src.resize(3, Eigen::Index(fit->used.size()));
+    fit->tgt.resize(3, Eigen::Index(fit->used.size()));
+    for (size_t k = 0; k < fit->used.size(); ++k) {
+      fit->src.col(Eigen::Index(k)) = points.at(fit->used[k]);
+      fit->tgt.col(Eigen::Index(k)) = model_points[fit->used[k]];
     }
     // The world's unit is unknown before alignment: the RANSAC threshold
     // applies in the target (head) frame, metres.
     RansacOptions ransac;
     ransac.inlier_threshold = options.inlier_mm / 1000.0;
-    SimilarityResult sim = EstimateSimilarityRansac(src, tgt, ransac);
+    fit->sim = EstimateSimilarityRansac(fit->src, fit->tgt, ransac);
+    return true;
+  };
+
+  AlignResult best;
+  std::vector<std::vector<Observation>> best_observations;
+  bool found = false;
+  for (const auto& [frame, first_observations] : groups) {
+    std::vector<std::vector<Observation>> per_landmark = first_observations;
+    LandmarkFit lf;
+    if (!fit_landmarks(per_landmark, &lf)) continue;
     Sim3 from_views;
-    const bool use_views = options.method == "views" && SimilarityFromViewPoses(view_poses[frame], &from_views);
+    std::vector<ViewPose> frontal;
+    for (const ViewPose& v : view_poses[frame])
+      if (v.frontal_by_pnp) frontal.push_back(v);
+    const bool use_views = options.method == "views" && SimilarityFromViewPoses(frontal, &from_views);
+    int views_used = static_cast<int>(frontal.size());
+    if (use_views && options.select_views == "geometry") {
+      // Choose the views again by where their cameras are, under the rotation
+      // so far, until the choice settles; then triangulate from those views.
+      const Eigen::Vector3d face_centre = lf.src.rowwise().mean();
+      std::vector<ViewPose> chosen;
+      for (int round = 0; round < 8; ++round) {
+        const std::vector<ViewPose> facing = ViewsFacing(view_poses[frame], from_views.rotation, face_centre,
+                                                         options.max_yaw_deg, options.max_elevation_deg);
+        Sim3 next;
+        if (!SimilarityFromViewPoses(facing, &next)) break;
+        const double change = Eigen::AngleAxisd(next.rotation.transpose() * from_views.rotation).angle();
+        from_views = next;
+        chosen = facing;
+        if (change < 1e-4) break;
+      }
+      LandmarkFit refit;
+      if (!chosen.empty() && fit_landmarks(ByLandmark(chosen), &refit)) {
+        per_landmark = ByLandmark(chosen);
+        lf = refit;
+        views_used = static_cast<int>(chosen.size());
+      }
+    }
+    const std::vector<int>& used = lf.used;
+    const Eigen::Matrix3Xd& src = lf.src;
+    const Eigen::Matrix3Xd& tgt = lf.tgt;
+    SimilarityResult& sim = lf.sim;
     if (use_views) {
       // The views fix the rotation; scale and translation come from the
       // landmarks (their extent across the face is well measured even where
@@ -382,6 +485,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
     r.head_from_world = sim.tgt_from_src;
     r.quality = sim.quality;
     r.method = use_views ? "views" : "landmarks";
+    r.views_used = use_views ? views_used : 0;
     r.landmarks_used = used;
     r.reference_frame = per_frame ? frame : -1;
     for (size_t k = 0; k < used.size(); ++k) {
@@ -392,6 +496,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
     SummariseResiduals(&r);
     if (!found || r.median_mm < best.median_mm) {
       best = r;
+      best_observations = per_landmark;
       found = true;
     }
     if (!per_frame) break;
@@ -408,7 +513,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   // tempers the detections that stray.
   if (options.refine == "reprojection") {
     double median_px = 0;
-    if (RefineByReprojection(groups.at(per_frame ? best.reference_frame : 0), model_points, rigid,
+    if (RefineByReprojection(best_observations, model_points, rigid,
                              options.refine_robust_px, &best.head_from_world, &median_px)) {
       best.method += "+reprojection";
       best.reprojection_median_px = median_px;
@@ -442,6 +547,7 @@ Status WriteAlignment(const AlignResult& r, const fs::path& path) {
       {"quality", SimilarityQualityName(r.quality)},
       {"method", r.method},
       {"reference_frame", r.reference_frame},
+      {"views_used", r.views_used},
       {"reprojection_median_px", r.reprojection_median_px},
       {"rms_mm", r.rms_mm},
       {"median_mm", r.median_mm},

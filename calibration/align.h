@@ -20,6 +20,13 @@ struct AlignOptions {
   double inlier_mm = 8.0;      // RANSAC inlier threshold, millimetres
   double max_reprojection_px = 8.0;  // triangulated landmarks reprojecting worse are dropped
   double max_yaw_deg = 35.0;         // views of a more turned head give no landmarks
+  // Which views' head poses give the rotation (method "views"): "geometry"
+  // starts from the views whose own PnP yaw is within max_yaw_deg, then
+  // chooses the views whose cameras face the face within max_yaw_deg and
+  // max_elevation_deg under the rotation so far, until the choice settles;
+  // "pnp" keeps the first choice.
+  std::string select_views = "geometry";
+  double max_elevation_deg = 30.0;
   // "views": the rotation from the views' PnP head poses (robust chordal mean),
   // scale and translation from the triangulated landmarks with that rotation
   // held; "landmarks": Umeyama in RANSAC on the triangulated landmarks alone.
@@ -45,6 +52,7 @@ struct AlignResult {
   std::vector<bool> inlier;
   double rms_mm = 0.0, median_mm = 0.0;
   int reference_frame = -1;            // several cameras: the frame whose head pose defines the head frame
+  int views_used = 0;                  // views whose head poses gave the rotation (method views)
   double reprojection_median_px = 0.0;  // landmark reprojection after the refinement (0: not refined)
   CameraSet cameras;                   // the views re-expressed in the head frame
   std::string message;

@@ -97,10 +97,12 @@ Status RunAlignStage(Workspace* workspace, const AlignOptions& align, const std:
         char refined[80] = "";
         if (aligned.reprojection_median_px > 0)
           std::snprintf(refined, sizeof(refined), ", landmark reprojection %.1f px", aligned.reprojection_median_px);
+        char views[64] = "";
+        if (aligned.views_used > 0) std::snprintf(views, sizeof(views), ", rotation from %d views", aligned.views_used);
         char text[400];
-        std::snprintf(text, sizeof(text), "scale %.4g, %zu landmarks, median residual %.1f mm, rms %.1f mm%s%s",
+        std::snprintf(text, sizeof(text), "scale %.4g, %zu landmarks, median residual %.1f mm, rms %.1f mm%s%s%s",
                       aligned.head_from_world.scale, aligned.landmarks_used.size(), aligned.median_mm,
-                      aligned.rms_mm, refined, aligned.message.empty() ? "" : (", " + aligned.message).c_str());
+                      aligned.rms_mm, views, refined, aligned.message.empty() ? "" : (", " + aligned.message).c_str());
         result->message = text;
         HF_LOG(Info) << "align: " << result->message;
         return Status::Ok();

@@ -314,6 +314,18 @@ TEST(Landmarks, TurnedHeadsKeepTheirLandmarksWithHogFraming) {
   }
 }
 
+// cam_from_head rotation of a camera at `eye` (head frame) looking at the
+// origin, image y pointing down the head's -y.
+Eigen::Matrix3d LookingAtOrigin(const Eigen::Vector3d& eye) {
+  const Eigen::Vector3d z = -eye.normalized();
+  const Eigen::Vector3d y = (Eigen::Vector3d(0, -1, 0) - Eigen::Vector3d(0, -1, 0).dot(z) * z).normalized();
+  Eigen::Matrix3d r;
+  r.row(0) = y.cross(z);
+  r.row(1) = y;
+  r.row(2) = z;
+  return r;
+}
+
 // Align on exact synthetic views: the detector's landmark points on the mean
 // face, carried into a world of another scale and orientation and projected
 // into twelve near-frontal views of one moving camera. Both fits recover the
@@ -348,12 +360,7 @@ TEST(Align, RecoversTheSimilarityFromLandmarkViews) {
       for (double yaw : {-25.0, -8.0, 8.0, 25.0}) {
         const double a = yaw * M_PI / 180, b = pitch * M_PI / 180;
         const Eigen::Vector3d eye = 0.7 * Eigen::Vector3d(std::sin(a) * std::cos(b), std::sin(b), std::cos(a) * std::cos(b));
-        const Eigen::Vector3d z = -eye.normalized();
-        const Eigen::Vector3d y = (Eigen::Vector3d(0, -1, 0) - Eigen::Vector3d(0, -1, 0).dot(z) * z).normalized();
-        Eigen::Matrix3d r;
-        r.row(0) = y.cross(z);
-        r.row(1) = y;
-        r.row(2) = z;
+        const Eigen::Matrix3d r = LookingAtOrigin(eye);
         // cam_from_world = [R_h R | (R_h t + t_h) / s] for cam_from_head = [R_h | t_h].
         CameraView view;
         view.camera = "cam0";
@@ -414,6 +421,81 @@ TEST(Align, RecoversTheSimilarityFromLandmarkViews) {
       EXPECT_LT(scale_error[1], scale_error[0]);
     }
   }
+}
+
+// A detector that sees every turned head as half as turned as it is, and a
+// camera that spends more of its path on one side of the face (yaw -60 to
+// +30 degrees): views chosen by their own PnP yaw (all of them pass 35
+// degrees) give a lopsided mean; views chosen by where their cameras are,
+// under the rotation so far, settle on the symmetric -30..+30 and recover
+// the head's rotation.
+TEST(Align, ChoosesViewsByWhereTheirCamerasAre) {
+  const std::vector<Eigen::Vector3d> points = DetectorLandmarkPoints(Model(), DefaultLandmarkEmbedding());
+  Sim3 truth;
+  truth.scale = 2.0;
+  truth.rotation = Eigen::AngleAxisd(0.4, Eigen::Vector3d(0.2, 1.0, 0.1).normalized()).toRotationMatrix();
+  truth.translation = Eigen::Vector3d(0.01, 0.02, -0.4);
+  CameraIntrinsics intrinsics;
+  intrinsics.name = "cam0";
+  intrinsics.width = intrinsics.height = 512;
+  intrinsics.fx = intrinsics.fy = 900;
+  intrinsics.cx = intrinsics.cy = 255.5;
+  IngestedCapture capture;
+  CameraSet cameras;
+  cameras.mode = "colmap";
+  cameras.frame = "world";
+  cameras.cameras = {intrinsics};
+  IngestedCamera cam;
+  cam.name = "cam0";
+  cam.width = cam.height = cam.source_width = cam.source_height = 512;
+  int index = 0;
+  for (double pitch : {-8.0, 8.0})
+    for (double yaw = -60; yaw <= 30; yaw += 10) {
+      auto eye_at = [&](double yaw_deg) {
+        const double a = yaw_deg * M_PI / 180, b = pitch * M_PI / 180;
+        return Eigen::Vector3d(0.7 * Eigen::Vector3d(std::sin(a) * std::cos(b), std::sin(b), std::cos(a) * std::cos(b)));
+      };
+      const Eigen::Vector3d eye = eye_at(yaw), seen_eye = eye_at(0.5 * yaw);
+      const Eigen::Matrix3d r = LookingAtOrigin(eye), seen = LookingAtOrigin(seen_eye);
+      CameraView view;
+      view.camera = "cam0";
+      view.frame = index;
+      view.registered = true;
+      view.cam_from_world.linear() = r * truth.rotation;
+      view.cam_from_world.translation() = (r * truth.translation - r * eye) / truth.scale;
+      cameras.views.push_back(view);
+      IngestedFrame frame;
+      frame.index = frame.source_frame = index++;
+      Landmarks68 landmarks;
+      for (int i = 0; i < 68; ++i) {
+        const Eigen::Vector3d c = seen * (points[i] - seen_eye);
+        landmarks[i] = cv::Point2f(static_cast<float>(intrinsics.fx * c.x() / c.z() + intrinsics.cx),
+                                   static_cast<float>(intrinsics.fy * c.y() / c.z() + intrinsics.cy));
+      }
+      frame.landmarks = landmarks;
+      cam.frames.push_back(frame);
+    }
+  capture.cameras = {cam};
+  double error_deg[2];
+  for (int geometry = 0; geometry < 2; ++geometry) {
+    AlignOptions options;
+    options.select_views = geometry ? "geometry" : "pnp";
+    options.refine = "off";
+    AlignResult aligned;
+    const Status status = RunAlign(options, capture, cameras, Model(), &aligned);
+    ASSERT_TRUE(status.ok()) << status.message();
+    error_deg[geometry] =
+        Eigen::AngleAxisd(aligned.head_from_world.rotation.transpose() * truth.rotation).angle() * 180 / M_PI;
+    std::printf("views chosen by %s: %d views, rotation error %.2f deg\n", options.select_views.c_str(),
+                aligned.views_used, error_deg[geometry]);
+    if (geometry) {
+      EXPECT_EQ(aligned.views_used, 14);  // yaw -30 .. +30 at both pitches
+    } else {
+      EXPECT_EQ(aligned.views_used, 20);
+    }
+  }
+  EXPECT_GT(error_deg[0], 5.0);
+  EXPECT_LT(error_deg[1], 0.5);
 }
 
 // The shipped embedding is what `headforge embed-landmarks` measures today, and

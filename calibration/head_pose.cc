@@ -16,6 +16,9 @@ Status HeadPoseOptions::Check() const {
   if (focal < 0) return Status::InvalidArgument("head-pose focal must be >= 0 (0 estimates it)");
   if (!(robust_px > 0)) return Status::InvalidArgument("head-pose robust scale must be positive");
   if (jaw_weight < 0 || smoothness < 0) return Status::InvalidArgument("head-pose weights must be >= 0");
+  if (refine != "face-model" && refine != "off")
+    return Status::InvalidArgument("head-pose refine must be face-model or off");
+  if (refine_rounds < 1) return Status::InvalidArgument("head-pose refine rounds must be at least 1");
   return Status::Ok();
 }
 

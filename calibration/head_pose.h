@@ -21,6 +21,12 @@ struct HeadPoseOptions {
   double jaw_weight = 0.3;       // weight of the jaw contour (0-16): detectors follow the silhouette
   double smoothness = 1.0;       // weight of the temporal smoothness term (0: none)
   int max_iterations = 100;
+  // After the fit to the mean face's landmarks: "face-model" refines the focal
+  // length and the poses by fitting the face model's identity and each frame's
+  // expression as well (done by the calibrate stage, which has the tracker;
+  // skipped when `focal` is given); "off" keeps the fit to the mean face.
+  std::string refine = "face-model";
+  int refine_rounds = 6;  // fits at most, until the focal length changes by less than 1%
   // The 68 head-frame points the detector's landmarks stand for (see
   // landmark_embedding.h); empty: the model's landmark vertices.
   std::vector<Eigen::Vector3d> landmark_points;

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdio>
 #include <nlohmann/json.hpp>
+#include <regex>
 #include <sstream>
 
 #include "calibration/align.h"
@@ -13,6 +14,7 @@
 #include "capture/ingest.h"
 #include "capture/simulator.h"
 #include "core/hash.h"
+#include "pipelines/stages.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/parallel.h"
@@ -40,10 +42,18 @@ struct Row {
 
 // Simulates `scene` into dir/capture and ingests it into dir/workspace unless
 // both are already there for the same scene file.
+// `identity_seed` > 0 simulates the scene with another random subject.
 Status PrepareScene(const fs::path& scene_file, const fs::path& dir, const FaceModel& model, const std::string& data,
-                    int threads, const std::string& crop, IngestedCapture* capture, nlohmann::json* truth) {
+                    int threads, const std::string& crop, int identity_seed, IngestedCapture* capture,
+                    nlohmann::json* truth) {
   std::string text;
   HF_RETURN_IF_ERROR(ReadFileToString(scene_file, &text));
+  if (identity_seed > 0) {
+    const std::regex seed_line(R"(identity_seed\s*=\s*\d+)");
+    if (!std::regex_search(text, seed_line))
+      return Status::InvalidArgument(scene_file.string() + " has no identity_seed to vary");
+    text = std::regex_replace(text, seed_line, "identity_seed = " + std::to_string(identity_seed));
+  }
   // Simulation and ingest are redone when the scene, the crop or ingest's outputs change.
   const std::string stamp = Hasher().Add(text).Add(crop).Add(std::string(IngestVersion())).Hex();
   std::string previous;
@@ -102,10 +112,10 @@ Row RunSetting(const std::string& scene, const Setting& s, const IngestedCapture
 }
 
 // Head-pose cameras; `focal` > 0 gives the true focal length instead of estimating it.
-Row RunHeadPose(const IngestedCapture& capture, const nlohmann::json& truth, const FaceModel& model, const fs::path& dir,
-                double focal) {
+Row RunHeadPose(const std::string& scene, const IngestedCapture& capture, const nlohmann::json& truth,
+                const FaceModel& model, const fs::path& dir, double focal) {
   Row row;
-  row.scene = "talking_static";
+  row.scene = scene;
   row.label = focal > 0 ? "head-pose, true focal given" : "head-pose, focal estimated";
   row.mode = "head-pose";
   CalibrateOptions options;
@@ -116,6 +126,7 @@ Row RunHeadPose(const IngestedCapture& capture, const nlohmann::json& truth, con
   CalibrateSummary summary;
   NullProgress progress;
   Status status = RunCalibrate(options, capture, model, dir, &progress, &cameras, &summary);
+  if (status.ok()) status = RefineHeadPoseStep(options, capture, model, 0, &progress, &cameras, &summary);
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (status.ok()) status = EvaluateHeadCameras(cameras, capture, truth, &row.head);
   row.world = row.head;
@@ -224,15 +235,30 @@ int BenchCalibrate(const std::vector<std::string>& args) {
     nlohmann::json truth;
     const fs::path dir = fs::path(out) / scene;
     const std::string crop = scene == "talking_static" ? "sequence" : "none";
-    if (Status s = PrepareScene(scene_dir / (scene + ".toml"), dir, model, common.data_dir, threads, crop, &capture, &truth);
+    if (Status s = PrepareScene(scene_dir / (scene + ".toml"), dir, model, common.data_dir, threads, crop, 0, &capture,
+                                &truth);
         !s.ok())
       return ReportFailure(s.WithContext(scene));
     offsets.emplace_back(scene, MeasureSubjectOffset(model, truth));
     std::vector<Row> results;
     if (scene == "talking_static") {
-      results.push_back(RunHeadPose(capture, truth, model, dir / "runs" / "head_pose", 0.0));
+      results.push_back(RunHeadPose(scene, capture, truth, model, dir / "runs" / "head_pose", 0.0));
       const double true_focal = truth["cameras"][0]["fx"].get<double>() * capture.cameras[0].crop_scale;
-      results.push_back(RunHeadPose(capture, truth, model, dir / "runs" / "head_pose_known", true_focal));
+      results.push_back(RunHeadPose(scene, capture, truth, model, dir / "runs" / "head_pose_known", true_focal));
+      // The focal length from landmarks depends on how the subject's face
+      // differs from the mean face: the same scene with other random subjects.
+      for (int seed : quick ? std::vector<int>{} : std::vector<int>{12, 23, 47}) {
+        const std::string variant = scene + " (identity seed " + std::to_string(seed) + ")";
+        const fs::path variant_dir = fs::path(out) / (scene + "_identity_" + std::to_string(seed));
+        IngestedCapture other;
+        nlohmann::json other_truth;
+        if (Status s = PrepareScene(scene_dir / (scene + ".toml"), variant_dir, model, common.data_dir, threads, crop,
+                                    seed, &other, &other_truth);
+            !s.ok())
+          return ReportFailure(s.WithContext(variant));
+        offsets.emplace_back(variant, MeasureSubjectOffset(model, other_truth));
+        results.push_back(RunHeadPose(variant, other, other_truth, model, variant_dir / "runs" / "head_pose", 0.0));
+      }
     } else {
       const bool rig = capture.cameras.size() > 1;
       std::vector<Setting> settings;

@@ -2,6 +2,7 @@
 
 #include "core/hash.h"
 #include "core/log.h"
+#include "core/parallel.h"
 
 namespace headforge {
 
@@ -45,6 +46,29 @@ Status ChainedFingerprint(const Workspace& workspace, const std::string& stage, 
 
 }  // namespace
 
+Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCapture& capture, const FaceModel& model,
+                          int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary) {
+  if (summary->mode != "head-pose" || calibrate.head_pose.refine != "face-model" || calibrate.head_pose.focal > 0)
+    return Status::Ok();
+  TrackOptions fit;
+  fit.threads = threads > 0 ? threads : HardwareThreads();
+  progress->Start("calibrate: refining with the face model", 0);
+  HeadPoseRefinement refined;
+  HF_RETURN_IF_ERROR(RefineHeadPoseCameras(model, capture, fit, calibrate.landmark_embedding,
+                                           calibrate.head_pose.refine_rounds, 0.01, cameras, &refined));
+  progress->Finish();
+  HF_LOG(Info) << "calibrate: the face model's identity and expressions move the focal length from "
+               << refined.focal_before << " to " << refined.focal_after << " px in " << refined.rounds
+               << " round(s) (landmark residual " << refined.median_residual_px << " px, " << refined.seconds << " s)";
+  summary->focal = refined.focal_after;
+  summary->reprojection_px = refined.median_residual_px;
+  if (!capture.cameras.empty() && capture.cameras[0].crop_scale > 0)
+    summary->reprojection_source_px = refined.median_residual_px / capture.cameras[0].crop_scale;
+  summary->reason += std::string(summary->reason.empty() ? "" : "; ") + "refined with the face model from focal " +
+                     std::to_string(static_cast<int>(std::lround(refined.focal_before))) + " px";
+  return Status::Ok();
+}
+
 Status RunCalibrateStage(Workspace* workspace, const CalibrateOptions& calibrate, const std::string& face_model,
                          const OptionSet& options, int threads, Progress* progress) {
   HF_RETURN_IF_ERROR(calibrate.Check());
@@ -64,6 +88,10 @@ Status RunCalibrateStage(Workspace* workspace, const CalibrateOptions& calibrate
         CameraSet cameras;
         CalibrateSummary summary;
         HF_RETURN_IF_ERROR(RunCalibrate(effective, capture, model, staging, progress, &cameras, &summary));
+        if (summary.mode == "head-pose" && calibrate.head_pose.refine == "face-model") {
+          HF_RETURN_IF_ERROR(RefineHeadPoseStep(effective, capture, model, threads, progress, &cameras, &summary));
+          HF_RETURN_IF_ERROR(cameras.Write(staging / "cameras.json"));
+        }
         result->outputs = {"cameras.json"};
         if (fs::exists(staging / "colmap")) result->outputs.push_back("colmap");
         result->message = summary.OneLine();

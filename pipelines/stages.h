@@ -17,6 +17,13 @@ namespace headforge {
 Status RunIngestStage(Workspace* workspace, const IngestOptions& ingest, const OptionSet& options,
                       int threads, Progress* progress);
 
+// Head-pose cameras (calibrate's result when it chose head-pose): the
+// face-model refinement of their focal length and poses, as
+// `calibrate.head_pose.refine` asks (reconstruction/track_stage.h). Leaves
+// other cameras, and a given focal length, alone.
+Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCapture& capture, const FaceModel& model,
+                          int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary);
+
 // Runs (or skips) calibrate on the workspace's ingest outputs.
 Status RunCalibrateStage(Workspace* workspace, const CalibrateOptions& calibrate, const std::string& face_model,
                          const OptionSet& options, int threads, Progress* progress);

@@ -27,6 +27,31 @@ TrackingCamera ToTrackingCamera(const CameraIntrinsics& in, const Eigen::Isometr
   return c;
 }
 
+// One TrackingView per registered view of every camera, with its landmarks.
+Status BuildTrackingViews(const IngestedCapture& capture, const CameraSet& cameras, std::vector<TrackingView>* views,
+                          std::vector<std::pair<int, int>>* view_source) {
+  for (size_t c = 0; c < capture.cameras.size(); ++c) {
+    const IngestedCamera& cam = capture.cameras[c];
+    const CameraIntrinsics* in = cameras.FindCamera(cam.name);
+    if (in == nullptr) return Status::DataError("track: no intrinsics for camera " + cam.name + " in the cameras");
+    for (const IngestedFrame& f : cam.frames) {
+      const CameraView* v = cameras.FindView(cam.name, f.index);
+      if (v == nullptr || !v->registered) continue;  // an unregistered view says nothing
+      TrackingView view;
+      view.frame = f.index;
+      view.camera = ToTrackingCamera(*in, v->cam_from_world);
+      if (f.landmarks) {
+        std::array<Eigen::Vector2d, 68> points;
+        for (int i = 0; i < 68; ++i) points[i] = Eigen::Vector2d((*f.landmarks)[i].x, (*f.landmarks)[i].y);
+        view.landmarks = points;
+      }
+      views->push_back(view);
+      view_source->emplace_back(int(c), f.index);
+    }
+  }
+  return Status::Ok();
+}
+
 // The fitted head drawn over one frame: the face shaded toward the camera at
 // half opacity, detected landmarks green, fitted ones red.
 cv::Mat Overlay(const cv::Mat& frame, const Mesh& mesh, const TrackingCamera& camera,
@@ -133,25 +158,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
 
   std::vector<TrackingView> views;
   std::vector<std::pair<int, int>> view_source;  // camera index, frame index
-  for (size_t c = 0; c < capture.cameras.size(); ++c) {
-    const IngestedCamera& cam = capture.cameras[c];
-    const CameraIntrinsics* in = cameras.FindCamera(cam.name);
-    if (in == nullptr) return Status::DataError("track: no intrinsics for camera " + cam.name + " in the cameras");
-    for (const IngestedFrame& f : cam.frames) {
-      const CameraView* v = cameras.FindView(cam.name, f.index);
-      if (v == nullptr || !v->registered) continue;  // an unregistered view says nothing
-      TrackingView view;
-      view.frame = f.index;
-      view.camera = ToTrackingCamera(*in, v->cam_from_world);
-      if (f.landmarks) {
-        std::array<Eigen::Vector2d, 68> points;
-        for (int i = 0; i < 68; ++i) points[i] = Eigen::Vector2d((*f.landmarks)[i].x, (*f.landmarks)[i].y);
-        view.landmarks = points;
-      }
-      views.push_back(view);
-      view_source.emplace_back(int(c), f.index);
-    }
-  }
+  HF_RETURN_IF_ERROR(BuildTrackingViews(capture, cameras, &views, &view_source));
   const int num_frames = capture.num_frames();
   HF_LOG(Info) << "track: " << views.size() << " views of " << num_frames << " frames, " << options.fit.identity_modes
                << " identity modes, " << model.num_expressions() << " expressions"
@@ -264,6 +271,52 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   summary->median_residual_px = result.median_residual_px;
   summary->seconds = result.seconds;
   summary->fixed_head = fit.fixed_head;
+  return Status::Ok();
+}
+
+Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capture, const TrackOptions& options,
+                             const std::string& landmark_embedding, int max_rounds, double min_change,
+                             CameraSet* cameras, HeadPoseRefinement* result) {
+  if (cameras->mode != "head-pose" || cameras->frame != "head")
+    return Status::InvalidArgument("the face-model refinement applies to head-pose cameras");
+  if (capture.cameras.size() != 1 || cameras->cameras.size() != 1)
+    return Status::InvalidArgument("head-pose cameras have one camera");
+  if (max_rounds < 1 || !(min_change > 0)) return Status::InvalidArgument("the refinement needs rounds >= 1, change > 0");
+  if (model.num_expressions() == 0) return Status::DataError("the face model has no expressions");
+  const std::string embedding = landmark_embedding.empty() ? DefaultLandmarkEmbedding() : landmark_embedding;
+  LandmarkBasis basis;
+  HF_RETURN_IF_ERROR(
+      BuildLandmarkBasis(model, DetectorLandmarkPoints(model, embedding), options.identity_modes, &basis));
+  TrackOptions fit = options;
+  fit.fixed_head = false;
+  fit.fit_focal = true;
+  HeadPoseRefinement out;
+  CameraIntrinsics& in = cameras->cameras[0];
+  out.focal_before = in.fx;
+  for (int round = 0; round < max_rounds; ++round) {
+    std::vector<TrackingView> views;
+    std::vector<std::pair<int, int>> view_source;
+    HF_RETURN_IF_ERROR(BuildTrackingViews(capture, *cameras, &views, &view_source));
+    TrackResult tracked;
+    HF_RETURN_IF_ERROR(TrackSequence(basis, views, capture.num_frames(), fit, &tracked));
+    in.fx *= tracked.focal_scale;
+    in.fy *= tracked.focal_scale;
+    // The camera dollies with the zoom (tracking_costs.h), and the fitted
+    // motion of the head becomes part of each frame's camera:
+    // cam_from_head' = dollied cam_from_head * head_motion.
+    for (CameraView& v : cameras->views) {
+      if (!v.registered || v.frame < 0 || v.frame >= int(tracked.frames.size())) continue;
+      v.cam_from_world.translation().z() *= tracked.focal_scale;
+      v.cam_from_world = v.cam_from_world * tracked.frames[v.frame].head_motion;
+    }
+    out.rounds = round + 1;
+    out.median_residual_px = tracked.median_residual_px;
+    out.seconds += tracked.seconds;
+    out.solver_report = tracked.solver_report;
+    if (std::abs(tracked.focal_scale - 1.0) < min_change) break;
+  }
+  out.focal_after = in.fx;
+  *result = out;
   return Status::Ok();
 }
 

@@ -45,4 +45,28 @@ struct TrackSummary {
 Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
                 const FaceModel& model, const fs::path& out_dir, Progress* progress, TrackSummary* summary);
 
+struct HeadPoseRefinement {
+  double focal_before = 0, focal_after = 0;  // pixels
+  int rounds = 0;                            // fits run
+  double median_residual_px = 0;             // landmark residual of the fit
+  double seconds = 0;
+  std::string solver_report;                 // Ceres' one-line summary
+};
+
+// Head-pose cameras refined with the whole face model. Against the mean
+// face's landmarks alone the focal length is poorly determined: perspective
+// across a face moves its landmarks by a few pixels, and a face deeper or
+// flatter than the mean reads as a nearer or farther one. This fits the
+// sequence as tracking does (shared identity, each frame's expression and
+// head motion) with the focal length free, then folds the fitted focal length
+// into the camera and each frame's head motion into its cam_from_head. The
+// focal length lies in a long, shallow valley with the identity's depth: a
+// fit stops in it, and a new fit started from the cameras it left (identity
+// and expressions from zero again) goes further along, so fits are repeated
+// until the focal length changes by less than `min_change` (relative) or
+// `max_rounds` have run.
+Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capture, const TrackOptions& options,
+                             const std::string& landmark_embedding, int max_rounds, double min_change,
+                             CameraSet* cameras, HeadPoseRefinement* result);
+
 }  // namespace headforge

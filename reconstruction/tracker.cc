@@ -40,14 +40,15 @@ bool Usable(const TrackingView& view, int i) {
 // Pixel distances between a view's usable landmarks and the model's, with
 // the indices they belong to.
 std::vector<double> ViewResiduals(const TrackingView& view, const LandmarkBasis& basis,
-                                  const Eigen::VectorXd& alpha, const FrameBlocks& frame,
+                                  const Eigen::VectorXd& alpha, const FrameBlocks& frame, double focal_scale,
                                   std::vector<int>* indices = nullptr) {
+  const TrackingCamera camera = view.camera.WithFocalScale(focal_scale);
   const Eigen::Isometry3d motion = MotionOf(frame);
   const Eigen::VectorXd beta = Eigen::Map<const Eigen::VectorXd>(frame.expression.data(), frame.expression.size());
   std::vector<double> r;
   for (int i = 0; i < 68; ++i) {
     if (!Usable(view, i)) continue;
-    r.push_back((view.camera.Pixel(motion * basis.Point(i, alpha, beta)) - (*view.landmarks)[i]).norm());
+    r.push_back((camera.Pixel(motion * basis.Point(i, alpha, beta)) - (*view.landmarks)[i]).norm());
     if (indices) indices->push_back(i);
   }
   return r;
@@ -70,6 +71,14 @@ bool TrackOptions::Check(std::string* why) const {
   if (!(identity_prior >= 0 && expression_sparsity >= 0 && sparsity_scale > 0 && rotation_smoothness >= 0 &&
         translation_smoothness >= 0 && expression_smoothness >= 0 && robust_scale_px > 0 && contour_weight >= 0)) {
     *why = "weights must be zero or positive (scales positive)";
+    return false;
+  }
+  if (!(max_focal_change >= 1)) {
+    *why = "max_focal_change must be at least 1";
+    return false;
+  }
+  if (fit_focal && fixed_head) {
+    *why = "the focal length can be refined only with the head's motion free";
     return false;
   }
   if (max_iterations < 1 || threads < 1) {
@@ -102,6 +111,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   for (auto& m : fit_basis.identity) m = m.leftCols(k).eval();
 
   std::vector<double> identity(k, 0.0);
+  double focal_scale = 1.0;
   std::vector<FrameBlocks> frames(num_frames);
   for (auto& f : frames) f.expression.assign(e, 0.0);
 
@@ -142,13 +152,20 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
       view_blocks[v].push_back(problem.AddResidualBlock(
           LandmarkReprojectionCost::Create(fit_basis, i, view.camera, pixel, weight),
           new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, identity.data(),
-          f.expression.data()));
+          f.expression.data(), &focal_scale));
       f.observed = true;
       ++observations;
     }
   }
   if (observations == 0) {
     return Status::DataError("track: no frame has landmarks; check that ingest found the face (landmarks.json)");
+  }
+
+  if (options.fit_focal) {
+    problem.SetParameterLowerBound(&focal_scale, 0, 1.0 / options.max_focal_change);
+    problem.SetParameterUpperBound(&focal_scale, 0, options.max_focal_change);
+  } else {
+    problem.SetParameterBlockConstant(&focal_scale);
   }
 
   // Priors, bounds, smoothness between consecutive observed frames.
@@ -206,7 +223,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
     const Eigen::VectorXd alpha = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
     for (size_t v = 0; v < views.size(); ++v) {
       if (!used[v]) continue;
-      view_median[v] = Median(ViewResiduals(views[v], fit_basis, alpha, frames[views[v].frame]));
+      view_median[v] = Median(ViewResiduals(views[v], fit_basis, alpha, frames[views[v].frame], focal_scale));
       all_used.push_back(view_median[v]);
     }
     const double limit = std::max(options.flag_residual_px, 3.0 * Median(all_used));
@@ -233,6 +250,8 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
 
   TrackResult out;
   out.dropped_views = out_dropped_views;
+  if (!std::isfinite(focal_scale)) return Status::Internal("track: the focal length became non-finite");
+  out.focal_scale = focal_scale;
   out.identity = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
   out.iterations = static_cast<int>(summary.iterations.size());
   out.solver_report = summary.BriefReport();
@@ -245,7 +264,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
     const TrackingView& view = views[v];
     if (!used[v]) continue;
     std::vector<int> indices;
-    const std::vector<double> r = ViewResiduals(view, fit_basis, alpha, frames[view.frame], &indices);
+    const std::vector<double> r = ViewResiduals(view, fit_basis, alpha, frames[view.frame], focal_scale, &indices);
     residuals[view.frame].insert(residuals[view.frame].end(), r.begin(), r.end());
     seen[view.frame] += int(indices.size());
     Eigen::MatrixXd seen_points(2, indices.size());

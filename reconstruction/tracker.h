@@ -49,6 +49,11 @@ struct TrackOptions {
   // The cameras already carry the head's motion (head-pose calibration):
   // hold each frame's head motion at the identity.
   bool fixed_head = false;
+  // Refine the cameras' focal length: one factor on every camera's fx and fy
+  // (for head-pose cameras, the one camera), within [1/max_focal_change,
+  // max_focal_change]. Only with the head's motion free.
+  bool fit_focal = false;
+  double max_focal_change = 3.0;
   // A frame that some camera sees within this yaw of frontal (degrees, with
   // the cameras' initial head pose) ignores its views beyond it.
   double max_fit_yaw_deg = 35.0;
@@ -79,6 +84,7 @@ struct TrackedFrame {
 
 struct TrackResult {
   Eigen::VectorXd identity;  // [K]
+  double focal_scale = 1.0;  // factor on the cameras' focal lengths (1 unless fit_focal)
   std::vector<TrackedFrame> frames;
   double median_residual_px = 0;
   // Views dropped after a first fit because their landmarks disagreed with

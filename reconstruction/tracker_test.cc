@@ -209,6 +209,35 @@ TEST(Tracker, DisagreeingAndNearProfileViewsAreLeftOut) {
   EXPECT_LT(s.rotation_deg, 0.5);
 }
 
+// One fixed camera whose focal length is given 30% long (with its distance
+// scaled to match, so the face keeps its size in the image): fitting the
+// focal length with the identity and expressions recovers it, where the
+// perspective across the face is the only cue.
+TEST(Tracker, FocalLengthIsRecoveredWithTheWholeFaceModel) {
+  const Truth truth = MakeTruth(60, 1.0, 21);
+  const TrackingCamera real = CameraAt(0, 900, 0.6);
+  const std::vector<TrackingView> observed = Observe(truth, {real}, 0.5, 22);
+  std::vector<TrackingView> views = observed;
+  for (TrackingView& v : views) v.camera = CameraAt(0, 1170, 0.78);
+  TrackOptions options;
+  options.threads = 2;
+  options.max_iterations = 300;
+  TrackResult held, fitted;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 60, options, &held).ok());
+  options.fit_focal = true;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 60, options, &fitted).ok());
+  const double focal = 1170 * fitted.focal_scale;
+  std::printf("focal given 1170 px, true 900: fitted %.1f px; residual %.3f px (focal held: %.3f px)\n", focal,
+              fitted.median_residual_px, held.median_residual_px);
+  EXPECT_NEAR(focal, 900, 0.03 * 900);
+  EXPECT_LT(fitted.median_residual_px, held.median_residual_px);
+  EXPECT_DOUBLE_EQ(held.focal_scale, 1.0);
+  // The head is held by the cameras: the focal length cannot be refined.
+  options.fixed_head = true;
+  TrackResult refused;
+  EXPECT_FALSE(TrackSequence(Basis(), views, 60, options, &refused).ok());
+}
+
 TEST(Tracker, HeadHeldByTheCamerasStaysFixed) {
   // Head-pose calibration: each frame's camera carries the head's motion.
   Truth truth = MakeTruth(20, 1.0, 5);

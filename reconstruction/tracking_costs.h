@@ -22,12 +22,27 @@ struct TrackingCamera {
     const Eigen::Vector3d p = rotation * head_point + translation;
     return {fx * p.x() / p.z() + cx, fy * p.y() / p.z() + cy};
   }
+  // The same camera zoomed and dollied by `scale`: focal lengths and the
+  // distance along its axis (translation z) multiplied by it.
+  TrackingCamera WithFocalScale(double scale) const {
+    TrackingCamera c = *this;
+    c.fx *= scale;
+    c.fy *= scale;
+    c.translation.z() *= scale;
+    return c;
+  }
 };
 
 // One detected landmark against the model's landmark i, moved by the head's
 // motion (angle-axis rotation and translation applied in the head frame) and
-// seen by a fixed camera. Residuals: 2, pixels times `weight`.
-// Parameters: rotation[3], translation[3], identity[K], expression[E].
+// seen by a fixed camera. `focal_scale` (1 unless the focal length is refined)
+// zooms and dollies together: the focal lengths are multiplied by it and the
+// camera's distance along its axis (translation z) too, so the head keeps its
+// size in the image and only the perspective changes; otherwise a focal step
+// would need every frame's depth to follow it. Residuals: 2, pixels times
+// `weight`.
+// Parameters: rotation[3], translation[3], identity[K], expression[E],
+// focal_scale[1].
 struct LandmarkReprojectionCost {
   static constexpr int kStride = 8;
 
@@ -46,6 +61,7 @@ struct LandmarkReprojectionCost {
     const T* translation = parameters[1];
     const T* alpha = parameters[2];
     const T* beta = parameters[3];
+    const T& focal_scale = parameters[4][0];
     T x[3];
     for (int d = 0; d < 3; ++d) {
       x[d] = T(base_[d]);
@@ -59,10 +75,11 @@ struct LandmarkReprojectionCost {
       p[r] = T(camera_.translation[r]);
       for (int c = 0; c < 3; ++c) p[r] += T(camera_.rotation(r, c)) * (moved[c] + translation[c]);
     }
+    p[2] += (focal_scale - T(1)) * T(camera_.translation[2]);
     // A landmark at or behind the camera has no pixel: reject the step.
     if (!(p[2] > T(1e-6))) return false;
-    residual[0] = T(weight_) * (T(camera_.fx) * p[0] / p[2] + T(camera_.cx) - T(pixel_.x()));
-    residual[1] = T(weight_) * (T(camera_.fy) * p[1] / p[2] + T(camera_.cy) - T(pixel_.y()));
+    residual[0] = T(weight_) * (focal_scale * T(camera_.fx) * p[0] / p[2] + T(camera_.cx) - T(pixel_.x()));
+    residual[1] = T(weight_) * (focal_scale * T(camera_.fy) * p[1] / p[2] + T(camera_.cy) - T(pixel_.y()));
     return true;
   }
 
@@ -75,6 +92,7 @@ struct LandmarkReprojectionCost {
     cost->AddParameterBlock(3);
     cost->AddParameterBlock(basis.num_identity);
     cost->AddParameterBlock(basis.num_expressions);
+    cost->AddParameterBlock(1);
     cost->SetNumResiduals(2);
     return cost;
   }

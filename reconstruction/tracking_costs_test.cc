@@ -55,10 +55,24 @@ TEST(TrackingCosts, LandmarkReprojectionGradients) {
   const double rotation[3] = {0.1, -0.2, 0.05}, translation[3] = {0.01, 0.02, -0.03};
   const double alpha[4] = {0.5, -1.0, 0.3, 2.0};
   const double beta[5] = {0.1, 0.9, 0.0, 0.5, 0.3};
+  const double focal_scale[1] = {0.9};
   for (int landmark : {0, 30, 67}) {
     std::unique_ptr<ceres::CostFunction> cost(LandmarkReprojectionCost::Create(
         basis, landmark, camera, Eigen::Vector2d(255, 270), 0.7));
-    ExpectGradientsMatch(cost.get(), {rotation, translation, alpha, beta});
+    ExpectGradientsMatch(cost.get(), {rotation, translation, alpha, beta, focal_scale});
+    // The focal scale zooms and dollies the camera.
+    const double* parameters[] = {rotation, translation, alpha, beta, focal_scale};
+    double residual[2];
+    ASSERT_TRUE(cost->Evaluate(parameters, residual, nullptr));
+    const Eigen::VectorXd a = Eigen::Map<const Eigen::VectorXd>(alpha, 4), b = Eigen::Map<const Eigen::VectorXd>(beta, 5);
+    Eigen::Isometry3d motion = Eigen::Isometry3d::Identity();
+    const Eigen::Vector3d aa(rotation[0], rotation[1], rotation[2]);
+    motion.linear() = Eigen::AngleAxisd(aa.norm(), aa.normalized()).toRotationMatrix();
+    motion.translation() = Eigen::Vector3d(translation[0], translation[1], translation[2]);
+    const Eigen::Vector2d expected =
+        0.7 * (camera.WithFocalScale(0.9).Pixel(motion * basis.Point(landmark, a, b)) - Eigen::Vector2d(255, 270));
+    EXPECT_NEAR(residual[0], expected.x(), 1e-9);
+    EXPECT_NEAR(residual[1], expected.y(), 1e-9);
   }
 }
 
@@ -68,8 +82,8 @@ TEST(TrackingCosts, LandmarkBehindTheCameraIsRejected) {
   camera.translation = Eigen::Vector3d(0, 0, -1.0);  // everything behind
   std::unique_ptr<ceres::CostFunction> cost(
       LandmarkReprojectionCost::Create(basis, 3, camera, Eigen::Vector2d(0, 0), 1.0));
-  const double zero3[3] = {0, 0, 0}, alpha[2] = {0, 0}, beta[2] = {0, 0};
-  const double* parameters[] = {zero3, zero3, alpha, beta};
+  const double zero3[3] = {0, 0, 0}, alpha[2] = {0, 0}, beta[2] = {0, 0}, focal_scale[1] = {1};
+  const double* parameters[] = {zero3, zero3, alpha, beta, focal_scale};
   double residual[2];
   EXPECT_FALSE(cost->Evaluate(parameters, residual, nullptr));
 }

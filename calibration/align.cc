@@ -435,11 +435,17 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
         chosen = facing;
         if (change < 1e-4) break;
       }
+      // Too few views to surround the face (a rig's few fixed cameras, tens of
+      // degrees apart): the window cannot be made even, and its mean follows
+      // whichever view falls in or out; keep the first choice.
+      constexpr size_t kMinFacingViews = 6;
       LandmarkFit refit;
-      if (!chosen.empty() && fit_landmarks(ByLandmark(chosen), &refit)) {
+      if (chosen.size() >= kMinFacingViews && fit_landmarks(ByLandmark(chosen), &refit)) {
         per_landmark = ByLandmark(chosen);
         lf = refit;
         views_used = static_cast<int>(chosen.size());
+      } else {
+        SimilarityFromViewPoses(frontal, &from_views);
       }
     }
     const std::vector<int>& used = lf.used;

@@ -326,6 +326,27 @@ Eigen::Matrix3d LookingAtOrigin(const Eigen::Vector3d& eye) {
   return r;
 }
 
+// A camera's centre in the head frame, `distance` metres from the origin at
+// the given yaw and pitch (degrees).
+Eigen::Vector3d EyeAt(double yaw_deg, double pitch_deg, double distance) {
+  const double a = yaw_deg * M_PI / 180, b = pitch_deg * M_PI / 180;
+  return distance * Eigen::Vector3d(std::sin(a) * std::cos(b), std::sin(b), std::cos(a) * std::cos(b));
+}
+
+// The registered view of a camera at `eye` (head frame) looking at the head's
+// origin, in a world related to the head by head_from_world = `truth`:
+// cam_from_world = [R_h R | (R_h t + t_h) / s] for cam_from_head = [R_h | t_h].
+CameraView ViewFrom(const Eigen::Vector3d& eye, const Sim3& truth, int frame) {
+  const Eigen::Matrix3d r = LookingAtOrigin(eye);
+  CameraView view;
+  view.camera = "cam0";
+  view.frame = frame;
+  view.registered = true;
+  view.cam_from_world.linear() = r * truth.rotation;
+  view.cam_from_world.translation() = (r * truth.translation - r * eye) / truth.scale;
+  return view;
+}
+
 // Align on exact synthetic views: the detector's landmark points on the mean
 // face, carried into a world of another scale and orientation and projected
 // into twelve near-frontal views of one moving camera. Both fits recover the
@@ -358,16 +379,7 @@ TEST(Align, RecoversTheSimilarityFromLandmarkViews) {
     int index = 0;
     for (double pitch : {-15.0, 0.0, 15.0})
       for (double yaw : {-25.0, -8.0, 8.0, 25.0}) {
-        const double a = yaw * M_PI / 180, b = pitch * M_PI / 180;
-        const Eigen::Vector3d eye = 0.7 * Eigen::Vector3d(std::sin(a) * std::cos(b), std::sin(b), std::cos(a) * std::cos(b));
-        const Eigen::Matrix3d r = LookingAtOrigin(eye);
-        // cam_from_world = [R_h R | (R_h t + t_h) / s] for cam_from_head = [R_h | t_h].
-        CameraView view;
-        view.camera = "cam0";
-        view.frame = index;
-        view.registered = true;
-        view.cam_from_world.linear() = r * truth.rotation;
-        view.cam_from_world.translation() = (r * truth.translation - r * eye) / truth.scale;
+        const CameraView view = ViewFrom(EyeAt(yaw, pitch, 0.7), truth, index);
         cameras->views.push_back(view);
         IngestedFrame frame;
         frame.index = frame.source_frame = index;
@@ -451,19 +463,9 @@ TEST(Align, ChoosesViewsByWhereTheirCamerasAre) {
   int index = 0;
   for (double pitch : {-8.0, 8.0})
     for (double yaw = -60; yaw <= 30; yaw += 10) {
-      auto eye_at = [&](double yaw_deg) {
-        const double a = yaw_deg * M_PI / 180, b = pitch * M_PI / 180;
-        return Eigen::Vector3d(0.7 * Eigen::Vector3d(std::sin(a) * std::cos(b), std::sin(b), std::cos(a) * std::cos(b)));
-      };
-      const Eigen::Vector3d eye = eye_at(yaw), seen_eye = eye_at(0.5 * yaw);
-      const Eigen::Matrix3d r = LookingAtOrigin(eye), seen = LookingAtOrigin(seen_eye);
-      CameraView view;
-      view.camera = "cam0";
-      view.frame = index;
-      view.registered = true;
-      view.cam_from_world.linear() = r * truth.rotation;
-      view.cam_from_world.translation() = (r * truth.translation - r * eye) / truth.scale;
-      cameras.views.push_back(view);
+      const Eigen::Vector3d seen_eye = EyeAt(0.5 * yaw, pitch, 0.7);
+      const Eigen::Matrix3d seen = LookingAtOrigin(seen_eye);
+      cameras.views.push_back(ViewFrom(EyeAt(yaw, pitch, 0.7), truth, index));
       IngestedFrame frame;
       frame.index = frame.source_frame = index++;
       Landmarks68 landmarks;

@@ -171,9 +171,11 @@ bool SimilarityFromViewPoses(const std::vector<ViewPose>& views, Sim3* head_from
     std::vector<double> sorted = angles;
     std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
     const double limit = std::max(3.0 * sorted[sorted.size() / 2], 2.0 * 3.14159265358979323846 / 180.0);
+    std::vector<bool> next(angles.size());
     int kept = 0;
-    for (size_t i = 0; i < angles.size(); ++i) kept += use[i] = angles[i] <= limit;
-    if (kept < 3) break;
+    for (size_t i = 0; i < angles.size(); ++i) kept += next[i] = angles[i] <= limit && views[i].weight > 0;
+    if (kept < 3) break;  // keep the last set whole: rotation, scale and translation from the same views
+    use = next;
     rotation = chordal_mean(rotations, use);
   }
   // Scale and translation with the rotation fixed: least squares on the centres.
@@ -425,16 +427,19 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       // so far, until the choice settles; then triangulate from those views.
       const Eigen::Vector3d face_centre = lf.src.rowwise().mean();
       std::vector<ViewPose> chosen;
-      for (int round = 0; round < 8; ++round) {
+      bool settled = false;
+      for (int round = 0; round < 8 && !settled; ++round) {
         const std::vector<ViewPose> facing = ViewsFacing(view_poses[frame], from_views.rotation, face_centre,
                                                          options.max_yaw_deg, options.max_elevation_deg);
         Sim3 next;
         if (!SimilarityFromViewPoses(facing, &next)) break;
-        const double change = Eigen::AngleAxisd(next.rotation.transpose() * from_views.rotation).angle();
+        settled = Eigen::AngleAxisd(next.rotation.transpose() * from_views.rotation).angle() < 1e-4;
         from_views = next;
         chosen = facing;
-        if (change < 1e-4) break;
       }
+      if (!settled && !per_frame)
+        HF_LOG(Warning) << "align: the choice of views did not settle in 8 rounds; using the last (" << chosen.size()
+                        << " views)";
       // Too few views to surround the face (a rig's few fixed cameras, tens of
       // degrees apart): the window cannot be made even, and its mean follows
       // whichever view falls in or out; keep the first choice.

@@ -57,6 +57,9 @@ Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCaptu
   HF_RETURN_IF_ERROR(RefineHeadPoseCameras(model, capture, fit, calibrate.landmark_embedding,
                                            calibrate.head_pose.refine_rounds, 0.01, cameras, &refined));
   progress->Finish();
+  if (!refined.settled)
+    HF_LOG(Warning) << "calibrate: the focal length was still moving after " << refined.rounds
+                    << " rounds of the face-model refinement (--head-pose-refine-rounds)";
   HF_LOG(Info) << "calibrate: the face model's identity and expressions move the focal length from "
                << refined.focal_before << " to " << refined.focal_after << " px in " << refined.rounds
                << " round(s) (landmark residual " << refined.median_residual_px << " px, " << refined.seconds << " s)";

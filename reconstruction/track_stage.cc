@@ -305,7 +305,10 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
     // motion of the head becomes part of each frame's camera:
     // cam_from_head' = dollied cam_from_head * head_motion.
     for (CameraView& v : cameras->views) {
-      if (!v.registered || v.frame < 0 || v.frame >= int(tracked.frames.size())) continue;
+      if (!v.registered) continue;
+      if (v.frame < 0 || v.frame >= int(tracked.frames.size()))
+        return Status::DataError("head-pose cameras name frame " + std::to_string(v.frame) + " of " +
+                                 std::to_string(tracked.frames.size()));
       v.cam_from_world.translation().z() *= tracked.focal_scale;
       v.cam_from_world = v.cam_from_world * tracked.frames[v.frame].head_motion;
     }
@@ -313,7 +316,8 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
     out.median_residual_px = tracked.median_residual_px;
     out.seconds += tracked.seconds;
     out.solver_report = tracked.solver_report;
-    if (std::abs(tracked.focal_scale - 1.0) < min_change) break;
+    out.settled = std::abs(tracked.focal_scale - 1.0) < min_change;
+    if (out.settled) break;
   }
   out.focal_after = in.fx;
   *result = out;

@@ -48,6 +48,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
 struct HeadPoseRefinement {
   double focal_before = 0, focal_after = 0;  // pixels
   int rounds = 0;                            // fits run
+  bool settled = false;                      // the last fit moved the focal length by less than min_change
   double median_residual_px = 0;             // landmark residual of the fit
   double seconds = 0;
   std::string solver_report;                 // Ceres' one-line summary

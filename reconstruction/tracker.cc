@@ -73,8 +73,8 @@ bool TrackOptions::Check(std::string* why) const {
     *why = "weights must be zero or positive (scales positive)";
     return false;
   }
-  if (!(max_focal_change >= 1)) {
-    *why = "max_focal_change must be at least 1";
+  if (!(max_focal_change > 1)) {
+    *why = "max_focal_change must be above 1";
     return false;
   }
   if (fit_focal && fixed_head) {

@@ -49,9 +49,10 @@ struct TrackOptions {
   // The cameras already carry the head's motion (head-pose calibration):
   // hold each frame's head motion at the identity.
   bool fixed_head = false;
-  // Refine the cameras' focal length: one factor on every camera's fx and fy
-  // (for head-pose cameras, the one camera), within [1/max_focal_change,
-  // max_focal_change]. Only with the head's motion free.
+  // Refine the focal length: one zoom-and-dolly factor on every camera's fx,
+  // fy and distance along its axis (tracking_costs.h), within
+  // [1/max_focal_change, max_focal_change]. Meant for one camera looking at
+  // the head (head-pose cameras); only with the head's motion free.
   bool fit_focal = false;
   double max_focal_change = 3.0;
   // A frame that some camera sees within this yaw of frontal (degrees, with

@@ -187,6 +187,7 @@ TEST(SimulatedTrack, TalkingStatic) {
   EXPECT_LT(s.mae.at("eyeBlink_R"), 0.1);
   // calibrate's head-pose cameras, refined with the face model, find the focal
   // length (2.4% off; 40% from the mean face's landmarks alone).
+  ASSERT_GE(s.focal_error, 0.0) << "calibrate did not choose head-pose cameras";
   EXPECT_LT(s.focal_error, 0.05);
   // With the focal length right, the head's rotation is 1.7 deg off, mostly a
   // constant pitch of about 1.3 deg (the fitted pitch follows the true one

@@ -52,6 +52,12 @@ Status ParseNumber(const std::string& text, T* value) {
 }
 
 std::string FormatDouble(double value) {
+  // Whole numbers as whole numbers (30, not the shorter 3e+01).
+  if (std::isfinite(value) && value == std::floor(value) && std::abs(value) < 1e15) {
+    std::ostringstream whole;
+    whole << std::fixed << std::setprecision(0) << value;
+    return whole.str() == "-0" ? "0" : whole.str();
+  }
   std::ostringstream out;
   out << std::setprecision(17) << value;
   // Shortest text that reads back to the same double.

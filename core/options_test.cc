@@ -98,6 +98,28 @@ TEST(OptionSet, IniRoundTripReproducesValues) {
   fs::remove(ini);
 }
 
+// Numbers are written as a reader expects them and read back exactly.
+TEST(OptionSet, NumbersAreWrittenPlainlyAndReadBackExactly) {
+  for (const auto& [given, written] : std::vector<std::pair<std::string, std::string>>{
+           {"30", "fps = 30"}, {"100", "fps = 100"}, {"0.5", "fps = 0.5"}, {"1500.25", "fps = 1500.25"},
+           {"-2", "fps = -2"}, {"0.000001", "fps = 1e-06"}, {"0.1", "fps = 0.1"}}) {
+    Sample s;
+    OptionSet set;
+    Bind(&set, &s);
+    ASSERT_TRUE(set.Parse({"--fps", given}).ok());
+    const std::string ini = set.ToIni();
+    EXPECT_NE(ini.find(written + "\n"), std::string::npos) << given << " gave:\n" << ini;
+    Sample t;
+    OptionSet reread;
+    Bind(&reread, &t);
+    const fs::path file = fs::temp_directory_path() / "hf_options_numbers.ini";
+    ASSERT_TRUE(WriteFileAtomic(file, ini).ok());
+    ASSERT_TRUE(reread.Parse({"--config", file.string()}).ok());
+    EXPECT_EQ(t.fps, s.fps) << given;
+    fs::remove(file);
+  }
+}
+
 TEST(OptionSet, SemanticIniExcludesRuntimeOptionsAndFiltersSection) {
   Sample s;
   OptionSet set;

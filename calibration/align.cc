@@ -101,8 +101,8 @@ Eigen::Vector2d UndistortPixel(const CameraIntrinsics& c, const Eigen::Vector2d&
 
 struct ViewPose {
   Eigen::Isometry3d cam_from_world;  // from calibrate
-  Eigen::Isometry3d cam_from_head;   // from PnP of the view's landmarks against the model
-  bool frontal_by_pnp = false;       // PnP's own yaw is within the limit
+  Eigen::Isometry3d cam_from_head;   // from PnP of the view's landmarks against the model (world frame only)
+  bool frontal_by_pnp = false;       // PnP's own yaw is within the limit (world frame only)
   double weight = 1.0;               // in the mean of the views' rotations
   std::vector<Observation> landmarks;  // its 68 landmarks (undistorted) with its projection
 };
@@ -312,8 +312,8 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   // when several cameras watch a moving head.
   const bool per_frame = !head_frame && capture.cameras.size() > 1;
   const std::vector<Eigen::Vector3d> model_points = DetectorLandmarkPoints(model, options.landmark_embedding);
-  std::map<int, std::vector<std::vector<Observation>>> groups;
-  std::map<int, std::vector<ViewPose>> view_poses;  // per group: head pose seen by each frontal view
+  // Per group: every usable view, with its landmarks and (world frame) its PnP head pose.
+  std::map<int, std::vector<ViewPose>> view_poses;
   for (const auto& cam : capture.cameras) {
     const CameraIntrinsics* in = cameras.FindCamera(cam.name);
     if (!in || in->fx <= 0) continue;
@@ -323,27 +323,22 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       std::vector<Eigen::Vector2d> undistorted;
       for (int i = 0; i < 68; ++i)
         undistorted.push_back(UndistortPixel(*in, Eigen::Vector2d((*f.landmarks)[i].x, (*f.landmarks)[i].y)));
+      ViewPose v;
+      v.cam_from_world = view->cam_from_world;
+      const Eigen::Matrix<double, 3, 4> p = in->K() * view->cam_from_world.matrix().topRows<3>();
+      for (int i = 0; i < 68; ++i) v.landmarks.push_back({p, undistorted[i]});
       // Landmark detectors are trained on near-frontal faces: on oblique views
-      // their points drift. Keep views whose head yaw (from PnP against the
-      // model) is within the limit.
+      // their points drift. Note whether the view's head yaw (from PnP against
+      // the model) is within the limit.
       if (!head_frame) {
         const PnpResult pose = SolvePnp(model_points, undistorted, in->K());
         if (!pose.ok) continue;
         const Eigen::Vector3d eye = pose.cam_from_object.inverse().translation();
-        const bool frontal = std::abs(std::atan2(eye.x(), eye.z())) * 180.0 / 3.14159265358979323846 <= options.max_yaw_deg;
-        ViewPose v;
-        v.cam_from_world = view->cam_from_world;
         v.cam_from_head = pose.cam_from_object;
-        v.frontal_by_pnp = frontal;
-        const Eigen::Matrix<double, 3, 4> p = in->K() * view->cam_from_world.matrix().topRows<3>();
-        for (int i = 0; i < 68; ++i) v.landmarks.push_back({p, undistorted[i]});
-        view_poses[per_frame ? f.index : 0].push_back(std::move(v));
-        if (!frontal) continue;
+        v.frontal_by_pnp =
+            std::abs(std::atan2(eye.x(), eye.z())) * 180.0 / 3.14159265358979323846 <= options.max_yaw_deg;
       }
-      auto& group = groups[per_frame ? f.index : 0];
-      group.resize(68);
-      const Eigen::Matrix<double, 3, 4> p = in->K() * view->cam_from_world.matrix().topRows<3>();
-      for (int i = 0; i < 68; ++i) group[i].push_back({p, undistorted[i]});
+      view_poses[per_frame ? f.index : 0].push_back(std::move(v));
     }
   }
   // Landmarks that name one point of the surface from any side: eye corners,
@@ -360,8 +355,9 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
     AlignResult r;
     for (int i : rigid) {
       std::vector<double> distances;
-      for (const auto& [frame, per_landmark] : groups)
-        for (const auto& o : per_landmark[i]) {
+      for (const auto& [frame, views] : view_poses)
+        for (const ViewPose& v : views) {
+          const Observation& o = v.landmarks[i];
           const Eigen::Vector3d centre = ProjectionCentre(o.projection);
           const Eigen::Vector3d dir =
               o.projection.leftCols<3>().colPivHouseholderQr().solve(o.pixel.homogeneous()).normalized();
@@ -412,24 +408,26 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   AlignResult best;
   std::vector<std::vector<Observation>> best_observations;
   bool found = false;
-  for (const auto& [frame, first_observations] : groups) {
-    std::vector<std::vector<Observation>> per_landmark = first_observations;
+  for (const auto& [frame, views] : view_poses) {
+    std::vector<ViewPose> frontal;
+    for (const ViewPose& v : views)
+      if (v.frontal_by_pnp) frontal.push_back(v);
+    if (frontal.empty()) continue;
+    std::vector<std::vector<Observation>> per_landmark = ByLandmark(frontal);
     LandmarkFit lf;
     if (!fit_landmarks(per_landmark, &lf)) continue;
     Sim3 from_views;
-    std::vector<ViewPose> frontal;
-    for (const ViewPose& v : view_poses[frame])
-      if (v.frontal_by_pnp) frontal.push_back(v);
     const bool use_views = options.method == "views" && SimilarityFromViewPoses(frontal, &from_views);
     int views_used = static_cast<int>(frontal.size());
     if (use_views && options.select_views == "geometry") {
       // Choose the views again by where their cameras are, under the rotation
       // so far, until the choice settles; then triangulate from those views.
       const Eigen::Vector3d face_centre = lf.src.rowwise().mean();
+      const Sim3 first_choice = from_views;
       std::vector<ViewPose> chosen;
       bool settled = false;
       for (int round = 0; round < 8 && !settled; ++round) {
-        const std::vector<ViewPose> facing = ViewsFacing(view_poses[frame], from_views.rotation, face_centre,
+        const std::vector<ViewPose> facing = ViewsFacing(views, from_views.rotation, face_centre,
                                                          options.max_yaw_deg, options.max_elevation_deg);
         Sim3 next;
         if (!SimilarityFromViewPoses(facing, &next)) break;
@@ -450,7 +448,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
         lf = refit;
         views_used = static_cast<int>(chosen.size());
       } else {
-        SimilarityFromViewPoses(frontal, &from_views);
+        from_views = first_choice;
       }
     }
     const std::vector<int>& used = lf.used;

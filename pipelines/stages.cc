@@ -47,7 +47,9 @@ Status ChainedFingerprint(const Workspace& workspace, const std::string& stage, 
 }  // namespace
 
 Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCapture& capture, const FaceModel& model,
-                          int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary) {
+                          int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary,
+                          bool* applied) {
+  if (applied) *applied = false;
   if (summary->mode != "head-pose" || calibrate.head_pose.refine != "face-model" || calibrate.head_pose.focal > 0)
     return Status::Ok();
   TrackOptions fit;
@@ -69,6 +71,7 @@ Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCaptu
     summary->reprojection_source_px = refined.median_residual_px / capture.cameras[0].crop_scale;
   summary->reason += std::string(summary->reason.empty() ? "" : "; ") + "refined with the face model from focal " +
                      std::to_string(static_cast<int>(std::lround(refined.focal_before))) + " px";
+  if (applied) *applied = true;
   return Status::Ok();
 }
 
@@ -91,10 +94,10 @@ Status RunCalibrateStage(Workspace* workspace, const CalibrateOptions& calibrate
         CameraSet cameras;
         CalibrateSummary summary;
         HF_RETURN_IF_ERROR(RunCalibrate(effective, capture, model, staging, progress, &cameras, &summary));
-        if (summary.mode == "head-pose" && calibrate.head_pose.refine == "face-model") {
-          HF_RETURN_IF_ERROR(RefineHeadPoseStep(effective, capture, model, threads, progress, &cameras, &summary));
-          HF_RETURN_IF_ERROR(cameras.Write(staging / "cameras.json"));
-        }
+        bool refined = false;
+        HF_RETURN_IF_ERROR(
+            RefineHeadPoseStep(effective, capture, model, threads, progress, &cameras, &summary, &refined));
+        if (refined) HF_RETURN_IF_ERROR(cameras.Write(staging / "cameras.json"));
         result->outputs = {"cameras.json"};
         if (fs::exists(staging / "colmap")) result->outputs.push_back("colmap");
         result->message = summary.OneLine();

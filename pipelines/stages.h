@@ -20,9 +20,11 @@ Status RunIngestStage(Workspace* workspace, const IngestOptions& ingest, const O
 // Head-pose cameras (calibrate's result when it chose head-pose): the
 // face-model refinement of their focal length and poses, as
 // `calibrate.head_pose.refine` asks (reconstruction/track_stage.h). Leaves
-// other cameras, and a given focal length, alone.
+// other cameras, and a given focal length, alone; `applied` (optional) says
+// whether it changed the cameras.
 Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCapture& capture, const FaceModel& model,
-                          int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary);
+                          int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary,
+                          bool* applied = nullptr);
 
 // Runs (or skips) calibrate on the workspace's ingest outputs.
 Status RunCalibrateStage(Workspace* workspace, const CalibrateOptions& calibrate, const std::string& face_model,

@@ -85,20 +85,6 @@ struct Observation {
   Eigen::Vector2d pixel;
 };
 
-// Removes lens distortion from a pixel (fixed-point iteration on the normalised point).
-Eigen::Vector2d UndistortPixel(const CameraIntrinsics& c, const Eigen::Vector2d& px) {
-  const Eigen::Vector2d xd((px.x() - c.cx) / c.fx, (px.y() - c.cy) / c.fy);
-  Eigen::Vector2d x = xd;
-  for (int i = 0; i < 20; ++i) {
-    const double r2 = x.squaredNorm();
-    const double radial = 1 + c.k1 * r2 + c.k2 * r2 * r2;
-    const Eigen::Vector2d tangential(2 * c.p1 * x.x() * x.y() + c.p2 * (r2 + 2 * x.x() * x.x()),
-                                     c.p1 * (r2 + 2 * x.y() * x.y()) + 2 * c.p2 * x.x() * x.y());
-    x = (xd - tangential) / radial;
-  }
-  return Eigen::Vector2d(c.fx * x.x() + c.cx, c.fy * x.y() + c.cy);
-}
-
 struct ViewPose {
   Eigen::Isometry3d cam_from_world;  // from calibrate
   Eigen::Isometry3d cam_from_head;   // from PnP of the view's landmarks against the model (world frame only)
@@ -322,7 +308,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       if (!view || !view->registered || !f.landmarks) continue;
       std::vector<Eigen::Vector2d> undistorted;
       for (int i = 0; i < 68; ++i)
-        undistorted.push_back(UndistortPixel(*in, Eigen::Vector2d((*f.landmarks)[i].x, (*f.landmarks)[i].y)));
+        undistorted.push_back(in->Undistort(Eigen::Vector2d((*f.landmarks)[i].x, (*f.landmarks)[i].y)));
       ViewPose v;
       v.cam_from_world = view->cam_from_world;
       const Eigen::Matrix<double, 3, 4> p = in->K() * view->cam_from_world.matrix().topRows<3>();

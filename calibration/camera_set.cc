@@ -38,6 +38,21 @@ Eigen::Vector2d CameraIntrinsics::Project(const Eigen::Vector3d& p) const {
   return Eigen::Vector2d(fx * xd + cx, fy * yd + cy);
 }
 
+Eigen::Vector2d CameraIntrinsics::Undistort(const Eigen::Vector2d& pixel) const {
+  const double fy_ = fy > 0 ? fy : fx;
+  const Eigen::Vector2d xd((pixel.x() - cx) / fx, (pixel.y() - cy) / fy_);
+  if (k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0) return pixel;
+  Eigen::Vector2d x = xd;
+  for (int i = 0; i < 20; ++i) {
+    const double r2 = x.squaredNorm();
+    const double radial = 1 + k1 * r2 + k2 * r2 * r2;
+    const Eigen::Vector2d tangential(2 * p1 * x.x() * x.y() + p2 * (r2 + 2 * x.x() * x.x()),
+                                     p1 * (r2 + 2 * x.y() * x.y()) + 2 * p2 * x.x() * x.y());
+    x = (xd - tangential) / radial;
+  }
+  return Eigen::Vector2d(fx * x.x() + cx, fy_ * x.y() + cy);
+}
+
 const CameraIntrinsics* CameraSet::FindCamera(const std::string& name) const {
   for (const auto& c : cameras)
     if (c.name == name) return &c;

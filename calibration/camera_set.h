@@ -29,6 +29,9 @@ struct CameraIntrinsics {
   static CameraIntrinsics FromJson(const nlohmann::json& json);
   // Pixel of a camera-frame point, with distortion.
   Eigen::Vector2d Project(const Eigen::Vector3d& camera_point) const;
+  // The pixel a distortion-free camera with the same fx, fy, cx, cy would see
+  // (the inverse of the distortion, by fixed-point iteration).
+  Eigen::Vector2d Undistort(const Eigen::Vector2d& pixel) const;
 };
 
 struct CameraView {

@@ -41,8 +41,9 @@ Status BuildTrackingViews(const IngestedCapture& capture, const CameraSet& camer
       view.frame = f.index;
       view.camera = ToTrackingCamera(*in, v->cam_from_world);
       if (f.landmarks) {
+        // The fit's cameras are pinholes: lens distortion comes off the landmarks here.
         std::array<Eigen::Vector2d, 68> points;
-        for (int i = 0; i < 68; ++i) points[i] = Eigen::Vector2d((*f.landmarks)[i].x, (*f.landmarks)[i].y);
+        for (int i = 0; i < 68; ++i) points[i] = in->Undistort(Eigen::Vector2d((*f.landmarks)[i].x, (*f.landmarks)[i].y));
         view.landmarks = points;
       }
       views->push_back(view);
@@ -246,11 +247,24 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
         mesh.normals = VertexNormals(mesh.vertices, mesh.triangles);
         mesh_frame = frame;
       }
+      // Landmarks as detected and fitted ones through the lens (the shaded mesh is drawn without distortion).
+      const CameraIntrinsics& lens = *cameras.FindCamera(cam.name);
       std::vector<Eigen::Vector2d> fitted;
       for (int l = 0; l < 68; ++l) {
-        fitted.push_back(views[i].camera.Pixel(f.head_motion * basis.Point(l, result.identity, f.expression)));
+        const Eigen::Vector3d head = f.head_motion * basis.Point(l, result.identity, f.expression);
+        fitted.push_back(lens.Project(views[i].camera.rotation * head + views[i].camera.translation));
       }
-      const cv::Mat drawn = Overlay(image, mesh, views[i].camera, views[i].landmarks, fitted);
+      std::optional<std::array<Eigen::Vector2d, 68>> detected;
+      const IngestedFrame* source = nullptr;
+      if (frame < static_cast<int>(cam.frames.size()) && cam.frames[frame].index == frame) source = &cam.frames[frame];
+      for (size_t k = 0; source == nullptr && k < cam.frames.size(); ++k)
+        if (cam.frames[k].index == frame) source = &cam.frames[k];
+      if (source != nullptr && source->landmarks) {
+        const auto& lm = source->landmarks;
+        detected.emplace();
+        for (int l = 0; l < 68; ++l) (*detected)[l] = Eigen::Vector2d((*lm)[l].x, (*lm)[l].y);
+      }
+      const cv::Mat drawn = Overlay(image, mesh, views[i].camera, detected, fitted);
       auto it = writers.find(c);
       if (it == writers.end()) {
         const fs::path video = out_dir / ("overlay_" + cam.name + ".mp4");

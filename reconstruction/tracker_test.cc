@@ -9,6 +9,9 @@
 
 #include "calibration/landmark_embedding.h"
 #include "core/face_model.h"
+#include "core/json_io.h"
+#include "core/progress.h"
+#include "reconstruction/track_stage.h"
 
 namespace headforge {
 namespace {
@@ -364,6 +367,101 @@ TEST(TrackerHardCases, NoMotionAndAVeryLongFocalLength) {
   const Scores s = Score(truth, result);
   EXPECT_LT(s.residual, 1.0);
   EXPECT_LT(s.rotation_deg, 1.0);
+}
+
+// The track stage takes cameras as calibrate wrote them, lens distortion
+// included (COLMAP's SIMPLE_RADIAL, OPENCV), and removes it from the landmarks
+// before the pinhole fit: landmarks seen through a lens then track exactly as
+// the same landmarks seen through a pinhole do. The face sits off the lens
+// axis, where a k1 of -0.25 moves its landmarks by several pixels.
+TEST(TrackStage, RemovesLensDistortionFromTheLandmarks) {
+  const int frames = 12;
+  const Truth truth = MakeTruth(frames, 0.3, 21);
+  TrackingCamera pinhole = CameraAt(0, 900, 0.6);
+  pinhole.translation.x() += 0.15;  // a quarter of the distance off the axis
+  CameraIntrinsics lens;
+  lens.name = "cam0";
+  lens.model = "OPENCV";
+  lens.width = lens.height = 512;
+  lens.fx = lens.fy = pinhole.fx;
+  lens.cx = pinhole.cx;
+  lens.cy = pinhole.cy;
+  lens.k1 = -0.25;
+  lens.k2 = 0.05;
+  lens.p1 = 0.002;
+  CameraIntrinsics no_lens = lens;
+  no_lens.model = "PINHOLE";
+  no_lens.k1 = no_lens.k2 = no_lens.p1 = 0;
+
+  // One capture per way of seeing the landmarks, with the cameras that go with it.
+  std::vector<double> shift;
+  auto make = [&](const CameraIntrinsics& seen_through, const CameraIntrinsics& calibrated, IngestedCapture* capture,
+                  CameraSet* cameras) {
+    IngestedCamera cam;
+    cam.name = "cam0";
+    cam.width = cam.height = 512;
+    cameras->mode = "colmap";
+    cameras->frame = "head";
+    cameras->cameras = {calibrated};
+    for (int f = 0; f < frames; ++f) {
+      IngestedFrame frame;
+      frame.index = f;
+      Landmarks68 points;
+      for (int i = 0; i < 68; ++i) {
+        const Eigen::Vector3d head = truth.motion[f] * Basis().Point(i, truth.alpha, truth.beta[f]);
+        const Eigen::Vector2d px = seen_through.Project(pinhole.rotation * head + pinhole.translation);
+        points[i] = cv::Point2f(float(px.x()), float(px.y()));
+        shift.push_back((px - pinhole.Pixel(head)).norm());
+      }
+      frame.landmarks = points;
+      cam.frames.push_back(frame);
+      CameraView view;
+      view.camera = "cam0";
+      view.frame = f;
+      view.registered = true;
+      view.cam_from_world.linear() = pinhole.rotation;
+      view.cam_from_world.translation() = pinhole.translation;
+      cameras->views.push_back(view);
+    }
+    capture->cameras = {cam};
+  };
+  TrackStageOptions options;
+  options.overlay = false;
+  const fs::path out = fs::temp_directory_path() / "hf_track_lens";
+  fs::remove_all(out);
+  fs::create_directories(out);
+  NullProgress progress;
+  // Tracks; returns every frame's 53 weights.
+  auto track = [&](const IngestedCapture& capture, const CameraSet& cameras) {
+    TrackSummary summary;
+    EXPECT_TRUE(RunTrack(options, capture, cameras, Model(), out, &progress, &summary).ok());
+    nlohmann::json j;
+    EXPECT_TRUE(ReadJson(out / "tracking.json", &j).ok());
+    std::vector<double> weights;
+    for (const auto& f : j["frames"])
+      for (const auto& name : Model().expression_names()) weights.push_back(f["expression"][name].get<double>());
+    return weights;
+  };
+  auto max_difference = [](const std::vector<double>& a, const std::vector<double>& b) {
+    double d = 0;
+    for (size_t i = 0; i < a.size(); ++i) d = std::max(d, std::abs(a[i] - b[i]));
+    return d;
+  };
+
+  IngestedCapture clean, distorted;
+  CameraSet clean_cameras, lens_cameras, pinhole_cameras;
+  make(no_lens, no_lens, &clean, &clean_cameras);
+  shift.clear();
+  make(lens, lens, &distorted, &lens_cameras);
+  make(lens, no_lens, &distorted, &pinhole_cameras);
+  std::nth_element(shift.begin(), shift.begin() + shift.size() / 2, shift.end());
+  ASSERT_GT(shift[shift.size() / 2], 3.0) << "the lens should move the landmarks by pixels";
+
+  const std::vector<double> reference = track(clean, clean_cameras);
+  const double with_lens = max_difference(track(distorted, lens_cameras), reference);
+  const double without_lens = max_difference(track(distorted, pinhole_cameras), reference);
+  EXPECT_LT(with_lens, 0.002);
+  EXPECT_GT(without_lens, 0.02);  // the check above is not vacuous
 }
 
 }  // namespace

@@ -28,7 +28,7 @@ const std::vector<Command>& Commands() {
       {"status", "Show the stages of a workspace: status, wall time, summary.", StatusCommand},
       {"embed-landmarks", "Measure where the landmark detector's points sit on the face model.",
        EmbedLandmarksCommand},
-      {"face-model", "Face model tools: import-ict converts ICT-FaceKit's folder into the model file.",
+      {"face-model", "Face model tools: import-ict converts ICT-FaceKit's folder into the model file; inspect summarises one.",
        FaceModelCommand},
       {"splat-fit", "Fit a static Gaussian scene to a simulated capture; report held-out PSNR.",
        SplatFitCommand},

@@ -1,10 +1,15 @@
 // `headforge face-model`: tools for the face model file. `import-ict` converts
-// ICT-FaceKit's model folder into the Basel-layout HDF5 file the stages read.
+// ICT-FaceKit's model folder into the Basel-layout HDF5 file the stages read;
+// `inspect` summarises a model file and how far its identity modes can
+// imitate a rigid motion of the head.
 #include <cstdio>
 
+#include "core/face_model.h"
+#include "core/fs.h"
 #include "core/log.h"
 #include "pipelines/commands.h"
 #include "reconstruction/face_model_import.h"
+#include "reconstruction/pose_identity.h"
 
 namespace headforge {
 namespace {
@@ -12,6 +17,7 @@ namespace {
 constexpr const char* kFaceModelUsage =
     "Usage: headforge face-model <subcommand> [options]\n"
     "  import-ict DIR --out FILE.h5   convert ICT-FaceKit's FaceXModel folder into the face model file\n"
+    "  inspect [--face-model FILE]    what a model file holds; how far its identity modes imitate head motion\n"
     "(headforge face-model <subcommand> --help lists its options)\n";
 
 int ImportIctCommand(const std::vector<std::string>& args) {
@@ -53,11 +59,57 @@ int ImportIctCommand(const std::vector<std::string>& args) {
   return kExitOk;
 }
 
+int InspectCommand(const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  AddCommonOptions(&options, &common, /*with_workspace=*/false);
+  std::string face_model;
+  int modes = 20;
+  std::vector<std::string> point_sets = {"landmarks", "face"};
+  options.Add("face_model.path", &face_model, "Face model file; default DATA/ict_facekit/ict_face_model.h5.",
+              "face-model");
+  options.Add("face_model.modes", &modes, "Identity modes that imitate the motions (the tracker fits 20).", "modes");
+  options.Add("face_model.points", &point_sets,
+              "Points the motions move: landmarks (the iBUG-68 vertices), all, or a region's name.", "points");
+  const int parsed = ParseOrExit(
+      &options, args, "headforge face-model inspect [--face-model FILE]",
+      "Prints what a face model file holds (vertices, triangles, identity modes, expressions,\n"
+      "landmarks, regions), then, for each rigid motion of the head (1 deg about its x, y, z\n"
+      "axes, 1 mm along them, 1% scale), how much of it the first --modes identity modes can\n"
+      "reproduce (least squares on the chosen points). A fit of identity and head pose together\n"
+      "cannot tell a motion from the modes' imitation of it; what the modes leave over (mm of\n"
+      "surface per degree) is what the data must resolve for the head pose to be that accurate.");
+  if (parsed >= 0) return parsed;
+  if (Status s = common.Check(false); !s.ok()) return ReportFailure(s);
+  ApplyCommonOptions(common);
+  if (face_model.empty()) face_model = (fs::path(common.data_dir) / "ict_facekit" / "ict_face_model.h5").string();
+  FaceModel model;
+  if (Status s = FaceModel::Load(face_model, &model); !s.ok()) return ReportFailure(s);
+  std::vector<std::vector<RigidImitation>> tables(point_sets.size());
+  for (size_t i = 0; i < point_sets.size(); ++i)
+    if (Status s = ImitateRigidMotions(model, modes, point_sets[i], &tables[i]); !s.ok()) return ReportFailure(s);
+  std::printf("%s\n  %d vertices, %d triangles, %d identity modes, %d expressions, %zu landmark vertices, %zu regions, %s\n",
+              face_model.c_str(), model.num_vertices(), model.num_triangles(), model.num_identity(),
+              model.num_expressions(), model.landmarks_ibug68().size(), model.regions().size(),
+              model.has_uv() ? "UVs" : "no UVs");
+  for (size_t i = 0; i < point_sets.size(); ++i) {
+    std::printf("\nRigid motions imitated by %d identity modes (points: %s):\n", modes, point_sets[i].c_str());
+    std::printf("  %-10s %-6s %10s %10s %12s %14s\n", "motion", "unit", "moves (mm)", "shared (%)", "|alpha|",
+                "left over (mm)");
+    for (const RigidImitation& r : tables[i])
+      std::printf("  %-10s %-6s %10.3f %10.1f %12.2f %14.3f\n", r.motion.c_str(), r.unit.c_str(), r.motion_mm,
+                  100 * r.shared, r.alpha_norm, r.left_over_mm);
+  }
+  return kExitOk;
+}
+
 }  // namespace
 
 int FaceModelCommand(const std::vector<std::string>& args) {
   if (!args.empty() && args[0] == "import-ict")
     return ImportIctCommand(std::vector<std::string>(args.begin() + 1, args.end()));
+  if (!args.empty() && args[0] == "inspect")
+    return InspectCommand(std::vector<std::string>(args.begin() + 1, args.end()));
   const bool help = !args.empty() && (args[0] == "--help" || args[0] == "-h");
   if (!args.empty() && !help)
     std::fprintf(stderr, "headforge: face-model: unknown subcommand '%s'\n", args[0].c_str());

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 #include <H5Cpp.h>
 
+#include <Eigen/Geometry>
+
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -11,6 +13,7 @@
 
 #include "core/face_model.h"
 #include "core/fs.h"
+#include "reconstruction/pose_identity.h"
 
 namespace headforge {
 namespace {
@@ -126,14 +129,18 @@ std::string IndicesJson() {
          ",\n  \"idx_to_rigid_landmark_idx\": " + JsonList(kRigidLandmarks) + "\n}\n";
 }
 
-void WriteSyntheticIct(const fs::path& dir) {
+// `identities`: each identity shape's displacement from the neutral
+// (centimetres); empty: kIdentities of IdentityDeltaCm.
+void WriteSyntheticIct(const fs::path& dir, std::vector<Eigen::Matrix3Xd> identities = {}) {
   fs::create_directories(dir);
   const Eigen::Matrix3Xd neutral = NeutralCm();
   WriteText(dir / "generic_neutral_mesh.obj", ObjText(neutral));
-  for (int k = 0; k < kIdentities; ++k) {
+  if (identities.empty())
+    for (int k = 0; k < kIdentities; ++k) identities.push_back(IdentityDeltaCm(k));
+  for (size_t k = 0; k < identities.size(); ++k) {
     char name[32];
-    std::snprintf(name, sizeof(name), "identity%03d.obj", k);
-    WriteText(dir / name, ObjText(neutral + IdentityDeltaCm(k)));
+    std::snprintf(name, sizeof(name), "identity%03zu.obj", k);
+    WriteText(dir / name, ObjText(neutral + identities[k]));
   }
   for (size_t e = 0; e < kExpressions.size(); ++e)
     WriteText(dir / (kExpressions[e] + ".obj"), ObjText(neutral + ExpressionDeltaCm(static_cast<int>(e))));
@@ -395,6 +402,41 @@ TEST_F(ImportIctFaceKitErrors, FailureKeepsAnEarlierFile) {
   EXPECT_EQ(fs::file_size(out_), size);
   FaceModel model;
   EXPECT_TRUE(FaceModel::Load(out_.string(), &model).ok());
+}
+
+// A model whose identity shapes are the neutral pitched by 2 degrees (to first
+// order, as the function measures) and moved 3 mm along y: its modes imitate those two motions completely and a yaw only
+// in part. Points: the whole grid (its centroid is the pivot, as in the function).
+TEST(RigidImitation, ModesThatAreRigidMotionsImitateThem) {
+  const fs::path dir = ScratchDir();
+  const Eigen::Matrix3Xd neutral = NeutralCm();
+  const Eigen::Vector3d centre = neutral.rowwise().mean();
+  Eigen::Matrix3Xd pitched(3, kVertices), moved = Eigen::Matrix3Xd::Zero(3, kVertices);
+  for (int v = 0; v < kVertices; ++v) {
+    pitched.col(v) = (2.0 * M_PI / 180.0) * Eigen::Vector3d::UnitX().cross(neutral.col(v) - centre);
+    moved(1, v) = 0.3;
+  }
+  WriteSyntheticIct(dir / "ict", {pitched, moved});
+  ASSERT_TRUE(ImportIctFaceKit((dir / "ict").string(), (dir / "model.h5").string(), IctImportOptions()).ok());
+  FaceModel model;
+  ASSERT_TRUE(FaceModel::Load((dir / "model.h5").string(), &model).ok());
+  std::vector<RigidImitation> rows;
+  ASSERT_TRUE(ImitateRigidMotions(model, 2, "all", &rows).ok());
+  ASSERT_EQ(rows.size(), 7u);
+  // Float storage of the model leaves about 1e-6 of the motion over.
+  EXPECT_NEAR(rows[0].shared, 1.0, 1e-5) << rows[0].motion;
+  EXPECT_LT(rows[0].left_over_mm, 1e-4 * rows[0].motion_mm);
+  EXPECT_NEAR(rows[4].shared, 1.0, 1e-5) << rows[4].motion;
+  EXPECT_LT(rows[4].left_over_mm, 1e-4 * rows[4].motion_mm);
+  EXPECT_GT(rows[4].alpha_norm, 0.0);
+  for (int m : {1, 2, 3, 5}) EXPECT_LT(rows[m].shared, 0.9) << rows[m].motion;
+  // Shared and left over split the motion's displacement: shared^2 + (left/motion)^2 = 1.
+  for (const auto& r : rows)
+    EXPECT_NEAR(r.shared * r.shared + std::pow(r.left_over_mm / r.motion_mm, 2), 1.0, 1e-9) << r.motion;
+  // Bad requests are refused.
+  EXPECT_FALSE(ImitateRigidMotions(model, 3, "all", &rows).ok());
+  EXPECT_FALSE(ImitateRigidMotions(model, 0, "all", &rows).ok());
+  EXPECT_FALSE(ImitateRigidMotions(model, 2, "no such region", &rows).ok());
 }
 
 }  // namespace

@@ -226,6 +226,20 @@ TEST(Cli, HelpVersionAndUsageErrors) {
   EXPECT_EQ(no_ws.code, 1);
 }
 
+// face-model inspect on the shipped model: its summary and one table row per
+// rigid motion; an unknown point set is a clear error.
+TEST(Cli, FaceModelInspectPrintsTheModelAndTheImitationTable) {
+  const Result r = Headforge({"face-model", "inspect", "--points", "landmarks"});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(Contains(r.out, "26719 vertices")) << r.out;
+  EXPECT_TRUE(Contains(r.out, "53 expressions")) << r.out;
+  for (const char* motion : {"pitch (x)", "yaw (y)", "roll (z)", "along x", "along y", "along z", "scale"})
+    EXPECT_TRUE(Contains(r.out, motion)) << motion;
+  const Result bad = Headforge({"face-model", "inspect", "--points", "elbows"});
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_TRUE(Contains(bad.err, "unknown point set 'elbows'")) << bad.err;
+}
+
 }  // namespace
 }  // namespace headforge
 

@@ -412,18 +412,25 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       const Sim3 first_choice = from_views;
       std::vector<ViewPose> chosen;
       bool settled = false;
-      for (int round = 0; round < 8 && !settled; ++round) {
+      // A fixed-point iteration: each round moves the rotation by the part of
+      // the last move the detector does not see (unshaded orbits: about 0.7
+      // of it), so settling can take twenty rounds; each is a mean of rotations.
+      constexpr int kMaxRounds = 60;
+      for (int round = 0; round < kMaxRounds && !settled; ++round) {
         const std::vector<ViewPose> facing = ViewsFacing(views, from_views.rotation, face_centre,
                                                          options.max_yaw_deg, options.max_elevation_deg);
         Sim3 next;
         if (!SimilarityFromViewPoses(facing, &next)) break;
-        settled = Eigen::AngleAxisd(next.rotation.transpose() * from_views.rotation).angle() < 1e-4;
+        const double moved = Eigen::AngleAxisd(next.rotation.transpose() * from_views.rotation).angle();
+        HF_LOG(Debug) << "align: view choice round " << round << ": " << facing.size() << " views, rotation moved "
+                      << moved * 180 / M_PI << " deg";
+        settled = moved < 1e-4;
         from_views = next;
         chosen = facing;
       }
       if (!settled && !per_frame)
-        HF_LOG(Warning) << "align: the choice of views did not settle in 8 rounds; using the last (" << chosen.size()
-                        << " views)";
+        HF_LOG(Warning) << "align: the choice of views did not settle in " << kMaxRounds << " rounds; using the last ("
+                        << chosen.size() << " views)";
       // Too few views to surround the face (a rig's few fixed cameras, tens of
       // degrees apart): the window cannot be made even, and its mean follows
       // whichever view falls in or out; keep the first choice.

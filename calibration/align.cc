@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <Eigen/SVD>
 #include <ceres/rotation.h>
 #include <map>
@@ -26,6 +27,7 @@ Status AlignOptions::Check() const {
   if (method != "views" && method != "landmarks") return Status::InvalidArgument("--align-method must be views or landmarks");
   if (refine != "reprojection" && refine != "off") return Status::InvalidArgument("--align-refine must be reprojection or off");
   if (!(refine_robust_px > 0)) return Status::InvalidArgument("--align-refine-robust must be positive");
+  if (!(max_residual_mm > 0)) return Status::InvalidArgument("--max-align-residual must be positive");
   return Status::Ok();
 }
 
@@ -57,6 +59,10 @@ void AddAlignOptions(OptionSet* o, AlignOptions* a) {
          "align-refine");
   o->Add("align.refine_robust_px", &a->refine_robust_px, "Huber scale of the reprojection refinement, pixels.",
          "align-refine-robust");
+  o->Add("align.max_residual_mm", &a->max_residual_mm,
+         "Fail when the triangulated landmarks miss the face model by more than this median (mm): the cameras do not "
+         "see one consistent head.",
+         "max-align-residual");
 }
 
 CameraSet ToHeadFrame(const CameraSet& cameras, const Sim3& head_from_world) {
@@ -526,6 +532,22 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       }
       SummariseResiduals(&best);
     }
+  }
+  // A face is some 150 mm across: landmarks that miss the model by tens of
+  // millimetres mean the cameras do not see one consistent head, whatever
+  // COLMAP's registration count said.
+  if (best.median_mm > options.max_residual_mm) {
+    char text[400];
+    std::snprintf(text, sizeof(text),
+                  "the cameras do not agree on the face: landmarks triangulated from them miss the face model by a "
+                  "median %.0f mm (limit %.0f mm%s). The reconstruction is probably wrong even where frames "
+                  "registered; try calibrate with --max-features 8192, --matcher exhaustive, fewer --rig-instants, "
+                  "a rig file (--mode rig) or --mode head-pose",
+                  best.median_mm, options.max_residual_mm,
+                  best.reprojection_median_px > 0
+                      ? (", landmark reprojection " + std::to_string(int(std::lround(best.reprojection_median_px))) + " px").c_str()
+                      : "");
+    return Status::DataError(text);
   }
   best.cameras = ToHeadFrame(cameras, best.head_from_world);
   *result = std::move(best);

@@ -38,6 +38,9 @@ struct AlignOptions {
   // keep the fit to the triangulated landmarks.
   std::string refine = "reprojection";
   double refine_robust_px = 2.0;  // Huber scale of that refinement
+  // World-frame cameras: fail when the triangulated landmarks miss the model by
+  // more than this median (mm), a sign of a broken reconstruction.
+  double max_residual_mm = 40.0;
   Status Check() const;
 };
 void AddAlignOptions(OptionSet* options, AlignOptions* align);

@@ -3,7 +3,10 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <Eigen/Geometry>
+#include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstdint>
 #include <fstream>
 #include <map>
@@ -29,6 +32,8 @@ Status ColmapOptions::Check() const {
   if (overlap < 1) return Status::InvalidArgument("sequential overlap must be at least 1");
   if (rig_instants < 1) return Status::InvalidArgument("rig instants must be at least 1");
   if (mapper_attempts < 1) return Status::InvalidArgument("mapper attempts must be at least 1");
+  if (!(max_instant_rotation_deg > 0) || !(max_instant_shift > 0))
+    return Status::InvalidArgument("the fixed cameras' instant limits must be positive");
   return Status::Ok();
 }
 
@@ -179,6 +184,46 @@ Status ReadColmapTextModel(const fs::path& dir, const IngestedCapture& capture, 
   return Status::Ok();
 }
 
+Status CheckFixedCameraInstants(const CameraSet& cameras, double max_rotation_deg, double max_shift) {
+  std::map<std::string, std::vector<Eigen::Isometry3d>> instants;
+  for (const auto& v : cameras.views)
+    if (v.registered) instants[v.camera].push_back(v.cam_from_world);
+  std::vector<Eigen::Vector3d> centres;
+  for (const auto& [name, poses] : instants) centres.push_back(poses.front().inverse().translation());
+  std::vector<double> distances;
+  for (size_t a = 0; a < centres.size(); ++a)
+    for (size_t b = a + 1; b < centres.size(); ++b) distances.push_back((centres[a] - centres[b]).norm());
+  double rig_size = 0;
+  if (!distances.empty()) {
+    std::nth_element(distances.begin(), distances.begin() + distances.size() / 2, distances.end());
+    rig_size = distances[distances.size() / 2];
+  }
+  std::string worst;
+  double worst_excess = 1.0, worst_deg = 0, worst_shift = 0;
+  for (const auto& [name, poses] : instants)
+    for (size_t i = 1; i < poses.size(); ++i) {
+      const double deg =
+          Eigen::AngleAxisd(poses[i].linear() * poses.front().linear().transpose()).angle() * 180.0 / M_PI;
+      const double shift =
+          rig_size > 0 ? (poses[i].inverse().translation() - poses.front().inverse().translation()).norm() / rig_size : 0;
+      const double excess = std::max(deg / max_rotation_deg, shift / max_shift);
+      if (excess > worst_excess) {
+        worst_excess = excess;
+        worst = name;
+        worst_deg = deg;
+        worst_shift = shift;
+      }
+    }
+  if (worst.empty()) return Status::Ok();
+  char text[320];
+  std::snprintf(text, sizeof(text),
+                "COLMAP's model is inconsistent: it places fixed camera %s at two instants %.1f deg and %.0f%% of the "
+                "rig's size apart (limits %.1f deg, %.0f%%). Try: fewer --rig-instants, --max-features 8192, or a "
+                "rig calibration file (--mode rig)",
+                worst.c_str(), worst_deg, 100 * worst_shift, max_rotation_deg, 100 * max_shift);
+  return Status::DataError(text);
+}
+
 Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, const fs::path& work_dir,
                  CameraSet* cameras, ColmapReport* report) {
   HF_RETURN_IF_ERROR(options.Check());
@@ -295,6 +340,9 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
   HF_RETURN_IF_ERROR(ReadColmapTextModel(text, capture, cameras, report));
   report->total = total;
   if (options.static_cameras) {
+    if (Status s = CheckFixedCameraInstants(*cameras, options.max_instant_rotation_deg, options.max_instant_shift);
+        !s.ok())
+      return Status::DataError(s.message() + " (see " + log.string() + ")");
     // Each fixed camera's pose (from its first registered instant) holds for
     // all of its frames; registration counts the instants COLMAP was given.
     std::map<std::string, Eigen::Isometry3d> pose;

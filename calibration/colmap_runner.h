@@ -36,6 +36,11 @@ struct ColmapOptions {
   // registers fewer than `retry_below` of the images.
   int mapper_attempts = 2;
   double retry_below = 0.9;
+  // Fixed cameras: how far one camera's instants may lie apart in COLMAP's
+  // model before the model counts as broken (degrees; fraction of the median
+  // distance between the cameras).
+  double max_instant_rotation_deg = 2.0;
+  double max_instant_shift = 0.05;
   Status Check() const;
 };
 
@@ -52,6 +57,13 @@ struct ColmapReport {
 // unregistered).
 Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, const fs::path& work_dir,
                  CameraSet* cameras, ColmapReport* report);
+
+// Fixed cameras seen at several instants: each camera's registered instants
+// must agree (a camera that does not move cannot be in two places). Returns
+// DataError naming the worst camera when one's instants lie more than
+// `max_rotation_deg` or `max_shift` (times the median distance between the
+// cameras' first poses) apart; views of other cameras and single instants pass.
+Status CheckFixedCameraInstants(const CameraSet& cameras, double max_rotation_deg, double max_shift);
 
 // The parts of a COLMAP text model: cameras by id (pixel centres moved to
 // integers), and images by name with their camera id and cam_from_world.

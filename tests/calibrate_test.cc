@@ -8,6 +8,7 @@
 
 #include "calibration/align.h"
 #include "calibration/calibrate.h"
+#include "calibration/colmap_runner.h"
 #include "calibration/evaluation.h"
 #include "calibration/landmark_embedding.h"
 #include "capture/ingest.h"
@@ -183,6 +184,39 @@ TEST(Calibrate, AutoModeFallsBackToHeadPoseWhenColmapFails) {
   const Status failed = RunCalibrate(options, capture, Model(), dir / "colmap", &progress, &cameras, &result);
   ASSERT_FALSE(failed.ok());
   EXPECT_NE(failed.message().find("Try"), std::string::npos) << failed.message();
+}
+
+// Fixed cameras seen at several instants: COLMAP's model must place each
+// camera's instants together; a camera in two places means a broken model.
+TEST(Calibrate, FixedCamerasMustAgreeAcrossInstants) {
+  CameraSet cameras;
+  const double radius = 0.9;
+  auto view = [&](int camera, int frame, double yaw_deg, const Eigen::Vector3d& shift) {
+    CameraView v;
+    v.camera = "cam" + std::to_string(camera);
+    v.frame = frame;
+    v.registered = true;
+    const double yaw = yaw_deg * M_PI / 180;
+    const Eigen::Vector3d centre = radius * Eigen::Vector3d(std::sin(yaw), 0, std::cos(yaw)) + shift;
+    v.cam_from_world.linear() = Eigen::AngleAxisd(-yaw, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    v.cam_from_world.translation() = -v.cam_from_world.linear() * centre;
+    return v;
+  };
+  // Four cameras 30 degrees apart (about 0.47 m between neighbours), two instants each.
+  for (int c = 0; c < 4; ++c)
+    for (int f = 0; f < 2; ++f) cameras.views.push_back(view(c, f, 30.0 * c + 0.2 * f, Eigen::Vector3d(0, 0.002 * f, 0)));
+  EXPECT_TRUE(CheckFixedCameraInstants(cameras, 2.0, 0.05).ok());
+  CameraSet turned = cameras;
+  turned.views[5] = view(2, 1, 60.0 + 5.0, Eigen::Vector3d::Zero());  // cam2 turned by 5 deg (and moved with it)
+  const Status s = CheckFixedCameraInstants(turned, 2.0, 0.05);
+  EXPECT_EQ(s.code(), Status::Code::kDataError);
+  EXPECT_NE(s.message().find("fixed camera cam2"), std::string::npos) << s.message();
+  CameraSet moved = cameras;
+  moved.views[7] = view(3, 1, 90.0, Eigen::Vector3d(0.1, 0, 0));  // cam3 10 cm away: a fifth of the spacing
+  EXPECT_NE(CheckFixedCameraInstants(moved, 2.0, 0.05).message().find("fixed camera cam3"), std::string::npos);
+  // An unregistered instant does not count; nor does a camera seen once.
+  moved.views[7].registered = false;
+  EXPECT_TRUE(CheckFixedCameraInstants(moved, 2.0, 0.05).ok());
 }
 
 TEST(Calibrate, RigFilesAreImportedThroughTheCrop) {
@@ -433,6 +467,25 @@ TEST(Align, RecoversTheSimilarityFromLandmarkViews) {
       EXPECT_LT(scale_error[1], scale_error[0]);
     }
   }
+
+  // Cameras that do not see one head (each turned 20 degrees about a random
+  // axis through its centre, as a broken reconstruction might leave them)
+  // are refused, with the size of the disagreement.
+  IngestedCapture capture;
+  CameraSet cameras;
+  make(0.0, &capture, &cameras);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> gaussian(0.0, 1.0);
+  for (CameraView& v : cameras.views) {
+    const Eigen::Vector3d axis = Eigen::Vector3d(gaussian(rng), gaussian(rng), gaussian(rng)).normalized();
+    const Eigen::Vector3d centre = v.Centre();
+    v.cam_from_world.linear() = Eigen::AngleAxisd(20.0 * M_PI / 180, axis) * v.cam_from_world.linear();
+    v.cam_from_world.translation() = -v.cam_from_world.linear() * centre;
+  }
+  AlignResult aligned;
+  const Status broken = RunAlign(AlignOptions(), capture, cameras, Model(), &aligned);
+  EXPECT_EQ(broken.code(), Status::Code::kDataError);
+  EXPECT_NE(broken.message().find("the cameras do not agree on the face"), std::string::npos) << broken.message();
 }
 
 // A detector that sees every turned head as half as turned as it is, and a

@@ -39,9 +39,9 @@ Eigen::Vector2d CameraIntrinsics::Project(const Eigen::Vector3d& p) const {
 }
 
 Eigen::Vector2d CameraIntrinsics::Undistort(const Eigen::Vector2d& pixel) const {
+  if (k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0) return pixel;
   const double fy_ = fy > 0 ? fy : fx;
   const Eigen::Vector2d xd((pixel.x() - cx) / fx, (pixel.y() - cy) / fy_);
-  if (k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0) return pixel;
   Eigen::Vector2d x = xd;
   for (int i = 0; i < 20; ++i) {
     const double r2 = x.squaredNorm();

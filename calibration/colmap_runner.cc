@@ -218,8 +218,7 @@ Status CheckFixedCameraInstants(const CameraSet& cameras, double max_rotation_de
   char text[320];
   std::snprintf(text, sizeof(text),
                 "COLMAP's model is inconsistent: it places fixed camera %s at two instants %.1f deg and %.0f%% of the "
-                "rig's size apart (limits %.1f deg, %.0f%%). Try: fewer --rig-instants, --max-features 8192, or a "
-                "rig calibration file (--mode rig)",
+                "rig's size apart (limits %.1f deg, %.0f%%; fewer --rig-instants or a rig file, --mode rig, may help)",
                 worst.c_str(), worst_deg, 100 * worst_shift, max_rotation_deg, 100 * max_shift);
   return Status::DataError(text);
 }
@@ -342,7 +341,7 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
   if (options.static_cameras) {
     if (Status s = CheckFixedCameraInstants(*cameras, options.max_instant_rotation_deg, options.max_instant_shift);
         !s.ok())
-      return Status::DataError(s.message() + " (see " + log.string() + ")");
+      return Status::DataError(s.message() + "; see " + log.string());
     // Each fixed camera's pose (from its first registered instant) holds for
     // all of its frames; registration counts the instants COLMAP was given.
     std::map<std::string, Eigen::Isometry3d> pose;

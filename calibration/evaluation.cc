@@ -4,15 +4,10 @@
 #include <cmath>
 
 #include "core/json_io.h"
+#include "core/statistics.h"
 
 namespace headforge {
 namespace {
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 double Degrees(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
   return Eigen::AngleAxisd(a.transpose() * b).angle() * 180.0 / 3.14159265358979323846;

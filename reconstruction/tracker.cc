@@ -6,6 +6,7 @@
 #include <map>
 
 #include "calibration/reprojection_cost.h"
+#include "core/statistics.h"
 
 namespace headforge {
 namespace {
@@ -16,12 +17,6 @@ struct FrameBlocks {
   std::vector<double> expression;
   bool observed = false;
 };
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 Eigen::Isometry3d MotionOf(const FrameBlocks& b) {
   Eigen::Isometry3d m = Eigen::Isometry3d::Identity();

@@ -10,6 +10,7 @@
 #include <Eigen/SVD>
 
 #include "core/json_io.h"
+#include "core/statistics.h"
 #include "tests/run_headforge.h"
 
 namespace headforge {
@@ -27,11 +28,6 @@ nlohmann::json Json(const fs::path& path) {
   nlohmann::json j;
   EXPECT_TRUE(ReadJson(path, &j).ok()) << path;
   return j;
-}
-
-double Median(std::vector<double> v) {
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
 }
 
 double Correlation(const std::vector<double>& a, const std::vector<double>& b) {

@@ -420,7 +420,8 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       bool settled = false;
       // A fixed-point iteration: each round moves the rotation by the part of
       // the last move the detector does not see (unshaded orbits: about 0.7
-      // of it), so settling can take twenty rounds; each is a mean of rotations.
+      // of it), so settling takes some fifteen rounds there; each round is a
+      // mean of rotations.
       constexpr int kMaxRounds = 60;
       for (int round = 0; round < kMaxRounds && !settled; ++round) {
         const std::vector<ViewPose> facing = ViewsFacing(views, from_views.rotation, face_centre,

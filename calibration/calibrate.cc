@@ -61,6 +61,14 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
          "static-rig");
   o->Add("calibrate.colmap.rig_instants", &c->colmap.rig_instants,
          "Fixed cameras: synchronised instants given to COLMAP.", "rig-instants");
+  o->Add("calibrate.colmap.max_instant_rotation_deg", &c->colmap.max_instant_rotation_deg,
+         "Fixed cameras at several instants: fail when COLMAP turns one camera by more than this between its "
+         "instants (degrees).",
+         "max-instant-rotation");
+  o->Add("calibrate.colmap.max_instant_shift", &c->colmap.max_instant_shift,
+         "Fixed cameras at several instants: fail when COLMAP moves one camera by more than this fraction of the "
+         "rig's size between its instants.",
+         "max-instant-shift");
   o->Add("calibrate.head_pose.focal", &c->head_pose.focal,
          "Head-pose mode: focal length in frame pixels; 0 estimates it.", "focal");
   o->Add("calibrate.head_pose.smoothness", &c->head_pose.smoothness,

@@ -40,8 +40,7 @@ Eigen::Vector2d CameraIntrinsics::Project(const Eigen::Vector3d& p) const {
 
 Eigen::Vector2d CameraIntrinsics::Undistort(const Eigen::Vector2d& pixel) const {
   if (k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0) return pixel;
-  const double fy_ = fy > 0 ? fy : fx;
-  const Eigen::Vector2d xd((pixel.x() - cx) / fx, (pixel.y() - cy) / fy_);
+  const Eigen::Vector2d xd((pixel.x() - cx) / fx, (pixel.y() - cy) / fy);
   Eigen::Vector2d x = xd;
   for (int i = 0; i < 20; ++i) {
     const double r2 = x.squaredNorm();
@@ -50,7 +49,7 @@ Eigen::Vector2d CameraIntrinsics::Undistort(const Eigen::Vector2d& pixel) const 
                                      p1 * (r2 + 2 * x.y() * x.y()) + 2 * p2 * x.x() * x.y());
     x = (xd - tangential) / radial;
   }
-  return Eigen::Vector2d(fx * x.x() + cx, fy_ * x.y() + cy);
+  return Eigen::Vector2d(fx * x.x() + cx, fy * x.y() + cy);
 }
 
 const CameraIntrinsics* CameraSet::FindCamera(const std::string& name) const {

@@ -218,7 +218,8 @@ Status CheckFixedCameraInstants(const CameraSet& cameras, double max_rotation_de
   char text[320];
   std::snprintf(text, sizeof(text),
                 "COLMAP's model is inconsistent: it places fixed camera %s at two instants %.1f deg and %.0f%% of the "
-                "rig's size apart (limits %.1f deg, %.0f%%; fewer --rig-instants or a rig file, --mode rig, may help)",
+                "rig's size apart (limits --max-instant-rotation %.1f deg, --max-instant-shift %.0f%%; fewer "
+                "--rig-instants or a rig file, --mode rig, may help)",
                 worst.c_str(), worst_deg, 100 * worst_shift, max_rotation_deg, 100 * max_shift);
   return Status::DataError(text);
 }

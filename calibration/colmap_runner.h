@@ -59,10 +59,12 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
                  CameraSet* cameras, ColmapReport* report);
 
 // Fixed cameras seen at several instants: each camera's registered instants
-// must agree (a camera that does not move cannot be in two places). Returns
-// DataError naming the worst camera when one's instants lie more than
-// `max_rotation_deg` or `max_shift` (times the median distance between the
-// cameras' first poses) apart; views of other cameras and single instants pass.
+// must agree with its first (a camera that does not move cannot be in two
+// places). Returns DataError naming the worst camera when one's instants lie
+// more than `max_rotation_deg` or `max_shift` (times the rig's size, the
+// median distance between the cameras' first poses) apart. A camera seen at
+// one instant passes; with a single camera there is no size, and only the
+// rotation is checked.
 Status CheckFixedCameraInstants(const CameraSet& cameras, double max_rotation_deg, double max_shift);
 
 // The parts of a COLMAP text model: cameras by id (pixel centres moved to

@@ -83,20 +83,34 @@ int InspectCommand(const std::vector<std::string>& args) {
   if (Status s = common.Check(false); !s.ok()) return ReportFailure(s);
   ApplyCommonOptions(common);
   if (face_model.empty()) face_model = (fs::path(common.data_dir) / "ict_facekit" / "ict_face_model.h5").string();
+  const bool defaults = point_sets == std::vector<std::string>{"landmarks", "face"};
+  if (modes < 1) return ReportFailure(Status::InvalidArgument("--modes must be at least 1"));
   FaceModel model;
   if (Status s = FaceModel::Load(face_model, &model); !s.ok()) return ReportFailure(s);
-  std::vector<std::vector<RigidImitation>> tables(point_sets.size());
-  for (size_t i = 0; i < point_sets.size(); ++i)
-    if (Status s = ImitateRigidMotions(model, modes, point_sets[i], &tables[i]); !s.ok()) return ReportFailure(s);
   std::printf("%s\n  %d vertices, %d triangles, %d identity modes, %d expressions, %zu landmark vertices, %zu regions, %s\n",
               face_model.c_str(), model.num_vertices(), model.num_triangles(), model.num_identity(),
               model.num_expressions(), model.landmarks_ibug68().size(), model.regions().size(),
               model.has_uv() ? "UVs" : "no UVs");
-  for (size_t i = 0; i < point_sets.size(); ++i) {
-    std::printf("\nRigid motions imitated by %d identity modes (points: %s):\n", modes, point_sets[i].c_str());
+  if (modes > model.num_identity()) {
+    std::printf("  (the model has %d identity modes; using them all)\n", model.num_identity());
+    modes = model.num_identity();
+  }
+  for (const std::string& points : point_sets) {
+    // The default sets are skipped where a model lacks them; a set asked for is required.
+    const bool missing = (points == "landmarks" && model.landmarks_ibug68().empty()) ||
+                         (points != "landmarks" && points != "all" && model.FindRegion(points) == nullptr);
+    if (missing && defaults) {
+      std::printf("\n(no %s points in this model)\n", points.c_str());
+      continue;
+    }
+    std::vector<RigidImitation> rows;
+    if (Status s = ImitateRigidMotions(model, modes, points, &rows); !s.ok()) return ReportFailure(s);
+    std::printf("\nRigid motions imitated by %d identity modes (points: %s; rotations and scale with a free "
+                "translation):\n",
+                modes, points.c_str());
     std::printf("  %-10s %-6s %10s %10s %12s %14s\n", "motion", "unit", "moves (mm)", "shared (%)", "|alpha|",
                 "left over (mm)");
-    for (const RigidImitation& r : tables[i])
+    for (const RigidImitation& r : rows)
       std::printf("  %-10s %-6s %10.3f %10.1f %12.2f %14.3f\n", r.motion.c_str(), r.unit.c_str(), r.motion_mm,
                   100 * r.shared, r.alpha_norm, r.left_over_mm);
   }

@@ -30,7 +30,12 @@ Status ImitateRigidMotions(const FaceModel& model, int modes, const std::string&
     centre += model.neutral().col(vertices[i]).cast<double>();
   }
   centre /= n;
-  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(basis);
+  // Rotations and scale are imitated by the modes together with a free
+  // translation (a fit moves the head too); translations by the modes alone.
+  Eigen::MatrixXd with_translation(3 * n, modes + 3);
+  with_translation.leftCols(modes) = basis;
+  for (int i = 0; i < n; ++i) with_translation.block(3 * i, modes, 3, 3).setIdentity();
+  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr_modes(basis), qr_moving(with_translation);
   const char* names[] = {"pitch (x)", "yaw (y)", "roll (z)", "along x", "along y", "along z", "scale"};
   rows->clear();
   for (int m = 0; m < 7; ++m) {
@@ -46,13 +51,14 @@ Status ImitateRigidMotions(const FaceModel& model, int modes, const std::string&
         move = 0.01 * p;
       d.segment<3>(3 * i) = move;
     }
-    const Eigen::VectorXd alpha = qr.solve(d);
-    const Eigen::VectorXd imitated = basis * alpha;
+    const bool translation = m >= 3 && m < 6;
+    const Eigen::VectorXd x = translation ? Eigen::VectorXd(qr_modes.solve(d)) : Eigen::VectorXd(qr_moving.solve(d));
+    const Eigen::VectorXd imitated = translation ? Eigen::VectorXd(basis * x) : Eigen::VectorXd(with_translation * x);
     RigidImitation row;
     row.motion = names[m];
     row.unit = m < 3 ? "1 deg" : (m < 6 ? "1 mm" : "1 %");
     row.shared = imitated.norm() / d.norm();
-    row.alpha_norm = alpha.norm();
+    row.alpha_norm = x.head(modes).norm();
     row.motion_mm = 1e3 * d.norm() / std::sqrt(double(n));
     row.left_over_mm = 1e3 * (d - imitated).norm() / std::sqrt(double(n));
     rows->push_back(row);

@@ -19,7 +19,7 @@ namespace headforge {
 struct RigidImitation {
   std::string motion;         // "pitch (x)", ..., "scale"
   std::string unit;           // "1 deg", "1 mm", "1 %"
-  double shared = 0.0;        // |B a| / |d|: the part of the motion's displacement the modes reproduce (0-1)
+  double shared = 0.0;        // |B a (+ t)| / |d|: the part of the motion's displacement reproduced (0-1)
   double alpha_norm = 0.0;    // |a| of the least-squares imitation, per unit of motion
   double motion_mm = 0.0;     // rms displacement of the points under one unit of motion, mm
   double left_over_mm = 0.0;  // rms of what the modes cannot reproduce, mm
@@ -27,9 +27,11 @@ struct RigidImitation {
 
 // Least-squares imitation, by the first `modes` identity modes, of each rigid
 // motion (1 deg about the head's x, y, z axes through the points' centroid;
-// 1 mm along them; 1% scale) on the model's points: "landmarks" (its iBUG-68
-// vertices), "all", or the name of a region ("face"). InvalidArgument for an
-// unknown set or a model without the modes.
+// 1 mm along them; 1% scale) on the model's points. Rotations and scale may
+// also be imitated with a free translation (a fit moves the head as well, so
+// the pivot does not matter); translations by the modes alone. Points:
+// "landmarks" (its iBUG-68 vertices), "all", or the name of a region
+// ("face"). InvalidArgument for an unknown set or a model without the modes.
 Status ImitateRigidMotions(const FaceModel& model, int modes, const std::string& points,
                            std::vector<RigidImitation>* rows);
 

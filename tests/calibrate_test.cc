@@ -202,7 +202,8 @@ TEST(Calibrate, FixedCamerasMustAgreeAcrossInstants) {
     v.cam_from_world.translation() = -v.cam_from_world.linear() * centre;
     return v;
   };
-  // Four cameras 30 degrees apart (about 0.47 m between neighbours), two instants each.
+  // Four cameras 30 degrees apart on a 0.9 m circle (the median distance between
+  // them, the rig's size, is 0.9 m), two instants each.
   for (int c = 0; c < 4; ++c)
     for (int f = 0; f < 2; ++f) cameras.views.push_back(view(c, f, 30.0 * c + 0.2 * f, Eigen::Vector3d(0, 0.002 * f, 0)));
   EXPECT_TRUE(CheckFixedCameraInstants(cameras, 2.0, 0.05).ok());
@@ -212,7 +213,7 @@ TEST(Calibrate, FixedCamerasMustAgreeAcrossInstants) {
   EXPECT_EQ(s.code(), Status::Code::kDataError);
   EXPECT_NE(s.message().find("fixed camera cam2"), std::string::npos) << s.message();
   CameraSet moved = cameras;
-  moved.views[7] = view(3, 1, 90.0, Eigen::Vector3d(0.1, 0, 0));  // cam3 10 cm away: a fifth of the spacing
+  moved.views[7] = view(3, 1, 90.0, Eigen::Vector3d(0.1, 0, 0));  // cam3 10 cm away: 11% of the rig's size
   EXPECT_NE(CheckFixedCameraInstants(moved, 2.0, 0.05).message().find("fixed camera cam3"), std::string::npos);
   // An unregistered instant does not count; nor does a camera seen once.
   moved.views[7].registered = false;

@@ -169,6 +169,7 @@ SimulatedScores RunSimulated(const std::string& scene, int frames, const std::ve
     estimated.push_back(est);
     real_rotations.push_back(real);
   }
+  EXPECT_GT(estimated.size(), 0u) << "no registered views to score";
   s.rotation_deg = Median(rotation);
   // est = real * g for one constant g (chordal mean of real^T est, projected onto the rotations).
   Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();

@@ -443,8 +443,9 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       // whichever view falls in or out; keep the first choice.
       constexpr size_t kMinFacingViews = 6;
       LandmarkFit refit;
-      if (chosen.size() >= kMinFacingViews && fit_landmarks(ByLandmark(chosen), &refit)) {
-        per_landmark = ByLandmark(chosen);
+      std::vector<std::vector<Observation>> chosen_landmarks = ByLandmark(chosen);
+      if (chosen.size() >= kMinFacingViews && fit_landmarks(chosen_landmarks, &refit)) {
+        per_landmark = std::move(chosen_landmarks);
         lf = refit;
         views_used = static_cast<int>(chosen.size());
       } else {

@@ -14,12 +14,12 @@
 #include "capture/ingest.h"
 #include "capture/simulator.h"
 #include "core/hash.h"
-#include "pipelines/stages.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/parallel.h"
 #include "core/paths.h"
 #include "pipelines/commands.h"
+#include "pipelines/stages.h"
 
 namespace headforge {
 namespace {

@@ -27,14 +27,17 @@ TrackingCamera ToTrackingCamera(const CameraIntrinsics& in, const Eigen::Isometr
   return c;
 }
 
-// One TrackingView per registered view of every camera, with its landmarks.
+// One TrackingView per registered view of every camera, with its landmarks;
+// `view_source` says where each came from: (camera index, position in that
+// camera's ingested frames).
 Status BuildTrackingViews(const IngestedCapture& capture, const CameraSet& cameras, std::vector<TrackingView>* views,
                           std::vector<std::pair<int, int>>* view_source) {
   for (size_t c = 0; c < capture.cameras.size(); ++c) {
     const IngestedCamera& cam = capture.cameras[c];
     const CameraIntrinsics* in = cameras.FindCamera(cam.name);
     if (in == nullptr) return Status::DataError("track: no intrinsics for camera " + cam.name + " in the cameras");
-    for (const IngestedFrame& f : cam.frames) {
+    for (size_t k = 0; k < cam.frames.size(); ++k) {
+      const IngestedFrame& f = cam.frames[k];
       const CameraView* v = cameras.FindView(cam.name, f.index);
       if (v == nullptr || !v->registered) continue;  // an unregistered view says nothing
       TrackingView view;
@@ -47,7 +50,7 @@ Status BuildTrackingViews(const IngestedCapture& capture, const CameraSet& camer
         view.landmarks = points;
       }
       views->push_back(view);
-      view_source->emplace_back(int(c), f.index);
+      view_source->emplace_back(int(c), int(k));
     }
   }
   return Status::Ok();
@@ -158,7 +161,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   fit.fixed_head = cameras.mode == "head-pose" && !options.refine_head_pose;
 
   std::vector<TrackingView> views;
-  std::vector<std::pair<int, int>> view_source;  // camera index, frame index
+  std::vector<std::pair<int, int>> view_source;  // camera index, position in its frames
   HF_RETURN_IF_ERROR(BuildTrackingViews(capture, cameras, &views, &view_source));
   const int num_frames = capture.num_frames();
   HF_LOG(Info) << "track: " << views.size() << " views of " << num_frames << " frames, " << options.fit.identity_modes
@@ -232,12 +235,13 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
     std::vector<size_t> order(views.size());
     std::iota(order.begin(), order.end(), 0);
     std::stable_sort(order.begin(), order.end(),
-                     [&](size_t a, size_t b) { return view_source[a].second < view_source[b].second; });
+                     [&](size_t a, size_t b) { return views[a].frame < views[b].frame; });
     progress->Start("track: overlay video", int64_t(views.size()));
     std::map<int, cv::VideoWriter> writers;
     int mesh_frame = -1;
     for (const size_t i : order) {
-      const auto [c, frame] = view_source[i];
+      const auto [c, position] = view_source[i];
+      const int frame = views[i].frame;
       const IngestedCamera& cam = capture.cameras[c];
       const cv::Mat image = cv::imread(capture.FramePath(cam.name, frame).string(), cv::IMREAD_COLOR);
       if (image.empty()) return Status::IoError("track: cannot read frame " + capture.FramePath(cam.name, frame).string());
@@ -255,12 +259,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
         fitted.push_back(lens.Project(views[i].camera.rotation * head + views[i].camera.translation));
       }
       std::optional<std::array<Eigen::Vector2d, 68>> detected;
-      const IngestedFrame* source = nullptr;
-      if (frame < static_cast<int>(cam.frames.size()) && cam.frames[frame].index == frame) source = &cam.frames[frame];
-      for (size_t k = 0; source == nullptr && k < cam.frames.size(); ++k)
-        if (cam.frames[k].index == frame) source = &cam.frames[k];
-      if (source != nullptr && source->landmarks) {
-        const auto& lm = source->landmarks;
+      if (const auto& lm = cam.frames[position].landmarks) {
         detected.emplace();
         for (int l = 0; l < 68; ++l) (*detected)[l] = Eigen::Vector2d((*lm)[l].x, (*lm)[l].y);
       }

@@ -329,14 +329,14 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
   const std::string what = status.ok() ? "COLMAP registered only " + std::to_string(report.registered) + " of " +
                                              std::to_string(report.total) + " frames (below --min-registered " +
                                              std::to_string(static_cast<int>(100 * options.min_registered + 0.5)) +
-                                             "%)"
+                                             "%; see " + (out_dir / "colmap" / "colmap.log").string() + ")"
                                        : status.message();
   if (options.mode != "auto" || capture.cameras.size() != 1)
     return Status::DataError(what + ". Try: more texture in the background, --max-features 8192, --matcher "
                              "exhaustive, or --mode head-pose for a fixed camera");
   HF_LOG(Warning) << "calibrate: " << what << "; falling back to head-pose cameras";
+  // colmap/ stays, so that the log named in `what` can be read.
   summary->reason += (summary->reason.empty() ? "" : "; ") + what + "; fell back to head-pose";
-  RemoveAll(out_dir / "colmap");
   const std::string reason = summary->reason;
   HF_RETURN_IF_ERROR(HeadPoseCameras(options, capture, model, cameras, summary));
   summary->reason = reason;

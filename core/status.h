@@ -31,6 +31,12 @@ class Status {
   Code code() const { return code_; }
   const std::string& message() const { return message_; }
 
+  // The same error with another message.
+  Status WithMessage(std::string message) const {
+    if (ok()) return *this;
+    return Status(code_, std::move(message));
+  }
+
   // Prefixes the message with context ("ingest: " + message).
   Status WithContext(const std::string& context) const {
     if (ok()) return *this;

@@ -17,6 +17,7 @@ namespace {
 constexpr const char* kManifest = "workspace.json";
 constexpr const char* kLockFile = ".lock";
 constexpr const char* kStagingDir = ".staging";
+constexpr const char* kFailedDir = "failed";
 constexpr int kManifestVersion = 1;
 
 StageStatus ParseStatus(const std::string& text) {
@@ -189,6 +190,7 @@ Status Workspace::BeginStage(const std::string& stage, const std::string& finger
   HF_CHECK(mode_ == Mode::kReadWrite);
   *staging = root_ / kStagingDir / stage;
   HF_RETURN_IF_ERROR(RemoveAll(*staging));  // leftovers of an interrupted attempt
+  HF_RETURN_IF_ERROR(RemoveAll(root_ / kFailedDir / stage));  // an earlier failure's files
   HF_RETURN_IF_ERROR(EnsureDirectory(*staging));
   StageRecord* r = Mutable(stage);
   r->status = StageStatus::kRunning;
@@ -219,15 +221,27 @@ Status Workspace::CommitStage(const std::string& stage, const std::vector<std::s
   return Save();
 }
 
-Status Workspace::FailStage(const std::string& stage, const std::string& message,
-                            double wall_time_s) {
+Status Workspace::FailStage(const std::string& stage, std::string* message, double wall_time_s) {
   HF_CHECK(mode_ == Mode::kReadWrite);
-  RemoveAll(root_ / kStagingDir / stage);
+  const fs::path staging = root_ / kStagingDir / stage;
+  // Keep what the attempt wrote, unless that is only its options file.
+  std::error_code ec;
+  bool wrote = false;
+  for (const auto& entry : fs::directory_iterator(staging, ec))
+    if (entry.path().filename() != stage + ".ini") wrote = true;
+  const fs::path kept = root_ / kFailedDir / stage;
+  if (wrote && EnsureDirectory(kept.parent_path()).ok() && ReplacePath(staging, kept).ok()) {
+    const std::string from = staging.string(), to = kept.string();
+    for (size_t at = message->find(from); at != std::string::npos; at = message->find(from, at + to.size()))
+      message->replace(at, from.size(), to);
+    if (message->find(to) == std::string::npos) *message += " (what the failed attempt wrote is kept in " + to + ")";
+  }
+  RemoveAll(staging);
   StageRecord* r = Mutable(stage);
   r->status = StageStatus::kFailed;
   r->wall_time_s = wall_time_s;
   r->finished_at = NowIso8601();
-  r->message = message;
+  r->message = *message;
   return Save();
 }
 
@@ -259,8 +273,9 @@ Status RunStage(Workspace* workspace, const std::string& stage, const std::strin
     }
   }
   if (!status.ok()) {
-    workspace->FailStage(stage, status.message(), seconds());
-    return status.WithContext(stage);
+    std::string message = status.message();
+    workspace->FailStage(stage, &message, seconds());
+    return status.WithMessage(message).WithContext(stage);
   }
   result.outputs.push_back(stage + ".ini");
   return workspace->CommitStage(stage, result.outputs, seconds(), result.message);

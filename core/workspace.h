@@ -57,14 +57,18 @@ class Workspace {
   // that started it was interrupted.
   bool WasInterrupted(const std::string& stage) const;
 
-  // Marks the stage running and returns an empty staging folder for its outputs.
+  // Marks the stage running and returns an empty staging folder for its outputs;
+  // an earlier failure's kept files (failed/<stage>/) are removed.
   Status BeginStage(const std::string& stage, const std::string& fingerprint, fs::path* staging);
   // Moves each output (relative to the staging folder) into the workspace root,
   // replacing what was there, then marks the stage done.
   Status CommitStage(const std::string& stage, const std::vector<std::string>& outputs,
                      double wall_time_s, const std::string& message);
-  // Marks the stage failed; its previous outputs stay where they are.
-  Status FailStage(const std::string& stage, const std::string& message, double wall_time_s);
+  // Marks the stage failed; its previous outputs stay where they are. What the
+  // failed attempt wrote (logs, a COLMAP database, ...) moves to
+  // failed/<stage>/, replacing an older failure's, and `message` is rewritten
+  // to point there (paths into the staging folder, or a note at the end).
+  Status FailStage(const std::string& stage, std::string* message, double wall_time_s);
 
  private:
   Workspace() = default;
@@ -87,6 +91,9 @@ struct StageResult {
 // Runs `body` as `stage` unless it is up to date with `fingerprint`. The body
 // writes into `staging`; RunStage writes `options_ini` there as <stage>.ini,
 // commits, and records the wall time. `*skipped` tells whether the body ran.
+// When the body fails, what it wrote is kept in failed/<stage>/ and the error
+// names that folder (paths into the staging folder in the message are
+// rewritten to point there).
 Status RunStage(Workspace* workspace, const std::string& stage, const std::string& fingerprint,
                 const std::string& options_ini,
                 const std::function<Status(const fs::path& staging, StageResult* result)>& body,

@@ -88,6 +88,55 @@ TEST_F(WorkspaceTest, FailureKeepsEarlierOutputsAndIsRecorded) {
   EXPECT_EQ(ws->Find("ingest")->status, StageStatus::kFailed);
 }
 
+TEST_F(WorkspaceTest, FailedAttemptsFilesAreKeptAndNamedInTheError) {
+  std::unique_ptr<Workspace> ws;
+  ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
+  bool skipped;
+  const Status status = RunStage(
+      ws.get(), "calibrate", "f1", "x = 1\n",
+      [](const fs::path& staging, StageResult*) {
+        EXPECT_TRUE(WriteFileAtomic(staging / "colmap" / "colmap.log", "mapper: no good initial pair").ok());
+        return Status::DataError("COLMAP failed; see " + (staging / "colmap" / "colmap.log").string());
+      },
+      &skipped);
+  ASSERT_FALSE(status.ok());
+  EXPECT_EQ(status.code(), Status::Code::kDataError);
+  const fs::path kept = root_ / "failed" / "calibrate" / "colmap" / "colmap.log";
+  // The message points at the kept log, which is there to read.
+  EXPECT_NE(status.message().find(kept.string()), std::string::npos) << status.message();
+  EXPECT_EQ(status.message().find(".staging"), std::string::npos) << status.message();
+  std::string text;
+  ASSERT_TRUE(ReadFileToString(kept, &text).ok());
+  EXPECT_EQ(text, "mapper: no good initial pair");
+  EXPECT_NE(ws->Find("calibrate")->message.find(kept.string()), std::string::npos);
+
+  // A failure that names no path gets the folder appended.
+  const Status second = RunStage(
+      ws.get(), "calibrate", "f2", "",
+      [](const fs::path& staging, StageResult*) {
+        EXPECT_TRUE(WriteFileAtomic(staging / "partial.txt", "half").ok());
+        return Status::DataError("no face found");
+      },
+      &skipped);
+  ASSERT_FALSE(second.ok());
+  EXPECT_NE(second.message().find("kept in " + (root_ / "failed" / "calibrate").string()), std::string::npos)
+      << second.message();
+  EXPECT_TRUE(fs::exists(root_ / "failed" / "calibrate" / "partial.txt"));
+  EXPECT_FALSE(fs::exists(kept));  // the older failure's files were replaced
+
+  // A failure that wrote nothing keeps nothing and says nothing about it; a
+  // success clears the last failure's folder.
+  const Status third = RunStage(ws.get(), "track", "f", "",
+                                [](const fs::path&, StageResult*) { return Status::DataError("no landmarks"); },
+                                &skipped);
+  EXPECT_EQ(third.message(), "track: no landmarks");
+  EXPECT_FALSE(fs::exists(root_ / "failed" / "track"));
+  ASSERT_TRUE(RunStage(ws.get(), "calibrate", "f3", "",
+                       [](const fs::path& s, StageResult* r) { return WriteOutput(s, r, "good"); }, &skipped)
+                  .ok());
+  EXPECT_FALSE(fs::exists(root_ / "failed" / "calibrate"));
+}
+
 TEST_F(WorkspaceTest, ManifestPersistsAndInterruptedRunIsDetected) {
   {
     std::unique_ptr<Workspace> ws;

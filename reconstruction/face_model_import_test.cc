@@ -138,7 +138,7 @@ void WriteSyntheticIct(const fs::path& dir, std::vector<Eigen::Matrix3Xd> identi
   if (identities.empty())
     for (int k = 0; k < kIdentities; ++k) identities.push_back(IdentityDeltaCm(k));
   for (size_t k = 0; k < identities.size(); ++k) {
-    char name[32];
+    char name[48];
     std::snprintf(name, sizeof(name), "identity%03zu.obj", k);
     WriteText(dir / name, ObjText(neutral + identities[k]));
   }

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
+#include <cstring>
 #include <random>
 
 #include "calibration/align.h"
@@ -179,11 +180,20 @@ TEST(Calibrate, AutoModeFallsBackToHeadPoseWhenColmapFails) {
   ASSERT_TRUE(RunCalibrate(options, capture, Model(), dir / "auto", &progress, &cameras, &result).ok());
   EXPECT_EQ(result.mode, "head-pose");
   EXPECT_NE(result.reason.find("fell back to head-pose"), std::string::npos) << result.reason;
+  // Both messages name COLMAP's log, and it is there to read.
+  auto named_log = [](const std::string& message) {
+    const size_t end = message.find("colmap.log");
+    if (end == std::string::npos) return fs::path();
+    const size_t start = message.rfind(' ', end) + 1;
+    return fs::path(message.substr(start, end + std::strlen("colmap.log") - start));
+  };
+  EXPECT_TRUE(fs::is_regular_file(named_log(result.reason))) << result.reason;
   // Asked for COLMAP alone, the same frames fail with a message saying what to try.
   options.mode = "colmap";
   const Status failed = RunCalibrate(options, capture, Model(), dir / "colmap", &progress, &cameras, &result);
   ASSERT_FALSE(failed.ok());
   EXPECT_NE(failed.message().find("Try"), std::string::npos) << failed.message();
+  EXPECT_TRUE(fs::is_regular_file(named_log(failed.message()))) << failed.message();
 }
 
 // Fixed cameras seen at several instants: COLMAP's model must place each

@@ -55,6 +55,10 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
   o->Add("calibrate.colmap.mask", &c->colmap.mask,
          "Pixels COLMAP may use: auto, none, background (not the head) or head.", "colmap-mask");
   o->Add("calibrate.colmap.frame_step", &c->colmap.frame_step, "Give COLMAP every n-th frame.", "frame-step");
+  o->Add("calibrate.colmap.exhaustive_fallback_max", &c->colmap.exhaustive_fallback_max,
+         "When sequential matching leaves over 10% of the frames unregistered, match every pair and map again, "
+         "for up to this many frames (0: never).",
+         "exhaustive-fallback");
   o->Add("calibrate.static_rig", &c->static_rig,
          "Several cameras: auto (fixed when no camera's background moves), yes or no. Fixed cameras are "
          "calibrated from synchronised frames and keep one pose each.",
@@ -316,6 +320,12 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
   ColmapReport report;
   Status status = RunColmap(colmap, capture, out_dir / "colmap", cameras, &report);
   progress->Finish();
+  if (report.registered_sequential >= 0) {
+    summary->sequential_registered = report.registered_sequential;
+    summary->reason += (summary->reason.empty() ? "" : "; ") + std::string("sequential matching registered ") +
+                       std::to_string(report.registered_sequential) + " of " + std::to_string(report.total) +
+                       ", then every pair was matched";
+  }
   const bool too_few = status.ok() && report.registered < options.min_registered * report.total;
   if (status.ok() && !too_few) {
     summary->mode = "colmap";

@@ -46,6 +46,9 @@ struct CalibrateSummary {
   double reprojection_px = 0.0;  // median landmark (head-pose) or mean SfM (colmap) reprojection error
   double reprojection_source_px = 0.0;  // the same in source-video pixels (head-pose)
   double focal = 0.0;     // head-pose: estimated focal length (frame pixels)
+  // colmap: registered after sequential matching alone when every pair was
+  // matched after it (ColmapOptions::exhaustive_fallback_max); -1 otherwise.
+  int sequential_registered = -1;
   std::string OneLine() const;
 };
 

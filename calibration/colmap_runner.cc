@@ -32,6 +32,8 @@ Status ColmapOptions::Check() const {
   if (overlap < 1) return Status::InvalidArgument("sequential overlap must be at least 1");
   if (rig_instants < 1) return Status::InvalidArgument("rig instants must be at least 1");
   if (mapper_attempts < 1) return Status::InvalidArgument("mapper attempts must be at least 1");
+  if (exhaustive_fallback_max < 0)
+    return Status::InvalidArgument("--exhaustive-fallback must be 0 (never) or more images");
   if (!(max_instant_rotation_deg > 0) || !(max_instant_shift > 0))
     return Status::InvalidArgument("the fixed cameras' instant limits must be positive");
   return Status::Ok();
@@ -288,17 +290,17 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
                << " SIFT features max, mask: " << report->mask << ")";
   HF_RETURN_IF_ERROR(RunTool(extract, log));
   HF_LOG(Info) << "calibrate: COLMAP " << report->matcher << " matching";
-  if (report->matcher == "sequential") {
-    HF_RETURN_IF_ERROR(RunTool({exe, "sequential_matcher", "--database_path", database.string(),
-                                "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", std::to_string(threads),
-                                "--SequentialMatching.overlap", std::to_string(options.overlap),
-                                "--SequentialMatching.quadratic_overlap", "1"},
-                               log));
-  } else {
-    HF_RETURN_IF_ERROR(RunTool({exe, "exhaustive_matcher", "--database_path", database.string(),
-                                "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", std::to_string(threads)},
-                               log));
-  }
+  auto match = [&](const std::string& matcher) {
+    if (matcher == "sequential")
+      return RunTool({exe, "sequential_matcher", "--database_path", database.string(), "--SiftMatching.use_gpu", "0",
+                      "--SiftMatching.num_threads", std::to_string(threads), "--SequentialMatching.overlap",
+                      std::to_string(options.overlap), "--SequentialMatching.quadratic_overlap", "1"},
+                     log);
+    return RunTool({exe, "exhaustive_matcher", "--database_path", database.string(), "--SiftMatching.use_gpu", "0",
+                    "--SiftMatching.num_threads", std::to_string(threads)},
+                   log);
+  };
+  HF_RETURN_IF_ERROR(match(report->matcher));
   // The incremental mapper depends on its initial pair and on thread timing: a
   // run that registers too few images is repeated with relaxed initialisation
   // (the attempts' models are kept side by side), and the largest model wins.
@@ -306,28 +308,43 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
       {},
       {"--Mapper.init_min_tri_angle", "8", "--Mapper.init_min_num_inliers", "50", "--Mapper.abs_pose_min_num_inliers",
        "15", "--Mapper.min_num_matches", "10"}};
+  const size_t num_attempts = std::min(attempts.size(), static_cast<size_t>(options.mapper_attempts));
   fs::path best;
-  int best_registered = 0;
-  for (size_t a = 0; a < attempts.size() && a < static_cast<size_t>(options.mapper_attempts); ++a) {
-    const fs::path sparse = work_dir / ("sparse" + (a == 0 ? std::string() : "_" + std::to_string(a)));
-    RemoveAll(sparse);
-    HF_RETURN_IF_ERROR(EnsureDirectory(sparse));
-    HF_LOG(Info) << "calibrate: COLMAP mapper" << (a == 0 ? "" : " (again, relaxed initialisation)");
-    std::vector<std::string> mapper = {exe, "mapper", "--database_path", database.string(), "--image_path", image_path,
-                                       "--output_path", sparse.string(), "--Mapper.num_threads", std::to_string(threads)};
-    mapper.insert(mapper.end(), attempts[a].begin(), attempts[a].end());
-    const Status mapped = RunTool(mapper, log);
-    if (!mapped.ok() && a + 1 == std::min(attempts.size(), static_cast<size_t>(options.mapper_attempts)) && best.empty())
-      return mapped;
-    for (const auto& entry : fs::directory_iterator(sparse)) {
-      const int registered = entry.is_directory() ? CountRegisteredImages(entry.path() / "images.bin") : 0;
-      if (registered > best_registered) {
-        best_registered = registered;
-        best = entry.path();
+  int best_registered = 0, run = 0;
+  // Runs the mapper attempts into sparse/, sparse_1/, ... (numbered on across
+  // rounds); fails only when the last attempt fails and nothing was mapped yet.
+  auto map = [&]() -> Status {
+    for (size_t a = 0; a < num_attempts; ++a, ++run) {
+      const fs::path sparse = work_dir / ("sparse" + (run == 0 ? std::string() : "_" + std::to_string(run)));
+      RemoveAll(sparse);
+      HF_RETURN_IF_ERROR(EnsureDirectory(sparse));
+      HF_LOG(Info) << "calibrate: COLMAP mapper" << (a == 0 ? "" : " (again, relaxed initialisation)");
+      std::vector<std::string> mapper = {exe, "mapper", "--database_path", database.string(), "--image_path", image_path,
+                                         "--output_path", sparse.string(), "--Mapper.num_threads", std::to_string(threads)};
+      mapper.insert(mapper.end(), attempts[a].begin(), attempts[a].end());
+      const Status mapped = RunTool(mapper, log);
+      if (!mapped.ok() && a + 1 == num_attempts && best.empty()) return mapped;
+      for (const auto& entry : fs::directory_iterator(sparse)) {
+        const int registered = entry.is_directory() ? CountRegisteredImages(entry.path() / "images.bin") : 0;
+        if (registered > best_registered) {
+          best_registered = registered;
+          best = entry.path();
+        }
       }
+      if (best_registered >= options.retry_below * total) break;
     }
-    if (best_registered >= options.retry_below * total) break;
+    return Status::Ok();
+  };
+  Status mapped = map();
+  if (report->matcher == "sequential" && best_registered < options.retry_below * total &&
+      total <= options.exhaustive_fallback_max) {
+    HF_LOG(Warning) << "calibrate: COLMAP registered " << best_registered << " of " << total
+                    << " images after sequential matching; matching every pair and mapping again";
+    report->registered_sequential = best_registered;
+    HF_RETURN_IF_ERROR(match("exhaustive"));
+    mapped = map();
   }
+  HF_RETURN_IF_ERROR(mapped);
   if (best.empty())
     return Status::DataError("COLMAP reconstructed nothing from " + std::to_string(total) +
                              " images (too few features or matches: textureless frames? see " + log.string() + ")");

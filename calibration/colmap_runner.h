@@ -36,6 +36,12 @@ struct ColmapOptions {
   // registers fewer than `retry_below` of the images.
   int mapper_attempts = 2;
   double retry_below = 0.9;
+  // Sequential matching only links frames near in time: a video that comes
+  // back to a view it left (a second pass round the head) can break into
+  // pieces. When the mapper still registers fewer than `retry_below` of the
+  // images, every pair is matched (pairs already matched are kept) and the
+  // mapper runs again, for at most this many images (0: never).
+  int exhaustive_fallback_max = 300;
   // Fixed cameras: how far one camera's instants may lie apart in COLMAP's
   // model before the model counts as broken (degrees; fraction of the median
   // distance between the cameras).
@@ -50,6 +56,9 @@ struct ColmapReport {
   int points = 0;
   double mean_reprojection_px = 0.0;
   std::string matcher, mask;
+  // When sequential matching registered too few and every pair was matched
+  // after it: the images registered before that; -1 otherwise.
+  int registered_sequential = -1;
 };
 
 // Runs COLMAP in `work_dir` (kept: database, sparse/ and text model, logs) and

@@ -104,6 +104,8 @@ Row RunSetting(const std::string& scene, const Setting& s, const IngestedCapture
   if (status.ok()) status = EvaluateWorldCameras(cameras, capture, truth, &aligned.head_from_world, &row.world);
   if (status.ok()) status = EvaluateHeadCameras(aligned.cameras, capture, truth, &row.head);
   // Registration counts the images COLMAP was given (fixed rigs: one per camera and instant).
+  if (summary.sequential_registered >= 0)
+    row.label += " (sequential registered " + std::to_string(summary.sequential_registered) + ", then every pair)";
   row.world.registered = summary.registered;
   row.world.views = summary.total;
   row.ok = status.ok();

@@ -38,9 +38,11 @@ fs::path Scratch(const std::string& name) {
   return dir;
 }
 
-// Simulates `scene_text` and ingests it (no crop) into dir/workspace.
+// Simulates `scene_text` and ingests it (no crop) into dir/workspace. With
+// `order` (one camera), the video is the simulated frames in that order, and
+// `truth` follows it.
 void SimulateAndIngest(const std::string& scene_text, const fs::path& dir, IngestedCapture* capture,
-                       nlohmann::json* truth) {
+                       nlohmann::json* truth, const std::vector<int>& order = {}) {
   Scene scene;
   const Status parsed = ParseScene(scene_text, "test.toml", &scene);
   ASSERT_TRUE(parsed.ok()) << parsed.message();
@@ -50,6 +52,13 @@ void SimulateAndIngest(const std::string& scene_text, const fs::path& dir, Inges
   ASSERT_TRUE(WriteSimulation(*sim, dir / "capture", scene_text, 0, &progress).ok());
   IngestOptions ingest;
   for (int c = 0; c < sim->num_cameras(); ++c) ingest.inputs.push_back((dir / "capture" / sim->CameraName(c)).string());
+  if (!order.empty()) {
+    const fs::path reordered = dir / "capture" / "reordered";
+    fs::create_directories(reordered);
+    for (size_t i = 0; i < order.size(); ++i)
+      fs::copy_file(dir / "capture" / sim->CameraName(0) / FrameFileName(order[i]), reordered / FrameFileName(static_cast<int>(i)));
+    ingest.inputs = {reordered.string()};
+  }
   ingest.crop = "none";
   ingest.resolution = scene.camera.intrinsics.width;
   ingest.blur_ratio = 0.0;
@@ -59,6 +68,11 @@ void SimulateAndIngest(const std::string& scene_text, const fs::path& dir, Inges
   ASSERT_TRUE(ingested.ok()) << ingested.message();
   ASSERT_TRUE(ReadIngestedCapture(dir / "workspace", capture).ok());
   ASSERT_TRUE(ReadJson(dir / "capture" / "ground_truth.json", truth).ok());
+  if (!order.empty()) {
+    nlohmann::json frames = nlohmann::json::array();
+    for (int f : order) frames.push_back((*truth)["frames"][f]);
+    (*truth)["frames"] = frames;
+  }
 }
 
 const char* kSmallOrbit = R"(
@@ -127,6 +141,43 @@ TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
     EXPECT_NEAR(v.cam_from_world.linear().determinant(), 1.0, 1e-9);
     EXPECT_NEAR(v.Centre().norm(), 0.8, 0.8 * 0.4);
   }
+}
+
+// A video that jumps between two sides of the head: sequential matching
+// (one neighbour here) links no frames, so the mapper finds nothing; matching
+// every pair after it recovers the orbit.
+TEST(Calibrate, SequentialMatchingThatBreaksFallsBackToEveryPair) {
+  const fs::path dir = Scratch("jumps");
+  std::vector<int> order;
+  for (int i = 0; i < 12; ++i) order.insert(order.end(), {i, i + 12});  // 0, 12, 1, 13, ...: 180 deg jumps
+  IngestedCapture capture;
+  nlohmann::json truth;
+  SimulateAndIngest(kSmallOrbit, dir, &capture, &truth, order);
+  CalibrateOptions options;
+  options.mode = "colmap";
+  options.colmap.executable = DefaultColmapExecutable();
+  options.colmap.overlap = 1;
+  CameraSet cameras;
+  CalibrateSummary summary;
+  NullProgress progress;
+  options.colmap.exhaustive_fallback_max = 0;  // no fallback: calibrate fails
+  const Status failed = RunCalibrate(options, capture, Model(), dir / "sequential", &progress, &cameras, &summary);
+  ASSERT_FALSE(failed.ok());
+  EXPECT_NE(failed.message().find("Try"), std::string::npos) << failed.message();
+
+  options.colmap.exhaustive_fallback_max = ColmapOptions().exhaustive_fallback_max;
+  const Status status = RunCalibrate(options, capture, Model(), dir / "fallback", &progress, &cameras, &summary);
+  ASSERT_TRUE(status.ok()) << status.message();
+  std::printf("sequential matching registered %d of 24, then every pair: %d (%s)\n", summary.sequential_registered,
+              summary.registered, summary.reason.c_str());
+  EXPECT_GE(summary.sequential_registered, 0);
+  EXPECT_LT(summary.sequential_registered, 12);
+  EXPECT_GE(summary.registered, 22);
+  EXPECT_NE(summary.reason.find("then every pair was matched"), std::string::npos) << summary.reason;
+  CameraErrors errors;
+  ASSERT_TRUE(EvaluateWorldCameras(cameras, capture, truth, nullptr, &errors).ok());
+  EXPECT_LT(errors.median_rotation_deg, 1.0);
+  EXPECT_LT(errors.median_centre_mm, 12.0);
 }
 
 TEST(Calibrate, HeadPoseCamerasOnAGridClipReprojectTheLandmarks) {

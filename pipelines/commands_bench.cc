@@ -214,12 +214,17 @@ int BenchCalibrate(const std::vector<std::string>& args) {
   options.Add("bench.out", &out, "Folder for the simulated scenes, workspaces and COLMAP runs (reused).", "out");
   options.Add("bench.scenes", &scenes, "Scenes to run (from scenes/).", "scenes");
   options.Add("bench.quick", &quick, "Only the baseline setting of each scene.", "quick");
-  const int parsed = ParseOrExit(&options, args, "headforge bench calibrate [--json] [--out DIR] [--quick]",
+  int repeat = 1;
+  options.Add("bench.repeat", &repeat,
+              "Run each COLMAP setting this many times (COLMAP's results vary from run to run); one row per run.",
+              "repeat");
+  const int parsed = ParseOrExit(&options, args, "headforge bench calibrate [--json] [--out DIR] [--quick] [--repeat N]",
                                  "Runs calibrate and align on simulated scenes at several settings and prints, per\n"
                                  "setting: wall time, registered frames, rotation and camera-centre errors after the\n"
                                  "best similarity to the truth, the scale error of align, the focal error, and the\n"
                                  "errors of the aligned head-frame cameras.");
   if (parsed >= 0) return parsed;
+  if (repeat < 1) return ReportFailure(Status::InvalidArgument("--repeat must be at least 1"));
   ApplyCommonOptions(common);
   if (json) SetLogLevel(LogLevel::kWarning);
   const int threads = common.threads > 0 ? common.threads : HardwareThreads();
@@ -284,12 +289,19 @@ int BenchCalibrate(const std::vector<std::string>& args) {
           settings.push_back({"every 4th frame", 4096, "sequential", 4});
         }
       }
-      for (const auto& s : settings) {
-        std::string name = s.label;
-        for (char& c : name)
-          if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
-        results.push_back(RunSetting(scene, s, capture, truth, model, dir / "runs" / name, threads));
-        if (!json) PrintRow(results.back());
+      for (const auto& setting : settings) {
+        for (int run = 1; run <= repeat; ++run) {
+          Setting s = setting;
+          std::string name = s.label;
+          for (char& c : name)
+            if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+          if (repeat > 1) {
+            s.label += " (run " + std::to_string(run) + " of " + std::to_string(repeat) + ")";
+            name += "_run" + std::to_string(run);
+          }
+          results.push_back(RunSetting(scene, s, capture, truth, model, dir / "runs" / name, threads));
+          if (!json) PrintRow(results.back());
+        }
       }
     }
     for (const auto& r : results) {
@@ -319,7 +331,7 @@ int BenchCalibrate(const std::vector<std::string>& args) {
 int BenchCommand(const std::vector<std::string>& args) {
   if (!args.empty() && args[0] == "calibrate") return BenchCalibrate(std::vector<std::string>(args.begin() + 1, args.end()));
   std::fprintf(stderr,
-               "Usage: headforge bench calibrate [--json] [--out DIR] [--quick]\n"
+               "Usage: headforge bench calibrate [--json] [--out DIR] [--quick] [--repeat N]\n"
                "  calibrate   camera accuracy against time on simulated scenes\n"
                "(rendering and kernel speed: build/bench/headforge_bench)\n");
   return args.empty() || args[0] == "--help" ? (args.empty() ? kExitUsage : kExitOk) : kExitUsage;

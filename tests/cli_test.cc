@@ -224,6 +224,13 @@ TEST(Cli, HelpVersionAndUsageErrors) {
   EXPECT_TRUE(Contains(missing.err, "/no/such.mp4")) << missing.err;
   const Result no_ws = Headforge({"status", "/tmp/hf_cli_never_created"});
   EXPECT_EQ(no_ws.code, 1);
+  const Result bench_help = Headforge({"bench", "calibrate", "--help"});
+  EXPECT_EQ(bench_help.code, 0);
+  for (const char* text : {"--repeat", "--quick", "--scenes"}) EXPECT_TRUE(Contains(bench_help.out, text)) << text;
+  const Result no_repeat = Headforge({"bench", "calibrate", "--repeat", "0", "--out", "/tmp/hf_cli_bench"});
+  EXPECT_EQ(no_repeat.code, 2);
+  EXPECT_TRUE(Contains(no_repeat.err, "--repeat must be at least 1")) << no_repeat.err;
+  EXPECT_FALSE(fs::exists("/tmp/hf_cli_bench"));  // refused before anything was simulated
 }
 
 // face-model inspect on the shipped model: its summary and one table row per

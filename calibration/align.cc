@@ -14,6 +14,7 @@
 #include "calibration/triangulation.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/rotation.h"
 
 namespace headforge {
 
@@ -146,14 +147,7 @@ bool SimilarityFromViewPoses(const std::vector<ViewPose>& views, Sim3* head_from
     Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
     for (size_t i = 0; i < rs.size(); ++i)
       if (use[i]) sum += views[i].weight * rs[i];
-    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    Eigen::Matrix3d r = svd.matrixU() * svd.matrixV().transpose();
-    if (r.determinant() < 0) {
-      Eigen::Matrix3d u = svd.matrixU();
-      u.col(2) *= -1;
-      r = u * svd.matrixV().transpose();
-    }
-    return r;
+    return NearestRotation(sum);
   };
   std::vector<bool> use(rotations.size(), true);
   Eigen::Matrix3d rotation = chordal_mean(rotations, use);

@@ -10,6 +10,7 @@
 #include <Eigen/SVD>
 
 #include "core/json_io.h"
+#include "core/rotation.h"
 #include "core/statistics.h"
 #include "tests/run_headforge.h"
 
@@ -174,9 +175,7 @@ SimulatedScores RunSimulated(const std::string& scene, int frames, const std::ve
   // est = real * g for one constant g (chordal mean of real^T est, projected onto the rotations).
   Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
   for (size_t i = 0; i < estimated.size(); ++i) sum += real_rotations[i].transpose() * estimated[i];
-  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Matrix3d g = svd.matrixU() * svd.matrixV().transpose();
-  if (g.determinant() < 0) g = svd.matrixU() * Eigen::Vector3d(1, 1, -1).asDiagonal() * svd.matrixV().transpose();
+  const Eigen::Matrix3d g = NearestRotation(sum);
   std::vector<double> motion;
   for (size_t i = 0; i < estimated.size(); ++i)
     motion.push_back(Eigen::AngleAxisd((estimated[i] * g.transpose()).transpose() * real_rotations[i]).angle() * 180 / M_PI);

@@ -1,6 +1,7 @@
 #include "calibration/calibrate.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <map>
@@ -14,6 +15,7 @@
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/paths.h"
+#include "core/statistics.h"
 
 namespace headforge {
 
@@ -100,34 +102,75 @@ std::string CalibrateSummary::OneLine() const {
   return std::string(text) + (reason.empty() ? "" : " (" + reason + ")");
 }
 
-Status MeasureBackgroundMotion(const IngestedCapture& capture, const std::string& camera, double* median_px) {
+namespace {
+constexpr int kMinFollowed = 20;        // features needed to trust their median motion
+constexpr double kMinChangeGrey = 5.0;  // background change (grey levels) of a camera that moved
+}  // namespace
+
+bool BackgroundMotion::Moving(double threshold_px) const {
+  if (followed >= kMinFollowed) return median_px > threshold_px;
+  if (change >= kMinChangeGrey) return true;  // features lost rather than followed
+  return 0.0 > threshold_px;  // nothing shows motion: none
+}
+
+std::string BackgroundMotion::Describe() const {
+  char text[200];
+  if (followed >= kMinFollowed)
+    std::snprintf(text, sizeof(text), "the background moves %.1f px between frames", median_px);
+  else if (change >= kMinChangeGrey)
+    std::snprintf(text, sizeof(text),
+                  "the background changes by %.0f grey levels between frames and optical flow follows %d features "
+                  "of it",
+                  change, followed);
+  else
+    std::snprintf(text, sizeof(text), "the background shows no motion (%d features followed, change %.0f grey levels)",
+                  followed, change);
+  return text;
+}
+
+Status MeasureBackgroundMotion(const IngestedCapture& capture, const std::string& camera, BackgroundMotion* motion) {
+  *motion = BackgroundMotion();
   const IngestedCamera* cam = nullptr;
   for (const auto& c : capture.cameras)
     if (c.name == camera) cam = &c;
-  if (!cam || cam->frames.size() < 2) {
-    *median_px = 0.0;
-    return Status::Ok();
-  }
-  // Pairs of frames spread over the sequence; features off the head only.
-  std::vector<double> motions;
+  if (!cam || cam->frames.size() < 2) return Status::Ok();
+  // Background: off the head mask by a margin, above the mouth (shoulders and
+  // body reach up to the chin and move with the head), and not the black
+  // padding of a crop.
+  auto background_of = [&](const cv::Mat& image, const IngestedFrame& frame) {
+    cv::Mat mask = cv::imread(capture.MaskPath(camera, frame.index).string(), cv::IMREAD_GRAYSCALE);
+    cv::Mat background = mask.empty() ? cv::Mat(image.size(), CV_8U, cv::Scalar(255)) : (mask == 0);
+    cv::erode(background, background, cv::Mat(), cv::Point(-1, -1), std::max(5, image.cols / 30));
+    if (const auto& lm = frame.landmarks) {
+      const int mouth =
+          std::clamp(static_cast<int>(std::min((*lm)[ibug::kMouthRight].y, (*lm)[ibug::kMouthLeft].y)), 0, image.rows);
+      background.rowRange(mouth, image.rows).setTo(0);
+    }
+    background &= image > 2;
+    return background;
+  };
+  // Pairs of frames spread over the sequence.
+  std::vector<double> motions, changes;
   const int n = static_cast<int>(cam->frames.size());
   for (int k = 1; k <= 4; ++k) {
     const int a = (k - 1) * (n - 1) / 4, b = k * (n - 1) / 4;
     if (a == b) continue;
     cv::Mat ia = cv::imread(capture.FramePath(camera, cam->frames[a].index).string(), cv::IMREAD_GRAYSCALE);
     cv::Mat ib = cv::imread(capture.FramePath(camera, cam->frames[b].index).string(), cv::IMREAD_GRAYSCALE);
-    cv::Mat ma = cv::imread(capture.MaskPath(camera, cam->frames[a].index).string(), cv::IMREAD_GRAYSCALE);
-    if (ia.empty() || ib.empty()) return Status::DataError("cannot read frames of " + camera);
-    // Background: off the head mask by a margin, above the mouth (shoulders and
-    // body reach up to the chin and move with the head), and not the black
-    // padding of a crop.
-    cv::Mat background = ma.empty() ? cv::Mat(ia.size(), CV_8U, cv::Scalar(255)) : (ma == 0);
-    cv::erode(background, background, cv::Mat(), cv::Point(-1, -1), std::max(5, ia.cols / 30));
-    if (const auto& lm = cam->frames[a].landmarks) {
-      const int mouth = std::clamp(static_cast<int>(std::min((*lm)[ibug::kMouthRight].y, (*lm)[ibug::kMouthLeft].y)), 0, ia.rows);
-      background.rowRange(mouth, ia.rows).setTo(0);
+    if (ia.empty() || ib.empty() || ia.size() != ib.size()) return Status::DataError("cannot read frames of " + camera);
+    const cv::Mat background = background_of(ia, cam->frames[a]);
+    // Grey-level change over the background both frames show, less the
+    // median difference (a change of exposure).
+    const cv::Mat both = background & background_of(ib, cam->frames[b]);
+    std::vector<double> differences;
+    for (int y = 0; y < ia.rows; ++y)
+      for (int x = 0; x < ia.cols; ++x)
+        if (both.at<uint8_t>(y, x)) differences.push_back(double(ia.at<uint8_t>(y, x)) - double(ib.at<uint8_t>(y, x)));
+    if (differences.size() >= 1000) {
+      const double offset = Median(differences);
+      for (double& d : differences) d = std::abs(d - offset);
+      changes.push_back(Median(differences));
     }
-    background &= ia > 2;
     std::vector<cv::Point2f> pa, pb;
     cv::goodFeaturesToTrack(ia, pa, 300, 0.01, 5, background);
     if (pa.size() < 10) continue;
@@ -141,12 +184,9 @@ Status MeasureBackgroundMotion(const IngestedCapture& capture, const std::string
     for (size_t i = 0; i < pa.size(); ++i)
       if (ok[i] && back_ok[i] && cv::norm(back[i] - pa[i]) < 0.3) motions.push_back(cv::norm(pb[i] - pa[i]));
   }
-  if (motions.size() < 20) {
-    *median_px = 0.0;  // too little texture off the head: nothing shows camera motion
-    return Status::Ok();
-  }
-  std::nth_element(motions.begin(), motions.begin() + motions.size() / 2, motions.end());
-  *median_px = motions[motions.size() / 2];
+  motion->followed = static_cast<int>(motions.size());
+  motion->median_px = Median(motions);
+  motion->change = Median(changes);
   return Status::Ok();
 }
 
@@ -273,9 +313,9 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
     if (options.static_rig == "auto") {
       fixed = true;
       for (const auto& cam : capture.cameras) {
-        double motion = 0;
+        BackgroundMotion motion;
         HF_RETURN_IF_ERROR(MeasureBackgroundMotion(capture, cam.name, &motion));
-        fixed = fixed && motion <= options.motion_threshold_px;
+        fixed = fixed && !motion.Moving(options.motion_threshold_px);
       }
     }
     colmap.static_cameras = fixed;
@@ -287,17 +327,11 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
       mode = "colmap";
       summary->reason = "auto: " + std::to_string(capture.cameras.size()) + " cameras";
     } else {
-      double motion = 0;
+      BackgroundMotion motion;
       HF_RETURN_IF_ERROR(MeasureBackgroundMotion(capture, capture.cameras[0].name, &motion));
-      char text[160];
-      if (motion > options.motion_threshold_px) {
-        mode = "colmap";
-        std::snprintf(text, sizeof(text), "auto: the background moves %.1f px between frames: a moving camera", motion);
-      } else {
-        mode = "head-pose";
-        std::snprintf(text, sizeof(text), "auto: the background moves %.1f px between frames: a fixed camera", motion);
-      }
-      summary->reason = text;
+      const bool moving = motion.Moving(options.motion_threshold_px);
+      mode = moving ? "colmap" : "head-pose";
+      summary->reason = "auto: " + motion.Describe() + (moving ? ": a moving camera" : ": a fixed camera");
     }
     HF_LOG(Info) << "calibrate: " << summary->reason << " -> " << mode;
   }

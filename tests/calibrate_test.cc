@@ -104,6 +104,14 @@ TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   IngestedCapture capture;
   nlohmann::json truth;
   SimulateAndIngest(kSmallOrbit, dir, &capture, &truth);
+  // Auto mode sees the camera move: frames a quarter of the orbit apart share
+  // no background that optical flow can follow, but the background changed.
+  BackgroundMotion motion;
+  ASSERT_TRUE(MeasureBackgroundMotion(capture, "cam0", &motion).ok());
+  std::printf("orbit background: %s\n", motion.Describe().c_str());
+  EXPECT_LT(motion.followed, 20);
+  EXPECT_GT(motion.change, 8.0);
+  EXPECT_TRUE(motion.Moving(1.5));
   CalibrateOptions options;
   options.mode = "colmap";
   options.colmap.executable = DefaultColmapExecutable();
@@ -198,6 +206,13 @@ TEST(Calibrate, HeadPoseCamerasOnAGridClipReprojectTheLandmarks) {
   ASSERT_TRUE(status.ok()) << status.message();
   EXPECT_EQ(result.mode, "head-pose");
   EXPECT_NE(result.reason.find("fixed camera"), std::string::npos) << result.reason;
+  // Its plain backdrop under compression: few features follow, and the grey
+  // levels stay put.
+  BackgroundMotion motion;
+  ASSERT_TRUE(MeasureBackgroundMotion(capture, capture.cameras[0].name, &motion).ok());
+  std::printf("GRID background: %s\n", motion.Describe().c_str());
+  EXPECT_LT(motion.change, 3.0);
+  EXPECT_FALSE(motion.Moving(1.5));
   std::printf("GRID head-pose: median landmark error %.2f px at 360x288, focal %.0f px\n",
               result.reprojection_source_px, result.focal);
   EXPECT_LT(result.reprojection_source_px, 3.0);

@@ -129,6 +129,10 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
          "robust-scale");
   o->Add("track.contour_weight", &t->fit.contour_weight, "Weight of the jaw-contour landmarks (0-16).",
          "contour-weight");
+  o->Add("track.contour_max_yaw", &t->fit.contour_max_yaw_deg,
+         "Views turned further than this from the face (degrees) leave their jaw contour out (fading over the 10 "
+         "degrees before); 180 keeps all.",
+         "contour-max-yaw");
   o->Add("track.max_view_yaw", &t->fit.max_fit_yaw_deg,
          "A frame seen within this yaw of frontal (degrees) by some camera ignores its other views.",
          "max-view-yaw");

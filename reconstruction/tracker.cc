@@ -64,7 +64,8 @@ bool TrackOptions::Check(std::string* why) const {
     return false;
   }
   if (!(identity_prior >= 0 && expression_sparsity >= 0 && sparsity_scale > 0 && rotation_smoothness >= 0 &&
-        translation_smoothness >= 0 && expression_smoothness >= 0 && robust_scale_px > 0 && contour_weight >= 0)) {
+        translation_smoothness >= 0 && expression_smoothness >= 0 && robust_scale_px > 0 && contour_weight >= 0 &&
+        contour_max_yaw_deg >= 0)) {
     *why = "weights must be zero or positive (scales positive)";
     return false;
   }
@@ -138,11 +139,15 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
     }
     used[v] = true;
     FrameBlocks& f = frames[view.frame];
+    constexpr double kContourFadeDeg = 10.0;
+    const double view_yaw = std::abs(YawFromCamera(view.camera, Eigen::Isometry3d::Identity()));
+    const double contour =
+        options.contour_weight * std::clamp((options.contour_max_yaw_deg - view_yaw) / kContourFadeDeg, 0.0, 1.0);
     for (int i = 0; i < 68; ++i) {
       if (!Usable(view, i)) continue;
       const Eigen::Vector2d& pixel = (*view.landmarks)[i];
       const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
-      const double weight = confidence * (i < 17 ? options.contour_weight : 1.0);
+      const double weight = confidence * (i < 17 ? contour : 1.0);
       if (!(weight > 0)) continue;
       view_blocks[v].push_back(problem.AddResidualBlock(
           LandmarkReprojectionCost::Create(fit_basis, i, view.camera, pixel, weight),

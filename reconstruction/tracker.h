@@ -46,6 +46,13 @@ struct TrackOptions {
   // Weight of the jaw contour (landmarks 0-16), whose detector definition
   // slides along the cheek with the view.
   double contour_weight = 0.5;
+  // A view whose camera is turned from the face by more than this (degrees)
+  // leaves its jaw contour out, fading over the 10 degrees before it: there the
+  // detector draws the contour along the silhouette, on another part of the
+  // face than the frontal definition, and it pulls the jaw open. Where views
+  // from the front are missing the contour of the others still counts at the
+  // faded weight; 180 keeps every view's contour.
+  double contour_max_yaw_deg = 20.0;
   // The cameras already carry the head's motion (head-pose calibration):
   // hold each frame's head motion at the identity.
   bool fixed_head = false;

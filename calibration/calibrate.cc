@@ -149,19 +149,24 @@ Status MeasureBackgroundMotion(const IngestedCapture& capture, const std::string
     background &= image > 2;
     return background;
   };
-  // Pairs of frames spread over the sequence.
-  std::vector<double> motions, changes;
+  // Five frames spread over the sequence, each read once; neighbours form the pairs.
   const int n = static_cast<int>(cam->frames.size());
-  for (int k = 1; k <= 4; ++k) {
-    const int a = (k - 1) * (n - 1) / 4, b = k * (n - 1) / 4;
-    if (a == b) continue;
-    cv::Mat ia = cv::imread(capture.FramePath(camera, cam->frames[a].index).string(), cv::IMREAD_GRAYSCALE);
-    cv::Mat ib = cv::imread(capture.FramePath(camera, cam->frames[b].index).string(), cv::IMREAD_GRAYSCALE);
-    if (ia.empty() || ib.empty() || ia.size() != ib.size()) return Status::DataError("cannot read frames of " + camera);
-    const cv::Mat background = background_of(ia, cam->frames[a]);
+  std::vector<int> sampled;
+  for (int k = 0; k <= 4; ++k)
+    if (sampled.empty() || k * (n - 1) / 4 != sampled.back()) sampled.push_back(k * (n - 1) / 4);
+  std::vector<cv::Mat> images, backgrounds;
+  for (int s : sampled) {
+    images.push_back(cv::imread(capture.FramePath(camera, cam->frames[s].index).string(), cv::IMREAD_GRAYSCALE));
+    if (images.back().empty() || images.back().size() != images.front().size())
+      return Status::DataError("cannot read frames of " + camera);
+    backgrounds.push_back(background_of(images.back(), cam->frames[s]));
+  }
+  std::vector<double> motions, changes;
+  for (size_t p = 0; p + 1 < images.size(); ++p) {
+    const cv::Mat &ia = images[p], &ib = images[p + 1], &background = backgrounds[p];
     // Grey-level change over the background both frames show, less the
     // median difference (a change of exposure).
-    const cv::Mat both = background & background_of(ib, cam->frames[b]);
+    const cv::Mat both = background & backgrounds[p + 1];
     std::vector<double> differences;
     for (int y = 0; y < ia.rows; ++y)
       for (int x = 0; x < ia.cols; ++x)
@@ -354,10 +359,10 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
   ColmapReport report;
   Status status = RunColmap(colmap, capture, out_dir / "colmap", cameras, &report);
   progress->Finish();
-  if (report.registered_sequential >= 0) {
-    summary->sequential_registered = report.registered_sequential;
+  if (report.sequential_registered >= 0) {
+    summary->sequential_registered = report.sequential_registered;
     summary->reason += (summary->reason.empty() ? "" : "; ") + std::string("sequential matching registered ") +
-                       std::to_string(report.registered_sequential) + " of " + std::to_string(report.total) +
+                       std::to_string(report.sequential_registered) + " of " + std::to_string(report.total) +
                        ", then every pair was matched";
   }
   const bool too_few = status.ok() && report.registered < options.min_registered * report.total;

@@ -340,7 +340,7 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
       total <= options.exhaustive_fallback_max) {
     HF_LOG(Warning) << "calibrate: COLMAP registered " << best_registered << " of " << total
                     << " images after sequential matching; matching every pair and mapping again";
-    report->registered_sequential = best_registered;
+    report->sequential_registered = best_registered;
     HF_RETURN_IF_ERROR(match("exhaustive"));
     mapped = map();
   }

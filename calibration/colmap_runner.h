@@ -58,7 +58,7 @@ struct ColmapReport {
   std::string matcher, mask;
   // When sequential matching registered too few and every pair was matched
   // after it: the images registered before that; -1 otherwise.
-  int registered_sequential = -1;
+  int sequential_registered = -1;
 };
 
 // Runs COLMAP in `work_dir` (kept: database, sparse/ and text model, logs) and

@@ -39,8 +39,8 @@ Status IngestOptions::Check() const {
     return Status::InvalidArgument("--resolution must be a positive number of pixels, not " +
                                    std::to_string(resolution));
   if (resolution > 8192) return Status::InvalidArgument("--resolution above 8192 is not supported");
-  if (crop != "sequence" && crop != "frame" && crop != "none")
-    return Status::InvalidArgument("--crop must be sequence, frame or none, not '" + crop + "'");
+  if (crop != "auto" && crop != "sequence" && crop != "frame" && crop != "none")
+    return Status::InvalidArgument("--crop must be auto, sequence, frame or none, not '" + crop + "'");
   if (!(crop_scale >= 1.0 && crop_scale <= 10.0))
     return Status::InvalidArgument("--crop-scale must be in [1, 10]");
   if (blur_ratio < 0.0 || blur_ratio >= 1.0)
@@ -69,7 +69,8 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
          "resolution");
   o->Add("ingest.crop", &in->crop,
          "sequence: one crop per camera holding the head in every frame (fixed intrinsics); "
-         "frame: a crop following the head; none: the whole frame.",
+         "frame: a crop following the head; none: the whole frame (longer side scaled to --resolution); "
+         "auto: sequence for one video, none for several (COLMAP needs their background to place fixed cameras).",
          "crop");
   o->Add("ingest.crop_scale", &in->crop_scale, "Crop side as a multiple of the face size.",
          "crop-scale");
@@ -148,8 +149,8 @@ std::string IngestSummary::OneLine() const {
   char text[256];
   std::snprintf(text, sizeof(text),
                 "%d of %d frames kept (%d blurred, %d missing in a camera), %d camera(s), "
-                "landmarks on %d, face lost on %d",
-                kept, sampled, dropped_blur, dropped_missing, cameras, with_landmarks, face_lost);
+                "landmarks on %d, face lost on %d, crop %s",
+                kept, sampled, dropped_blur, dropped_missing, cameras, with_landmarks, face_lost, crop.c_str());
   return text;
 }
 
@@ -345,11 +346,23 @@ Status LoadUserMasks(const IngestOptions& options, const std::string& camera, in
 
 }  // namespace
 
+std::string ResolvedCrop(const IngestOptions& options) {
+  if (options.crop != "auto") return options.crop;
+  return options.inputs.size() > 1 ? "none" : "sequence";
+}
+
 Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int threads,
                  Progress* progress, IngestSummary* summary) {
   HF_RETURN_IF_ERROR(options.Check());
   threads = std::max(1, threads);
   *summary = IngestSummary();
+  const std::string crop_mode = ResolvedCrop(options);
+  summary->crop = crop_mode;
+  if (options.crop == "auto")
+    HF_LOG(Info) << "ingest: crop " << crop_mode << " (auto: "
+                 << (options.inputs.size() > 1 ? "several cameras keep the whole frame for COLMAP"
+                                               : "one camera, cropped around the head")
+                 << ")";
 
   // Open every input first so a bad one fails before any work.
   std::vector<Camera> cameras(options.inputs.size());
@@ -497,9 +510,9 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
       }
       face_frames[i] = FaceFrameOf(plans[c].faces[best]->landmarks);
     }
-    if (options.crop == "sequence") {
+    if (crop_mode == "sequence") {
       plans[c].crops.assign(kept.size(), SequenceCrop(face_frames, options.crop_scale, options.resolution));
-    } else if (options.crop == "frame") {
+    } else if (crop_mode == "frame") {
       plans[c].crops = FollowingCrops(face_frames, options.crop_scale, options.resolution);
     } else {
       plans[c].crops.assign(kept.size(), FullFrameCrop(cam.source->size(), options.resolution));
@@ -618,7 +631,7 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
                                    {"sharpness", std::round(a.sharpness * 10.0) / 10.0},
                                    {"face", face ? "found" : "lost"}};
       if (source->is_folder()) frame_json["source_file"] = source->FrameName(a.source_index);
-      if (options.crop == "frame") frame_json["crop"] = CropJson(crop);
+      if (crop_mode == "frame") frame_json["crop"] = CropJson(crop);
       cam_frames.push_back(frame_json);
     }
     landmarks_json["cameras"][cam.name] = lm_frames;
@@ -630,7 +643,7 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
                                {"median_sharpness", cam.median_sharpness},
                                {"masks", options.masks.empty() ? "grabcut" : "user"},
                                {"frames", cam_frames}};
-    if (options.crop != "frame") cam_json["crop"] = CropJson(plan_c.crops[0]);
+    if (crop_mode != "frame") cam_json["crop"] = CropJson(plan_c.crops[0]);
     cameras_json.push_back(cam_json);
   }
 
@@ -641,7 +654,7 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
                            {"time_s", cameras[0].analysis.at(kept[i]).source_index / source_fps}});
   const nlohmann::json capture = {
       {"version", 1},
-      {"crop_mode", options.crop},
+      {"crop_mode", crop_mode},
       {"crop_mapping", "u_out = (u_src + 0.5 - x0) * scale - 0.5, pixel centres at integers"},
       {"fps", options.fps > 0.0 ? std::min(options.fps, source_fps) : source_fps},
       {"resolution", options.resolution},

@@ -33,8 +33,10 @@ struct IngestOptions {
   int resolution = 512;
   // "sequence": one square crop per camera holding the head in every frame
   // (fixed intrinsics); "frame": a square of fixed size following the head;
-  // "none": the whole frame, longer side scaled to `resolution`.
-  std::string crop = "sequence";
+  // "none": the whole frame, longer side scaled to `resolution`; "auto":
+  // sequence for one camera, none for several (structure from motion needs
+  // the background to tie fixed cameras together from a few instants).
+  std::string crop = "auto";
   // Side of a crop as a multiple of the face size (landmark extent).
   double crop_scale = 2.0;
   // A frame is dropped as blurred when its Laplacian variance is below this
@@ -82,12 +84,16 @@ struct IngestSummary {
   int face_lost = 0;         // kept frames (over all cameras) without a detected face
   int with_landmarks = 0;    // kept frames (over all cameras) with landmarks
   int cameras = 0;
+  std::string crop;          // the crop used ("auto" resolved)
   std::string OneLine() const;
 };
 
 // Runs ingest, writing frames/, masks/, landmarks.json and capture.json under
 // `out_dir`. Expected failures (unreadable input, no face, empty range) come
 // back as a Status that names the file and suggests what to try.
+// The crop ingest uses: `options.crop` with "auto" resolved for the number of inputs.
+std::string ResolvedCrop(const IngestOptions& options);
+
 Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int threads,
                  Progress* progress, IngestSummary* summary);
 

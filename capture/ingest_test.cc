@@ -63,6 +63,10 @@ TEST(Ingest, GridClipSampledAndCropped) {
   nlohmann::json capture, landmarks;
   ASSERT_TRUE(ReadJson(out / "capture.json", &capture).ok());
   ASSERT_TRUE(ReadJson(out / "landmarks.json", &landmarks).ok());
+  // One video: the default (auto) crop is one square around the head.
+  EXPECT_EQ(summary.crop, "sequence");
+  EXPECT_EQ(capture["crop_mode"], "sequence");
+  EXPECT_LT(capture["cameras"][0]["crop"]["width"].get<double>(), 288.0);
   const auto& frames = capture["cameras"][0]["frames"];
   ASSERT_EQ(frames.size(), static_cast<size_t>(summary.kept));
   EXPECT_EQ(frames[1]["source_frame"].get<int>() - frames[0]["source_frame"].get<int>(), 2);
@@ -133,6 +137,9 @@ TEST(Ingest, SynchronisesCamerasByOffsets) {
   IngestSummary summary;
   ASSERT_TRUE(Ingest(options, dir / "out", &summary).ok());
   EXPECT_EQ(summary.cameras, 2);
+  // Several videos: the default (auto) crop keeps each whole frame (360x288 to 192x154).
+  EXPECT_EQ(summary.crop, "none");
+  EXPECT_EQ(cv::imread((dir / "out" / "frames" / "cam1" / "000000.png").string()).size(), cv::Size(192, 154));
   // Samples 0..2 have no cam0 frame (offset 3 reaches past cam0's 12 frames only at the end):
   // cam0 frames 3..11 pair with cam1 frames 0..8 -> 9 synchronised frames.
   EXPECT_EQ(summary.kept, 9);

@@ -11,6 +11,7 @@
 
 #include "calibration/camera_set.h"
 #include "calibration/landmark_embedding.h"
+#include "capture/background_motion.h"
 #include "calibration/colmap_runner.h"
 #include "calibration/head_pose.h"
 #include "capture/capture_io.h"
@@ -29,7 +30,7 @@ struct CalibrateOptions {
   // Fewest registered frames, as a fraction of those given to COLMAP.
   double min_registered = 0.5;
   // Median background motion (pixels) above which a single video counts as a moving camera.
-  double motion_threshold_px = 1.5;
+  double motion_threshold_px = kMovingCameraPx;
   // The detector's landmarks on the model (landmark_embedding.h); "" for the model's vertices.
   std::string landmark_embedding = DefaultLandmarkEmbedding();
   // Several cameras: "auto" (fixed when no camera's background moves), "yes", "no".
@@ -56,22 +57,6 @@ struct CalibrateSummary {
 Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capture, const FaceModel& model,
                     const fs::path& out_dir, Progress* progress, CameraSet* cameras, CalibrateSummary* summary);
 
-// How the background (off the head) of one camera's frames moves, from pairs
-// of frames a quarter of the sequence apart.
-struct BackgroundMotion {
-  double median_px = 0.0;  // median displacement of the features optical flow follows
-  int followed = 0;        // features followed there and back
-  // Median absolute change of the background's grey levels between the
-  // frames (after removing a global offset): about 1 for a fixed camera under
-  // compression noise; a camera that moved far over textured surroundings
-  // changes it by ten or more, and its features are lost rather than followed.
-  double change = 0.0;
-  // A moving camera: followed features move more than `threshold_px`, or too
-  // few are followed while the background changed.
-  bool Moving(double threshold_px) const;
-  std::string Describe() const;  // for the log and the stage summary
-};
-Status MeasureBackgroundMotion(const IngestedCapture& capture, const std::string& camera, BackgroundMotion* motion);
 
 // Reads a rig file (JSON, or a COLMAP text model folder) into cameras for the
 // ingested views; intrinsics given in source pixels are mapped through ingest's crop.

@@ -9,7 +9,9 @@
 #include <opencv2/imgproc.hpp>
 #include <set>
 
+#include "capture/background_motion.h"
 #include "capture/crop.h"
+#include "capture/capture_io.h"
 #include "capture/frame_source.h"
 #include "capture/landmarks.h"
 #include "capture/sharpness.h"
@@ -70,7 +72,7 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
   o->Add("ingest.crop", &in->crop,
          "sequence: one crop per camera holding the head in every frame (fixed intrinsics); "
          "frame: a crop following the head; none: the whole frame (longer side scaled to --resolution); "
-         "auto: sequence for one video, none for several (COLMAP needs their background to place fixed cameras).",
+         "auto: sequence for one fixed camera; none for several cameras or one that moves (COLMAP needs the background).",
          "crop");
   o->Add("ingest.crop_scale", &in->crop_scale, "Crop side as a multiple of the face size.",
          "crop-scale");
@@ -356,13 +358,6 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
   HF_RETURN_IF_ERROR(options.Check());
   threads = std::max(1, threads);
   *summary = IngestSummary();
-  const std::string crop_mode = ResolvedCrop(options);
-  summary->crop = crop_mode;
-  if (options.crop == "auto")
-    HF_LOG(Info) << "ingest: crop " << crop_mode << " (auto: "
-                 << (options.inputs.size() > 1 ? "several cameras keep the whole frame for COLMAP"
-                                               : "one camera, cropped around the head")
-                 << ")";
 
   // Open every input first so a bad one fails before any work.
   std::vector<Camera> cameras(options.inputs.size());
@@ -474,202 +469,235 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
                << summary->dropped_blur << " dropped as blurred, " << summary->dropped_missing
                << " missing in a camera";
 
-  // Faces per camera over the kept frames; lost frames borrow the nearest face for cropping.
-  struct CameraPlan {
-    std::vector<const FaceCandidate*> faces;
-    std::vector<CropWindow> crops;
-    std::vector<fs::path> user_masks;
-  };
-  std::vector<CameraPlan> plans(cameras.size());
-  for (size_t c = 0; c < cameras.size(); ++c) {
-    auto& cam = cameras[c];
-    std::vector<const FrameAnalysis*> frames;
-    for (int k : kept) frames.push_back(&cam.analysis.at(k));
-    plans[c].faces = SelectFaces(frames);
-    const int found = static_cast<int>(
-        std::count_if(plans[c].faces.begin(), plans[c].faces.end(), [](auto* f) { return f != nullptr; }));
-    if (found == 0)
-      return Status::DataError(
-          "no face found in " + cam.source->path() + " (" + std::to_string(kept.size()) +
-          " frames examined). Try: --detector dlib-hog or ultraface-640 (small faces), a lower "
-          "--detector-threshold, a video where the face is frontal and well lit, or a higher "
-          "resolution source");
-    summary->face_lost += static_cast<int>(kept.size()) - found;
-    summary->with_landmarks += found;
-    if (found < options.min_face_fraction * kept.size())
-      HF_LOG(Warning) << "face found in only " << found << " of " << kept.size() << " frames of "
-                      << cam.source->path() << "; the others are kept and marked lost";
+  // Crops, pass 2 and the JSON files, for one crop mode.
+  auto write_outputs = [&](const std::string& crop_mode) -> Status {
+    summary->face_lost = summary->with_landmarks = 0;
+    // Faces per camera over the kept frames; lost frames borrow the nearest face for cropping.
+    struct CameraPlan {
+      std::vector<const FaceCandidate*> faces;
+      std::vector<CropWindow> crops;
+      std::vector<fs::path> user_masks;
+    };
+    std::vector<CameraPlan> plans(cameras.size());
+    for (size_t c = 0; c < cameras.size(); ++c) {
+      auto& cam = cameras[c];
+      std::vector<const FrameAnalysis*> frames;
+      for (int k : kept) frames.push_back(&cam.analysis.at(k));
+      plans[c].faces = SelectFaces(frames);
+      const int found = static_cast<int>(
+          std::count_if(plans[c].faces.begin(), plans[c].faces.end(), [](auto* f) { return f != nullptr; }));
+      if (found == 0)
+        return Status::DataError(
+            "no face found in " + cam.source->path() + " (" + std::to_string(kept.size()) +
+            " frames examined). Try: --detector dlib-hog or ultraface-640 (small faces), a lower "
+            "--detector-threshold, a video where the face is frontal and well lit, or a higher "
+            "resolution source");
+      summary->face_lost += static_cast<int>(kept.size()) - found;
+      summary->with_landmarks += found;
+      if (found < options.min_face_fraction * kept.size())
+        HF_LOG(Warning) << "face found in only " << found << " of " << kept.size() << " frames of "
+                        << cam.source->path() << "; the others are kept and marked lost";
 
-    std::vector<FaceFrame> face_frames(kept.size());
-    for (size_t i = 0; i < kept.size(); ++i) {
-      // Nearest frame with a face, earlier on ties.
-      int best = -1;
-      for (int d = 0; best < 0; ++d) {
-        if (static_cast<int>(i) - d >= 0 && plans[c].faces[i - d]) best = static_cast<int>(i) - d;
-        else if (i + d < kept.size() && plans[c].faces[i + d]) best = static_cast<int>(i + d);
+      std::vector<FaceFrame> face_frames(kept.size());
+      for (size_t i = 0; i < kept.size(); ++i) {
+        // Nearest frame with a face, earlier on ties.
+        int best = -1;
+        for (int d = 0; best < 0; ++d) {
+          if (static_cast<int>(i) - d >= 0 && plans[c].faces[i - d]) best = static_cast<int>(i) - d;
+          else if (i + d < kept.size() && plans[c].faces[i + d]) best = static_cast<int>(i + d);
+        }
+        face_frames[i] = FaceFrameOf(plans[c].faces[best]->landmarks);
       }
-      face_frames[i] = FaceFrameOf(plans[c].faces[best]->landmarks);
+      if (crop_mode == "sequence") {
+        plans[c].crops.assign(kept.size(), SequenceCrop(face_frames, options.crop_scale, options.resolution));
+      } else if (crop_mode == "frame") {
+        plans[c].crops = FollowingCrops(face_frames, options.crop_scale, options.resolution);
+      } else {
+        plans[c].crops.assign(kept.size(), FullFrameCrop(cam.source->size(), options.resolution));
+      }
+      if (!options.masks.empty())
+        HF_RETURN_IF_ERROR(LoadUserMasks(options, cam.name, static_cast<int>(cameras.size()),
+                                         &plans[c].user_masks));
     }
-    if (crop_mode == "sequence") {
-      plans[c].crops.assign(kept.size(), SequenceCrop(face_frames, options.crop_scale, options.resolution));
-    } else if (crop_mode == "frame") {
-      plans[c].crops = FollowingCrops(face_frames, options.crop_scale, options.resolution);
-    } else {
-      plans[c].crops.assign(kept.size(), FullFrameCrop(cam.source->size(), options.resolution));
-    }
-    if (!options.masks.empty())
-      HF_RETURN_IF_ERROR(LoadUserMasks(options, cam.name, static_cast<int>(cameras.size()),
-                                       &plans[c].user_masks));
-  }
 
-  // Pass 2: decode again, crop, mask and write.
-  nlohmann::json landmarks_json = {{"format", "ibug68"},
-                                   {"coordinates", "pixels of frames/<camera>/<index>.png, "
-                                                   "pixel centres at integers"},
-                                   {"cameras", nlohmann::json::object()}};
-  nlohmann::json cameras_json = nlohmann::json::array();
-  for (size_t c = 0; c < cameras.size(); ++c) {
-    auto& cam = cameras[c];
-    const auto& plan_c = plans[c];
-    std::unique_ptr<FrameSource> source;
-    HF_RETURN_IF_ERROR(FrameSource::Open(options.inputs[c], options.folder_fps, &source));
-    const fs::path frame_dir = out_dir / "frames" / cam.name;
-    const fs::path mask_dir = out_dir / "masks" / cam.name;
-    HF_RETURN_IF_ERROR(EnsureDirectory(frame_dir));
-    HF_RETURN_IF_ERROR(EnsureDirectory(mask_dir));
-    std::map<int64_t, int> wanted;  // source frame -> output index
-    for (size_t i = 0; i < kept.size(); ++i) wanted[cam.analysis.at(kept[i]).source_index] = static_cast<int>(i);
+    // Pass 2: decode again, crop, mask and write.
+    nlohmann::json landmarks_json = {{"format", "ibug68"},
+                                     {"coordinates", "pixels of frames/<camera>/<index>.png, "
+                                                     "pixel centres at integers"},
+                                     {"cameras", nlohmann::json::object()}};
+    nlohmann::json cameras_json = nlohmann::json::array();
+    for (size_t c = 0; c < cameras.size(); ++c) {
+      auto& cam = cameras[c];
+      const auto& plan_c = plans[c];
+      std::unique_ptr<FrameSource> source;
+      HF_RETURN_IF_ERROR(FrameSource::Open(options.inputs[c], options.folder_fps, &source));
+      const fs::path frame_dir = out_dir / "frames" / cam.name;
+      const fs::path mask_dir = out_dir / "masks" / cam.name;
+      HF_RETURN_IF_ERROR(EnsureDirectory(frame_dir));
+      HF_RETURN_IF_ERROR(EnsureDirectory(mask_dir));
+      std::map<int64_t, int> wanted;  // source frame -> output index
+      for (size_t i = 0; i < kept.size(); ++i) wanted[cam.analysis.at(kept[i]).source_index] = static_cast<int>(i);
 
-    progress->Start("ingest: writing " + cam.name, static_cast<int64_t>(kept.size()));
-    std::vector<std::pair<int, cv::Mat>> batch;
-    Status batch_status;
-    auto flush = [&]() {
-      std::vector<Status> statuses(batch.size());
-      ParallelFor(static_cast<int>(batch.size()), threads, [&](int b, int) {
-        const int i = batch[b].first;
+      progress->Start("ingest: writing " + cam.name, static_cast<int64_t>(kept.size()));
+      std::vector<std::pair<int, cv::Mat>> batch;
+      Status batch_status;
+      auto flush = [&]() {
+        std::vector<Status> statuses(batch.size());
+        ParallelFor(static_cast<int>(batch.size()), threads, [&](int b, int) {
+          const int i = batch[b].first;
+          const CropWindow& crop = plan_c.crops[i];
+          const cv::Mat frame = crop.Apply(batch[b].second, cv::INTER_LINEAR);
+          cv::Mat mask;
+          if (!plan_c.user_masks.empty()) {
+            const int64_t source_index = cam.analysis.at(kept[i]).source_index;
+            if (source_index >= static_cast<int64_t>(plan_c.user_masks.size())) {
+              statuses[b] = Status::DataError("no mask for source frame " + std::to_string(source_index) +
+                                              " of " + cam.name + " in " + options.masks);
+              return;
+            }
+            cv::Mat user;
+            statuses[b] = ReadImage(plan_c.user_masks[source_index], &user, cv::IMREAD_GRAYSCALE);
+            if (!statuses[b].ok()) return;
+            if (user.size() != batch[b].second.size()) {
+              statuses[b] = Status::DataError("mask " + plan_c.user_masks[source_index].string() +
+                                              " is not the size of its frame");
+              return;
+            }
+            mask = crop.Apply(user, cv::INTER_LINEAR) > 127;
+          } else {
+            // Lost frames borrow the nearest face, mapped into this crop.
+            const FaceCandidate* face = plan_c.faces[i];
+            for (int d = 1; !face; ++d) {
+              if (i - d >= 0 && plan_c.faces[i - d]) face = plan_c.faces[i - d];
+              else if (i + d < static_cast<int>(kept.size()) && plan_c.faces[i + d]) face = plan_c.faces[i + d];
+            }
+            Landmarks68 mapped;
+            for (int p = 0; p < 68; ++p) mapped[p] = crop.Map(face->landmarks[p]);
+            mask = HeadMask(frame, mapped, options.mask,
+                            static_cast<uint64_t>(options.seed) * 1000003ULL + i + 1);
+          }
+          statuses[b] = WriteImageAtomic(frame_dir / FrameFile(i), frame);
+          if (statuses[b].ok()) statuses[b] = WriteImageAtomic(mask_dir / FrameFile(i), mask);
+        });
+        for (const auto& st : statuses)
+          if (!st.ok() && batch_status.ok()) batch_status = st;
+        progress->Advance(static_cast<int64_t>(batch.size()));
+        batch.clear();
+      };
+      const int64_t last = wanted.rbegin()->first;
+      for (int64_t j = 0; j <= last && batch_status.ok(); ++j) {
+        const auto it = wanted.find(j);
+        if (it == wanted.end()) {
+          if (!source->Skip()) break;
+          continue;
+        }
+        cv::Mat frame;
+        bool end = false;
+        HF_RETURN_IF_ERROR(source->Read(&frame, &end));
+        if (end) break;
+        batch.emplace_back(it->second, frame);
+        if (static_cast<int>(batch.size()) >= 16) flush();
+      }
+      if (!batch.empty()) flush();
+      HF_RETURN_IF_ERROR(batch_status);
+      if (ListFiles(frame_dir).size() != kept.size())
+        return Status::DataError(cam.source->path() + " yielded fewer frames on the second read "
+                                 "than on the first (damaged stream?)");
+      progress->Finish();
+
+      nlohmann::json lm_frames = nlohmann::json::array();
+      nlohmann::json cam_frames = nlohmann::json::array();
+      for (size_t i = 0; i < kept.size(); ++i) {
+        const FrameAnalysis& a = cam.analysis.at(kept[i]);
+        const FaceCandidate* face = plan_c.faces[i];
         const CropWindow& crop = plan_c.crops[i];
-        const cv::Mat frame = crop.Apply(batch[b].second, cv::INTER_LINEAR);
-        cv::Mat mask;
-        if (!plan_c.user_masks.empty()) {
-          const int64_t source_index = cam.analysis.at(kept[i]).source_index;
-          if (source_index >= static_cast<int64_t>(plan_c.user_masks.size())) {
-            statuses[b] = Status::DataError("no mask for source frame " + std::to_string(source_index) +
-                                            " of " + cam.name + " in " + options.masks);
-            return;
-          }
-          cv::Mat user;
-          statuses[b] = ReadImage(plan_c.user_masks[source_index], &user, cv::IMREAD_GRAYSCALE);
-          if (!statuses[b].ok()) return;
-          if (user.size() != batch[b].second.size()) {
-            statuses[b] = Status::DataError("mask " + plan_c.user_masks[source_index].string() +
-                                            " is not the size of its frame");
-            return;
-          }
-          mask = crop.Apply(user, cv::INTER_LINEAR) > 127;
-        } else {
-          // Lost frames borrow the nearest face, mapped into this crop.
-          const FaceCandidate* face = plan_c.faces[i];
-          for (int d = 1; !face; ++d) {
-            if (i - d >= 0 && plan_c.faces[i - d]) face = plan_c.faces[i - d];
-            else if (i + d < static_cast<int>(kept.size()) && plan_c.faces[i + d]) face = plan_c.faces[i + d];
-          }
+        nlohmann::json entry = {{"index", i}, {"found", face != nullptr}};
+        if (face) {
           Landmarks68 mapped;
           for (int p = 0; p < 68; ++p) mapped[p] = crop.Map(face->landmarks[p]);
-          mask = HeadMask(frame, mapped, options.mask,
-                          static_cast<uint64_t>(options.seed) * 1000003ULL + i + 1);
+          const cv::Point2f tl = crop.Map(face->detection.box.tl());
+          const cv::Point2f br = crop.Map(face->detection.box.br());
+          entry["score"] = std::round(face->detection.score * 1000.0f) / 1000.0f;
+          entry["detector"] = face->detection.from_fallback ? "dlib-hog (fallback)" : options.detector.detector;
+          entry["box"] = {tl.x, tl.y, br.x - tl.x, br.y - tl.y};
+          entry["points"] = PointsJson(mapped);
         }
-        statuses[b] = WriteImageAtomic(frame_dir / FrameFile(i), frame);
-        if (statuses[b].ok()) statuses[b] = WriteImageAtomic(mask_dir / FrameFile(i), mask);
-      });
-      for (const auto& st : statuses)
-        if (!st.ok() && batch_status.ok()) batch_status = st;
-      progress->Advance(static_cast<int64_t>(batch.size()));
-      batch.clear();
-    };
-    const int64_t last = wanted.rbegin()->first;
-    for (int64_t j = 0; j <= last && batch_status.ok(); ++j) {
-      const auto it = wanted.find(j);
-      if (it == wanted.end()) {
-        if (!source->Skip()) break;
-        continue;
+        lm_frames.push_back(entry);
+        nlohmann::json frame_json = {{"index", i},
+                                     {"source_frame", a.source_index},
+                                     {"time_s", a.source_index / cam.source->fps()},
+                                     {"sharpness", std::round(a.sharpness * 10.0) / 10.0},
+                                     {"face", face ? "found" : "lost"}};
+        if (source->is_folder()) frame_json["source_file"] = source->FrameName(a.source_index);
+        if (crop_mode == "frame") frame_json["crop"] = CropJson(crop);
+        cam_frames.push_back(frame_json);
       }
-      cv::Mat frame;
-      bool end = false;
-      HF_RETURN_IF_ERROR(source->Read(&frame, &end));
-      if (end) break;
-      batch.emplace_back(it->second, frame);
-      if (static_cast<int>(batch.size()) >= 16) flush();
+      landmarks_json["cameras"][cam.name] = lm_frames;
+      nlohmann::json cam_json = {{"name", cam.name},
+                                 {"source", AbsolutePath(cam.source->path()).string()},
+                                 {"source_fps", cam.source->fps()},
+                                 {"source_size", {cam.source->size().width, cam.source->size().height}},
+                                 {"offset", cam.offset},
+                                 {"median_sharpness", cam.median_sharpness},
+                                 {"masks", options.masks.empty() ? "grabcut" : "user"},
+                                 {"frames", cam_frames}};
+      if (crop_mode != "frame") cam_json["crop"] = CropJson(plan_c.crops[0]);
+      cameras_json.push_back(cam_json);
     }
-    if (!batch.empty()) flush();
-    HF_RETURN_IF_ERROR(batch_status);
-    if (ListFiles(frame_dir).size() != kept.size())
-      return Status::DataError(cam.source->path() + " yielded fewer frames on the second read "
-                               "than on the first (damaged stream?)");
-    progress->Finish();
 
-    nlohmann::json lm_frames = nlohmann::json::array();
-    nlohmann::json cam_frames = nlohmann::json::array();
-    for (size_t i = 0; i < kept.size(); ++i) {
-      const FrameAnalysis& a = cam.analysis.at(kept[i]);
-      const FaceCandidate* face = plan_c.faces[i];
-      const CropWindow& crop = plan_c.crops[i];
-      nlohmann::json entry = {{"index", i}, {"found", face != nullptr}};
-      if (face) {
-        Landmarks68 mapped;
-        for (int p = 0; p < 68; ++p) mapped[p] = crop.Map(face->landmarks[p]);
-        const cv::Point2f tl = crop.Map(face->detection.box.tl());
-        const cv::Point2f br = crop.Map(face->detection.box.br());
-        entry["score"] = std::round(face->detection.score * 1000.0f) / 1000.0f;
-        entry["detector"] = face->detection.from_fallback ? "dlib-hog (fallback)" : options.detector.detector;
-        entry["box"] = {tl.x, tl.y, br.x - tl.x, br.y - tl.y};
-        entry["points"] = PointsJson(mapped);
-      }
-      lm_frames.push_back(entry);
-      nlohmann::json frame_json = {{"index", i},
-                                   {"source_frame", a.source_index},
-                                   {"time_s", a.source_index / cam.source->fps()},
-                                   {"sharpness", std::round(a.sharpness * 10.0) / 10.0},
-                                   {"face", face ? "found" : "lost"}};
-      if (source->is_folder()) frame_json["source_file"] = source->FrameName(a.source_index);
-      if (crop_mode == "frame") frame_json["crop"] = CropJson(crop);
-      cam_frames.push_back(frame_json);
+    nlohmann::json frames_json = nlohmann::json::array();
+    for (size_t i = 0; i < kept.size(); ++i)
+      frames_json.push_back({{"index", i},
+                             {"sample", kept[i]},
+                             {"time_s", cameras[0].analysis.at(kept[i]).source_index / source_fps}});
+    const nlohmann::json capture = {
+        {"version", 1},
+        {"crop_mode", crop_mode},
+        {"crop_mapping", "u_out = (u_src + 0.5 - x0) * scale - 0.5, pixel centres at integers"},
+        {"fps", options.fps > 0.0 ? std::min(options.fps, source_fps) : source_fps},
+        {"resolution", options.resolution},
+        {"frames", frames_json},
+        {"cameras", cameras_json},
+        {"dropped", dropped},
+        {"report",
+         {{"sampled", summary->sampled},
+          {"kept", summary->kept},
+          {"dropped_blur", summary->dropped_blur},
+          {"dropped_missing", summary->dropped_missing},
+          {"face_lost", summary->face_lost},
+          {"with_landmarks", summary->with_landmarks}}}};
+    HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "landmarks.json", landmarks_json, -1));
+    HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "capture.json", capture, 1));
+    return Status::Ok();
+  };
+
+  std::string crop_mode = ResolvedCrop(options);
+  std::string why = options.crop != "auto"    ? "as asked"
+                    : cameras.size() > 1 ? "auto: several cameras keep the whole frame, whose background COLMAP needs"
+                                         : "auto: one camera";
+  HF_RETURN_IF_ERROR(write_outputs(crop_mode));
+  if (options.crop == "auto" && cameras.size() == 1) {
+    // A moving camera goes to COLMAP, which needs the background the crop
+    // around the head leaves out: measure the motion on what was written, and
+    // write the frames again whole if the camera moves.
+    IngestedCapture written;
+    HF_RETURN_IF_ERROR(ReadIngestedCapture(out_dir, &written));
+    BackgroundMotion motion;
+    HF_RETURN_IF_ERROR(MeasureBackgroundMotion(written, cameras[0].name, &motion));
+    if (motion.Moving(kMovingCameraPx)) {
+      crop_mode = "none";
+      why = "auto: a moving camera keeps the whole frame for COLMAP";
+      HF_LOG(Info) << "ingest: the camera moves (" << motion.Describe() << "); writing the frames again whole";
+      std::error_code ec;
+      fs::remove_all(out_dir / "frames", ec);
+      fs::remove_all(out_dir / "masks", ec);
+      HF_RETURN_IF_ERROR(write_outputs(crop_mode));
+    } else {
+      why = "auto: one fixed camera; " + motion.Describe();
     }
-    landmarks_json["cameras"][cam.name] = lm_frames;
-    nlohmann::json cam_json = {{"name", cam.name},
-                               {"source", AbsolutePath(cam.source->path()).string()},
-                               {"source_fps", cam.source->fps()},
-                               {"source_size", {cam.source->size().width, cam.source->size().height}},
-                               {"offset", cam.offset},
-                               {"median_sharpness", cam.median_sharpness},
-                               {"masks", options.masks.empty() ? "grabcut" : "user"},
-                               {"frames", cam_frames}};
-    if (crop_mode != "frame") cam_json["crop"] = CropJson(plan_c.crops[0]);
-    cameras_json.push_back(cam_json);
   }
-
-  nlohmann::json frames_json = nlohmann::json::array();
-  for (size_t i = 0; i < kept.size(); ++i)
-    frames_json.push_back({{"index", i},
-                           {"sample", kept[i]},
-                           {"time_s", cameras[0].analysis.at(kept[i]).source_index / source_fps}});
-  const nlohmann::json capture = {
-      {"version", 1},
-      {"crop_mode", crop_mode},
-      {"crop_mapping", "u_out = (u_src + 0.5 - x0) * scale - 0.5, pixel centres at integers"},
-      {"fps", options.fps > 0.0 ? std::min(options.fps, source_fps) : source_fps},
-      {"resolution", options.resolution},
-      {"frames", frames_json},
-      {"cameras", cameras_json},
-      {"dropped", dropped},
-      {"report",
-       {{"sampled", summary->sampled},
-        {"kept", summary->kept},
-        {"dropped_blur", summary->dropped_blur},
-        {"dropped_missing", summary->dropped_missing},
-        {"face_lost", summary->face_lost},
-        {"with_landmarks", summary->with_landmarks}}}};
-  HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "landmarks.json", landmarks_json, -1));
-  HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "capture.json", capture, 1));
+  summary->crop = crop_mode;
+  HF_LOG(Info) << "ingest: crop " << crop_mode << " (" << why << ")";
   return Status::Ok();
 }
 

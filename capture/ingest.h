@@ -34,8 +34,8 @@ struct IngestOptions {
   // "sequence": one square crop per camera holding the head in every frame
   // (fixed intrinsics); "frame": a square of fixed size following the head;
   // "none": the whole frame, longer side scaled to `resolution`; "auto":
-  // sequence for one camera, none for several (structure from motion needs
-  // the background to tie fixed cameras together from a few instants).
+  // none for several cameras or one whose background moves (structure from
+  // motion needs the background), else sequence.
   std::string crop = "auto";
   // Side of a crop as a multiple of the face size (landmark extent).
   double crop_scale = 2.0;

@@ -7,6 +7,8 @@
 #include <cstring>
 #include <random>
 
+#include <opencv2/imgcodecs.hpp>
+
 #include "calibration/align.h"
 #include "calibration/calibrate.h"
 #include "calibration/colmap_runner.h"
@@ -14,6 +16,7 @@
 #include "calibration/landmark_embedding.h"
 #include "capture/ingest.h"
 #include "capture/simulator.h"
+#include "core/fs.h"
 #include "core/json_io.h"
 #include "core/paths.h"
 
@@ -38,11 +41,12 @@ fs::path Scratch(const std::string& name) {
   return dir;
 }
 
-// Simulates `scene_text` and ingests it (no crop) into dir/workspace. With
-// `order` (one camera), the video is the simulated frames in that order, and
-// `truth` follows it.
+// Simulates `scene_text` and ingests it (no crop unless `crop` says) into
+// dir/workspace. With `order` (one camera), the video is the simulated frames
+// in that order, and `truth` follows it.
 void SimulateAndIngest(const std::string& scene_text, const fs::path& dir, IngestedCapture* capture,
-                       nlohmann::json* truth, const std::vector<int>& order = {}) {
+                       nlohmann::json* truth, const std::vector<int>& order = {}, const std::string& crop = "none",
+                       IngestSummary* summary_out = nullptr) {
   Scene scene;
   const Status parsed = ParseScene(scene_text, "test.toml", &scene);
   ASSERT_TRUE(parsed.ok()) << parsed.message();
@@ -59,13 +63,14 @@ void SimulateAndIngest(const std::string& scene_text, const fs::path& dir, Inges
       fs::copy_file(dir / "capture" / sim->CameraName(0) / FrameFileName(order[i]), reordered / FrameFileName(static_cast<int>(i)));
     ingest.inputs = {reordered.string()};
   }
-  ingest.crop = "none";
+  ingest.crop = crop;
   ingest.resolution = scene.camera.intrinsics.width;
   ingest.blur_ratio = 0.0;
   ResolveIngestDefaults(DefaultDataDir(), &ingest);
   IngestSummary summary;
   const Status ingested = RunIngest(ingest, dir / "workspace", 2, &progress, &summary);
   ASSERT_TRUE(ingested.ok()) << ingested.message();
+  if (summary_out) *summary_out = summary;
   ASSERT_TRUE(ReadIngestedCapture(dir / "workspace", capture).ok());
   ASSERT_TRUE(ReadJson(dir / "capture" / "ground_truth.json", truth).ok());
   if (!order.empty()) {
@@ -98,6 +103,27 @@ width = 320
 height = 320
 fov_deg = 45.0
 )";
+
+// Ingest's default crop keeps a moving camera's frames whole for COLMAP: it
+// crops around the head, sees the background move, and writes them again.
+TEST(Calibrate, IngestKeepsAMovingCamerasFramesWhole) {
+  const fs::path dir = Scratch("orbit_auto_crop");
+  IngestedCapture capture;
+  nlohmann::json truth;
+  IngestSummary summary;
+  SimulateAndIngest(kSmallOrbit, dir, &capture, &truth, {}, "auto", &summary);
+  EXPECT_EQ(summary.crop, "none");
+  ASSERT_EQ(capture.cameras.size(), 1u);
+  EXPECT_EQ(capture.cameras[0].width, 320);
+  EXPECT_DOUBLE_EQ(capture.cameras[0].crop_x0, 0.0);
+  EXPECT_DOUBLE_EQ(capture.cameras[0].crop_scale, 1.0);
+  EXPECT_EQ(capture.num_frames(), 24);
+  EXPECT_EQ(summary.with_landmarks + summary.face_lost, 24);  // counted once, not per writing
+  // Every frame and mask was written whole (none left from the first, cropped writing).
+  EXPECT_EQ(ListFiles(dir / "workspace" / "frames" / "cam0").size(), 24u);
+  const cv::Mat mask = cv::imread(capture.MaskPath("cam0", 23).string(), cv::IMREAD_GRAYSCALE);
+  EXPECT_EQ(mask.size(), cv::Size(320, 320));
+}
 
 TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   const fs::path dir = Scratch("orbit");

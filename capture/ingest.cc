@@ -10,8 +10,8 @@
 #include <set>
 
 #include "capture/background_motion.h"
-#include "capture/crop.h"
 #include "capture/capture_io.h"
+#include "capture/crop.h"
 #include "capture/frame_source.h"
 #include "capture/landmarks.h"
 #include "capture/sharpness.h"
@@ -348,11 +348,6 @@ Status LoadUserMasks(const IngestOptions& options, const std::string& camera, in
 
 }  // namespace
 
-std::string ResolvedCrop(const IngestOptions& options) {
-  if (options.crop != "auto") return options.crop;
-  return options.inputs.size() > 1 ? "none" : "sequence";
-}
-
 Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int threads,
                  Progress* progress, IngestSummary* summary) {
   HF_RETURN_IF_ERROR(options.Check());
@@ -469,55 +464,59 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
                << summary->dropped_blur << " dropped as blurred, " << summary->dropped_missing
                << " missing in a camera";
 
+  // Faces per camera over the kept frames; lost frames borrow the nearest face for cropping.
+  struct CameraPlan {
+    std::vector<const FaceCandidate*> faces;
+    std::vector<FaceFrame> face_frames;
+    std::vector<CropWindow> crops;
+    std::vector<fs::path> user_masks;
+  };
+  std::vector<CameraPlan> plans(cameras.size());
+  for (size_t c = 0; c < cameras.size(); ++c) {
+    auto& cam = cameras[c];
+    std::vector<const FrameAnalysis*> frames;
+    for (int k : kept) frames.push_back(&cam.analysis.at(k));
+    plans[c].faces = SelectFaces(frames);
+    const int found = static_cast<int>(
+        std::count_if(plans[c].faces.begin(), plans[c].faces.end(), [](auto* f) { return f != nullptr; }));
+    if (found == 0)
+      return Status::DataError(
+          "no face found in " + cam.source->path() + " (" + std::to_string(kept.size()) +
+          " frames examined). Try: --detector dlib-hog or ultraface-640 (small faces), a lower "
+          "--detector-threshold, a video where the face is frontal and well lit, or a higher "
+          "resolution source");
+    summary->face_lost += static_cast<int>(kept.size()) - found;
+    summary->with_landmarks += found;
+    if (found < options.min_face_fraction * kept.size())
+      HF_LOG(Warning) << "face found in only " << found << " of " << kept.size() << " frames of "
+                      << cam.source->path() << "; the others are kept and marked lost";
+
+    plans[c].face_frames.resize(kept.size());
+    for (size_t i = 0; i < kept.size(); ++i) {
+      // Nearest frame with a face, earlier on ties.
+      int best = -1;
+      for (int d = 0; best < 0; ++d) {
+        if (static_cast<int>(i) - d >= 0 && plans[c].faces[i - d]) best = static_cast<int>(i) - d;
+        else if (i + d < kept.size() && plans[c].faces[i + d]) best = static_cast<int>(i + d);
+      }
+      plans[c].face_frames[i] = FaceFrameOf(plans[c].faces[best]->landmarks);
+    }
+    if (!options.masks.empty())
+      HF_RETURN_IF_ERROR(LoadUserMasks(options, cam.name, static_cast<int>(cameras.size()),
+                                       &plans[c].user_masks));
+  }
+
   // Crops, pass 2 and the JSON files, for one crop mode.
   auto write_outputs = [&](const std::string& crop_mode) -> Status {
-    summary->face_lost = summary->with_landmarks = 0;
-    // Faces per camera over the kept frames; lost frames borrow the nearest face for cropping.
-    struct CameraPlan {
-      std::vector<const FaceCandidate*> faces;
-      std::vector<CropWindow> crops;
-      std::vector<fs::path> user_masks;
-    };
-    std::vector<CameraPlan> plans(cameras.size());
     for (size_t c = 0; c < cameras.size(); ++c) {
-      auto& cam = cameras[c];
-      std::vector<const FrameAnalysis*> frames;
-      for (int k : kept) frames.push_back(&cam.analysis.at(k));
-      plans[c].faces = SelectFaces(frames);
-      const int found = static_cast<int>(
-          std::count_if(plans[c].faces.begin(), plans[c].faces.end(), [](auto* f) { return f != nullptr; }));
-      if (found == 0)
-        return Status::DataError(
-            "no face found in " + cam.source->path() + " (" + std::to_string(kept.size()) +
-            " frames examined). Try: --detector dlib-hog or ultraface-640 (small faces), a lower "
-            "--detector-threshold, a video where the face is frontal and well lit, or a higher "
-            "resolution source");
-      summary->face_lost += static_cast<int>(kept.size()) - found;
-      summary->with_landmarks += found;
-      if (found < options.min_face_fraction * kept.size())
-        HF_LOG(Warning) << "face found in only " << found << " of " << kept.size() << " frames of "
-                        << cam.source->path() << "; the others are kept and marked lost";
-
-      std::vector<FaceFrame> face_frames(kept.size());
-      for (size_t i = 0; i < kept.size(); ++i) {
-        // Nearest frame with a face, earlier on ties.
-        int best = -1;
-        for (int d = 0; best < 0; ++d) {
-          if (static_cast<int>(i) - d >= 0 && plans[c].faces[i - d]) best = static_cast<int>(i) - d;
-          else if (i + d < kept.size() && plans[c].faces[i + d]) best = static_cast<int>(i + d);
-        }
-        face_frames[i] = FaceFrameOf(plans[c].faces[best]->landmarks);
-      }
+      const std::vector<FaceFrame>& face_frames = plans[c].face_frames;
       if (crop_mode == "sequence") {
         plans[c].crops.assign(kept.size(), SequenceCrop(face_frames, options.crop_scale, options.resolution));
       } else if (crop_mode == "frame") {
         plans[c].crops = FollowingCrops(face_frames, options.crop_scale, options.resolution);
       } else {
-        plans[c].crops.assign(kept.size(), FullFrameCrop(cam.source->size(), options.resolution));
+        plans[c].crops.assign(kept.size(), FullFrameCrop(cameras[c].source->size(), options.resolution));
       }
-      if (!options.masks.empty())
-        HF_RETURN_IF_ERROR(LoadUserMasks(options, cam.name, static_cast<int>(cameras.size()),
-                                         &plans[c].user_masks));
     }
 
     // Pass 2: decode again, crop, mask and write.
@@ -671,7 +670,7 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
     return Status::Ok();
   };
 
-  std::string crop_mode = ResolvedCrop(options);
+  std::string crop_mode = options.crop != "auto" ? options.crop : cameras.size() > 1 ? "none" : "sequence";
   std::string why = options.crop != "auto"    ? "as asked"
                     : cameras.size() > 1 ? "auto: several cameras keep the whole frame, whose background COLMAP needs"
                                          : "auto: one camera";

@@ -91,9 +91,6 @@ struct IngestSummary {
 // Runs ingest, writing frames/, masks/, landmarks.json and capture.json under
 // `out_dir`. Expected failures (unreadable input, no face, empty range) come
 // back as a Status that names the file and suggests what to try.
-// The crop ingest uses: `options.crop` with "auto" resolved for the number of inputs.
-std::string ResolvedCrop(const IngestOptions& options);
-
 Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int threads,
                  Progress* progress, IngestSummary* summary);
 

@@ -200,6 +200,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
       {"expression_names", model.expression_names()},
       {"head_held_by_cameras", fit.fixed_head},
       {"median_residual_px", result.median_residual_px},
+      {"dropped_views", result.dropped_views},
       {"solver", result.solver_report},
       {"seconds", result.seconds},
       {"frames", frames}};
@@ -286,6 +287,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   summary->interpolated = interpolated;
   summary->low_confidence = low;
   summary->median_residual_px = result.median_residual_px;
+  summary->dropped_views = result.dropped_views;
   summary->seconds = result.seconds;
   summary->fixed_head = fit.fixed_head;
   return Status::Ok();

@@ -34,6 +34,7 @@ void AddTrackOptions(OptionSet* options, TrackStageOptions* track);
 
 struct TrackSummary {
   int frames = 0, interpolated = 0, low_confidence = 0;
+  int dropped_views = 0;  // views left out for disagreeing with the rest of their frame
   double median_residual_px = 0;
   double seconds = 0;
   bool fixed_head = false;

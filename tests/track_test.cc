@@ -122,6 +122,7 @@ struct SimulatedScores {
   // motion is followed, apart from where the head frame itself sits.
   double motion_rotation_deg = 0;
   double focal_error = -1;  // head-pose cameras: |f / f_true - 1| of calibrate's focal length
+  int dropped_views = 0, views = 0;  // tracking.json's views left out, of the registered views
   std::map<std::string, double> mae;
 };
 
@@ -171,6 +172,8 @@ SimulatedScores RunSimulated(const std::string& scene, int frames, const std::ve
     real_rotations.push_back(real);
   }
   EXPECT_GT(estimated.size(), 0u) << "no registered views to score";
+  s.views = int(estimated.size());
+  s.dropped_views = tracking.at("dropped_views").get<int>();
   s.rotation_deg = Median(rotation);
   // est = real * g for one constant g (chordal mean of real^T est, projected onto the rotations).
   Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
@@ -190,7 +193,7 @@ SimulatedScores RunSimulated(const std::string& scene, int frames, const std::ve
               scene.c_str(), frames, s.residual_px, s.rotation_deg, s.motion_rotation_deg,
               Eigen::AngleAxisd(g).angle() * 180 / M_PI);
   for (const auto& [name, mae] : s.mae) std::printf(" %s %.3f", name.c_str(), mae);
-  std::printf("\n");
+  std::printf("; %d of %d views left out\n", s.dropped_views, s.views);
   return s;
 }
 
@@ -236,13 +239,16 @@ TEST(SimulatedTrack, Rig8Cam) {
   for (const auto& [name, mae] : s.mae) EXPECT_LT(mae, 0.12) << name;
   EXPECT_LT(s.mae.at("jawOpen"), 0.1);
   EXPECT_LT(s.mae.at("mouthSmile_R"), 0.1);
-  // 1.50-1.52 px: the 1.5 px target is not met. The jaw contour of views
+  // 1.49-1.52 px: the 1.5 px target is not met. The jaw contour of views
   // turned more than 20 deg is counted here though the fit leaves it out.
   EXPECT_LT(s.residual_px, 1.6);
-  // 2.8-3.2 deg, mostly a constant pitch of the head frame (the identity
+  // 2.8-3.6 deg over seven runs, mostly a constant pitch of the head frame (the identity
   // imitates most of a pitch of the landmarks, as on talking_static): the
   // 1.5 deg target is not met.
   EXPECT_LT(s.rotation_deg, 4.0);
+  // The eight cameras mostly agree: 5 of the 400 views are left out in the
+  // four runs that counted them.
+  EXPECT_LE(s.dropped_views, 20);
 }
 
 }  // namespace

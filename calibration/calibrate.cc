@@ -1,21 +1,16 @@
 #include "calibration/calibrate.h"
 
 #include <algorithm>
-#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <map>
 #include <sstream>
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
-#include <opencv2/video/tracking.hpp>
 
 #include "calibration/landmark_embedding.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/paths.h"
-#include "core/statistics.h"
 
 namespace headforge {
 
@@ -101,7 +96,6 @@ std::string CalibrateSummary::OneLine() const {
                   total, reprojection_px);
   return std::string(text) + (reason.empty() ? "" : " (" + reason + ")");
 }
-
 
 namespace {
 

@@ -11,9 +11,9 @@
 
 #include "calibration/camera_set.h"
 #include "calibration/landmark_embedding.h"
-#include "capture/background_motion.h"
 #include "calibration/colmap_runner.h"
 #include "calibration/head_pose.h"
+#include "capture/background_motion.h"
 #include "capture/capture_io.h"
 #include "core/face_model.h"
 #include "core/options.h"
@@ -56,7 +56,6 @@ struct CalibrateSummary {
 // Calibrates into `out_dir` (cameras.json, colmap/ when SfM ran).
 Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capture, const FaceModel& model,
                     const fs::path& out_dir, Progress* progress, CameraSet* cameras, CalibrateSummary* summary);
-
 
 // Reads a rig file (JSON, or a COLMAP text model folder) into cameras for the
 // ingested views; intrinsics given in source pixels are mapped through ingest's crop.

@@ -163,17 +163,16 @@ Status RunTrackStage(Workspace* workspace, const TrackStageOptions& track, const
         TrackSummary summary;
         HF_RETURN_IF_ERROR(RunTrack(track, capture, cameras, model, staging, progress, &summary));
         result->outputs = summary.outputs;
-        char text[300];
-        const std::string dropped =
-            summary.dropped_views > 0
-                ? ", " + std::to_string(summary.dropped_views) +
-                      " views left out (their landmarks disagreed with the other views of their frame)"
-                : "";
+        char text[200];
         std::snprintf(text, sizeof(text),
-                      "%d frames, median landmark residual %.2f px, %d interpolated, %d low-confidence, %.1f s%s%s",
+                      "%d frames, median landmark residual %.2f px, %d interpolated, %d low-confidence, %.1f s%s",
                       summary.frames, summary.median_residual_px, summary.interpolated, summary.low_confidence,
-                      summary.seconds, summary.fixed_head ? ", head held by the cameras" : "", dropped.c_str());
+                      summary.seconds, summary.fixed_head ? ", head held by the cameras" : "");
         result->message = text;
+        if (summary.dropped_views > 0) {
+          result->message += ", " + std::to_string(summary.dropped_views) +
+                             " views left out (their landmarks disagreed with the other views of their frame)";
+        }
         HF_LOG(Info) << "track: " << result->message;
         return Status::Ok();
       },

@@ -133,14 +133,11 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
                                      std::to_string(num_frames));
     }
     if (!view.landmarks) continue;
-    if (has_frontal[view.frame] &&
-        std::abs(YawFromCamera(view.camera, Eigen::Isometry3d::Identity())) > options.max_fit_yaw_deg) {
-      continue;
-    }
+    const double view_yaw = std::abs(YawFromCamera(view.camera, Eigen::Isometry3d::Identity()));
+    if (has_frontal[view.frame] && view_yaw > options.max_fit_yaw_deg) continue;
     used[v] = true;
     FrameBlocks& f = frames[view.frame];
     constexpr double kContourFadeDeg = 10.0;
-    const double view_yaw = std::abs(YawFromCamera(view.camera, Eigen::Isometry3d::Identity()));
     const double contour =
         options.contour_weight * std::clamp((options.contour_max_yaw_deg - view_yaw) / kContourFadeDeg, 0.0, 1.0);
     for (int i = 0; i < 68; ++i) {

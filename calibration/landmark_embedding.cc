@@ -1,6 +1,8 @@
 #include "calibration/landmark_embedding.h"
 
+#include <algorithm>
 #include <cmath>
+#include <functional>
 
 #include "capture/landmarks.h"
 #include "capture/simulator.h"
@@ -10,17 +12,16 @@
 namespace headforge {
 
 std::string DefaultLandmarkEmbedding() { return HEADFORGE_LANDMARK_EMBEDDING; }
+std::string ViewLandmarkEmbedding() { return HEADFORGE_VIEW_LANDMARK_EMBEDDING; }
 
-Status MeasureLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
-                                const std::string& landmark_model, int threads, std::vector<Eigen::Vector3d>* points) {
-  // The mean face, lit from the front, turning +-25 degrees and nodding +-12.
-  const std::string scene_text =
-      "name = \"landmark_embedding\"\nfps = 25\nframes = 60\neffects = [\"lighting\"]\n"
-      "[subject]\nidentity = [0.0]\n[background]\ntype = \"flat\"\n"
-      "[camera]\nposition = [0.0, 0.0, 0.65]\n[camera.intrinsics]\nwidth = 512\nheight = 512\nfocal = 1100.0\n"
-      "[head]\nyaw = { type = \"sine\", amplitude = 25.0, period = 2.4 }\n"
-      "pitch = { type = \"sine\", amplitude = 12.0, period = 1.1 }\n"
-      "[effect.lighting]\nx = 0.4\ny = 0.5\nz = 0.9\nambient = 0.45\ndiffuse = 0.7\n";
+namespace {
+
+// Renders the mean face by `scene_text`, detects the 68 points in every frame
+// and hands each one that lands on the head to `use` as a head-frame point,
+// with the direction from the head toward the camera.
+Status ForEachDetectedPoint(const std::string& scene_text, const FaceModel& model, const FaceDetectorOptions& detector,
+                            const std::string& landmark_model, int threads,
+                            const std::function<void(int, const Eigen::Vector3d&, const Eigen::Vector3d&)>& use) {
   Scene scene;
   HF_RETURN_IF_ERROR(ParseScene(scene_text, "landmark embedding scene", &scene));
   std::unique_ptr<Simulator> sim;
@@ -29,8 +30,6 @@ Status MeasureLandmarkEmbedding(const FaceModel& model, const FaceDetectorOption
   HF_RETURN_IF_ERROR(FaceDetector::Create(detector, &faces));
   std::unique_ptr<LandmarkPredictor> predictor;
   HF_RETURN_IF_ERROR(LandmarkPredictor::Load(landmark_model, &predictor));
-  std::vector<Eigen::Vector3d> sum(68, Eigen::Vector3d::Zero());
-  std::vector<int> count(68, 0);
   for (int f = 0; f < sim->num_frames(); ++f) {
     const SimulatedView view = sim->RenderView(f, 0);
     const auto found = faces->Detect(view.image);
@@ -46,10 +45,39 @@ Status MeasureLandmarkEmbedding(const FaceModel& model, const FaceDetectorOption
       if (z <= 0 || id < 0 || (id >> 24) != 0) continue;  // not on the head
       const Eigen::Vector3d cam((lm[i].x - view.camera.cx) / view.camera.fx * z,
                                 (lm[i].y - view.camera.cy) / view.camera.fy * z, z);
-      sum[i] += head_from_cam * cam;
-      ++count[i];
+      use(i, head_from_cam * cam, head_from_cam.translation());
     }
   }
+  return Status::Ok();
+}
+
+// The mean face under one light, the camera 0.65 m in front; the head turns
+// and nods by these amplitudes (degrees) over `frames` frames.
+std::string EmbeddingScene(int frames, double yaw, double yaw_period, double pitch, double pitch_period) {
+  char text[1024];
+  std::snprintf(text, sizeof(text),
+                "name = \"landmark_embedding\"\nfps = 25\nframes = %d\neffects = [\"lighting\"]\n"
+                "[subject]\nidentity = [0.0]\n[background]\ntype = \"flat\"\n"
+                "[camera]\nposition = [0.0, 0.0, 0.65]\n[camera.intrinsics]\nwidth = 512\nheight = 512\nfocal = 1100.0\n"
+                "[head]\nyaw = { type = \"sine\", amplitude = %.1f, period = %.2f }\n"
+                "pitch = { type = \"sine\", amplitude = %.1f, period = %.2f }\n"
+                "[effect.lighting]\nx = 0.4\ny = 0.5\nz = 0.9\nambient = 0.45\ndiffuse = 0.7\n",
+                frames, yaw, yaw_period, pitch, pitch_period);
+  return text;
+}
+
+}  // namespace
+
+Status MeasureLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
+                                const std::string& landmark_model, int threads, std::vector<Eigen::Vector3d>* points) {
+  // Turning +-25 degrees and nodding +-12.
+  std::vector<Eigen::Vector3d> sum(68, Eigen::Vector3d::Zero());
+  std::vector<int> count(68, 0);
+  HF_RETURN_IF_ERROR(ForEachDetectedPoint(EmbeddingScene(60, 25.0, 2.4, 12.0, 1.1), model, detector, landmark_model,
+                                          threads, [&](int i, const Eigen::Vector3d& p, const Eigen::Vector3d&) {
+                                            sum[i] += p;
+                                            ++count[i];
+                                          }));
   points->clear();
   int seen = 0;
   for (int i = 0; i < 68; ++i) {
@@ -61,10 +89,64 @@ Status MeasureLandmarkEmbedding(const FaceModel& model, const FaceDetectorOption
   return Status::Ok();
 }
 
-Status WriteLandmarkEmbedding(const std::string& path, const std::vector<Eigen::Vector3d>& points) {
+Status MeasureViewLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
+                                    const std::string& landmark_model, int threads, LandmarkEmbedding* embedding) {
+  LandmarkEmbedding out;
+  HF_RETURN_IF_ERROR(MeasureLandmarkEmbedding(model, detector, landmark_model, threads, &out.points));
+  for (int y = -60; y <= 60; y += 10) out.yaw_deg.push_back(y);
+  for (int p = -20; p <= 20; p += 10) out.pitch_deg.push_back(p);
+  const size_t num_nodes = out.yaw_deg.size() * out.pitch_deg.size();
+  std::vector<Eigen::Vector3d> sum(num_nodes * 68, Eigen::Vector3d::Zero());
+  std::vector<double> weight(num_nodes * 68, 0.0);
+  // Turning +-65 degrees and nodding +-22, each detection shared among the
+  // four nodes around its direction by the bilinear weights.
+  HF_RETURN_IF_ERROR(ForEachDetectedPoint(EmbeddingScene(400, 65.0, 3.3, 22.0, 0.7), model, detector, landmark_model,
+                                          threads, [&](int i, const Eigen::Vector3d& p, const Eigen::Vector3d& toward) {
+                                            for (const auto& [node, w] : out.NodeWeights(toward)) {
+                                              sum[node * 68 + i] += w * p;
+                                              weight[node * 68 + i] += w;
+                                            }
+                                          }));
+  // A node that saw a landmark little leans toward the points over every
+  // direction: three detections' weight make it the node's own.
+  constexpr double kFullWeight = 3.0;
+  for (size_t n = 0; n < num_nodes; ++n) {
+    std::vector<Eigen::Vector3d> points(68);
+    for (int i = 0; i < 68; ++i) {
+      const double w = weight[n * 68 + i];
+      const Eigen::Vector3d own = w > 0 ? Eigen::Vector3d(sum[n * 68 + i] / w) : out.points[i];
+      const double t = std::min(w / kFullWeight, 1.0);
+      points[i] = t * own + (1 - t) * out.points[i];
+    }
+    out.nodes.push_back(std::move(points));
+  }
+  *embedding = std::move(out);
+  return Status::Ok();
+}
+
+namespace {
+nlohmann::json PointRows(const std::vector<Eigen::Vector3d>& points) {
   nlohmann::json rows = nlohmann::json::array();
   for (const auto& p : points) rows.push_back({std::round(p.x() * 1e6) / 1e6, std::round(p.y() * 1e6) / 1e6, std::round(p.z() * 1e6) / 1e6});
-  return WriteJsonAtomic(path, {{"format", "ibug68 head-frame points, metres"}, {"points", rows}}, 1);
+  return rows;
+}
+}  // namespace
+
+Status WriteLandmarkEmbedding(const std::string& path, const std::vector<Eigen::Vector3d>& points) {
+  return WriteJsonAtomic(path, {{"format", "ibug68 head-frame points, metres"}, {"points", PointRows(points)}}, 1);
+}
+
+Status WriteLandmarkEmbedding(const std::string& path, const LandmarkEmbedding& embedding) {
+  nlohmann::json j = {{"format", "ibug68 head-frame points, metres; nodes: the points seen from each camera direction"},
+                      {"points", PointRows(embedding.points)}};
+  if (embedding.view_dependent()) {
+    j["yaw_deg"] = embedding.yaw_deg;
+    j["pitch_deg"] = embedding.pitch_deg;
+    nlohmann::json nodes = nlohmann::json::array();
+    for (const auto& points : embedding.nodes) nodes.push_back({{"points", PointRows(points)}});
+    j["nodes"] = nodes;
+  }
+  return WriteJsonAtomic(path, j, 0);
 }
 
 Status ReadLandmarkEmbedding(const std::string& path, std::vector<Eigen::Vector3d>* points) {
@@ -78,6 +160,84 @@ Status ReadLandmarkEmbedding(const std::string& path, std::vector<Eigen::Vector3
   }
   if (points->size() != 68) return Status::DataError(path + " does not hold 68 points");
   return Status::Ok();
+}
+
+Status ReadLandmarkEmbedding(const std::string& path, LandmarkEmbedding* embedding) {
+  LandmarkEmbedding out;
+  HF_RETURN_IF_ERROR(ReadLandmarkEmbedding(path, &out.points));
+  nlohmann::json j;
+  HF_RETURN_IF_ERROR(ReadJson(path, &j));
+  if (j.contains("nodes")) {
+    try {
+      out.yaw_deg = j.at("yaw_deg").get<std::vector<double>>();
+      out.pitch_deg = j.at("pitch_deg").get<std::vector<double>>();
+      for (const auto& node : j.at("nodes")) {
+        std::vector<Eigen::Vector3d> points;
+        for (const auto& p : node.at("points")) points.emplace_back(p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>());
+        if (points.size() != 68) return Status::DataError(path + ": a node does not hold 68 points");
+        out.nodes.push_back(std::move(points));
+      }
+    } catch (const nlohmann::json::exception& e) {
+      return Status::DataError(path + " has a malformed view grid: " + e.what());
+    }
+    auto ascending = [](const std::vector<double>& v) {
+      for (size_t i = 1; i < v.size(); ++i)
+        if (!(v[i] > v[i - 1])) return false;
+      return !v.empty();
+    };
+    if (!ascending(out.yaw_deg) || !ascending(out.pitch_deg) ||
+        out.nodes.size() != out.yaw_deg.size() * out.pitch_deg.size())
+      return Status::DataError(path + ": the view grid's angles must ascend and its nodes number yaws x pitches");
+  }
+  *embedding = std::move(out);
+  return Status::Ok();
+}
+
+std::vector<std::pair<int, double>> LandmarkEmbedding::NodeWeights(const Eigen::Vector3d& toward_camera) const {
+  const Eigen::Vector3d d = toward_camera.normalized();
+  const double yaw = std::atan2(d.x(), d.z()) * 180.0 / M_PI;
+  const double pitch = std::asin(std::clamp(d.y(), -1.0, 1.0)) * 180.0 / M_PI;
+  // Position between grid lines: index and fraction, clamped at the ends.
+  auto locate = [](const std::vector<double>& grid, double x, int* i, double* t) {
+    const int n = int(grid.size());
+    if (n == 1 || x <= grid.front()) {
+      *i = 0;
+      *t = 0;
+      return;
+    }
+    if (x >= grid.back()) {
+      *i = n - 2;
+      *t = 1;
+      return;
+    }
+    *i = int(std::upper_bound(grid.begin(), grid.end(), x) - grid.begin()) - 1;
+    *t = (x - grid[*i]) / (grid[*i + 1] - grid[*i]);
+  };
+  int iy, ip;
+  double ty, tp;
+  locate(yaw_deg, yaw, &iy, &ty);
+  locate(pitch_deg, pitch, &ip, &tp);
+  const int ny = int(yaw_deg.size()), np = int(pitch_deg.size());
+  std::vector<std::pair<int, double>> out;
+  for (int b = 0; b < (np > 1 ? 2 : 1); ++b) {
+    for (int a = 0; a < (ny > 1 ? 2 : 1); ++a) {
+      const double w = (ny > 1 ? (a ? ty : 1 - ty) : 1.0) * (np > 1 ? (b ? tp : 1 - tp) : 1.0);
+      if (w > 0) out.emplace_back((ip + b) * ny + iy + a, w);
+    }
+  }
+  return out;
+}
+
+LandmarkEmbedding LoadLandmarkEmbedding(const FaceModel& model, const std::string& embedding_path) {
+  LandmarkEmbedding e;
+  if (!embedding_path.empty() && fs::exists(embedding_path)) {
+    const Status s = ReadLandmarkEmbedding(embedding_path, &e);
+    if (s.ok()) return e;
+    HF_LOG(Warning) << s.message() << "; using the model's landmark vertices";
+  }
+  e = LandmarkEmbedding();
+  for (int v : model.landmarks_ibug68()) e.points.push_back(model.neutral().col(v).cast<double>());
+  return e;
 }
 
 std::vector<Eigen::Vector3d> DetectorLandmarkPoints(const FaceModel& model, const std::string& embedding_path) {

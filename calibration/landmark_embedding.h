@@ -24,11 +24,38 @@ Status MeasureLandmarkEmbedding(const FaceModel& model, const FaceDetectorOption
 Status WriteLandmarkEmbedding(const std::string& path, const std::vector<Eigen::Vector3d>& points);
 Status ReadLandmarkEmbedding(const std::string& path, std::vector<Eigen::Vector3d>* points);
 
+// The points as the detector places them from each direction of the camera:
+// from the side the jaw contour follows the silhouette and the inner points
+// shift too. Nodes on a grid of the camera's direction seen from the head
+// (yaw about the head's up axis, pitch up; degrees), blended bilinearly and
+// clamped at the grid's edges.
+struct LandmarkEmbedding {
+  std::vector<Eigen::Vector3d> points;  // 68, over every direction
+  std::vector<double> yaw_deg, pitch_deg;  // ascending; empty: no view dependence
+  std::vector<std::vector<Eigen::Vector3d>> nodes;  // [pitch * yaw_deg.size() + yaw] -> 68 points
+
+  bool view_dependent() const { return !nodes.empty(); }
+  // (node, weight) pairs summing to 1 for a direction from the head's origin
+  // toward the camera, in the head frame.
+  std::vector<std::pair<int, double>> NodeWeights(const Eigen::Vector3d& toward_camera) const;
+};
+Status ReadLandmarkEmbedding(const std::string& path, LandmarkEmbedding* embedding);
+Status WriteLandmarkEmbedding(const std::string& path, const LandmarkEmbedding& embedding);
+// MeasureLandmarkEmbedding's points, and a grid of yaw -60..60 and pitch
+// -20..20 degrees (10 apart) measured as the mean face turns +-65 degrees and
+// nods +-22 before the camera.
+Status MeasureViewLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
+                                    const std::string& landmark_model, int threads, LandmarkEmbedding* embedding);
+// The embedding file when it exists and loads, else the model's landmark vertices.
+LandmarkEmbedding LoadLandmarkEmbedding(const FaceModel& model, const std::string& embedding_path);
+
 // The 68 points a solver should use: the embedding file when it exists and
 // loads, else the model's landmark vertices.
 std::vector<Eigen::Vector3d> DetectorLandmarkPoints(const FaceModel& model, const std::string& embedding_path);
 
 // The embedding shipped in data/ (for the ICT model and dlib's 68-point predictor).
 std::string DefaultLandmarkEmbedding();
+// The same with the view grid (embed-landmarks --views), for `track`.
+std::string ViewLandmarkEmbedding();
 
 }  // namespace headforge

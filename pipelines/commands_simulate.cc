@@ -66,7 +66,12 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   std::string out = DefaultLandmarkEmbedding(), face_model;
   options.Add("embed.out", &out, "Where to write the embedding (JSON).", "out");
   options.Add("embed.face_model", &face_model, "Face model; default DATA/ict_facekit/ict_face_model.h5.", "face-model");
-  const int parsed = ParseOrExit(&options, args, "headforge embed-landmarks [--out FILE]",
+  bool views = false;
+  options.Add("embed.views", &views,
+              "Also measure the points from each direction of the camera (yaw -60..60, pitch -20..20 degrees), "
+              "which track uses view by view (400 more renders).",
+              "views");
+  const int parsed = ParseOrExit(&options, args, "headforge embed-landmarks [--out FILE] [--views]",
                                  "Measures where the landmark detector's 68 points sit on the face model, from\n"
                                  "simulator renders of the mean face (calibration/landmark_embedding.h).");
   if (parsed >= 0) return parsed;
@@ -76,11 +81,18 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   if (Status s = FaceModel::Load(face_model, &model); !s.ok()) return ReportFailure(s);
   FaceDetectorOptions detector;
   detector.ultraface_dir = (fs::path(common.data_dir) / "models" / "ultraface").string();
-  std::vector<Eigen::Vector3d> points;
   const int threads = common.threads > 0 ? common.threads : HardwareThreads();
-  if (Status s = MeasureLandmarkEmbedding(model, detector, DefaultLandmarkModel(), threads, &points); !s.ok())
-    return ReportFailure(s);
-  if (Status s = WriteLandmarkEmbedding(out, points); !s.ok()) return ReportFailure(s);
+  if (views) {
+    LandmarkEmbedding embedding;
+    if (Status s = MeasureViewLandmarkEmbedding(model, detector, DefaultLandmarkModel(), threads, &embedding); !s.ok())
+      return ReportFailure(s);
+    if (Status s = WriteLandmarkEmbedding(out, embedding); !s.ok()) return ReportFailure(s);
+  } else {
+    std::vector<Eigen::Vector3d> points;
+    if (Status s = MeasureLandmarkEmbedding(model, detector, DefaultLandmarkModel(), threads, &points); !s.ok())
+      return ReportFailure(s);
+    if (Status s = WriteLandmarkEmbedding(out, points); !s.ok()) return ReportFailure(s);
+  }
   HF_LOG(Info) << "embed-landmarks: wrote " << out;
   return kExitOk;
 }

@@ -106,4 +106,46 @@ Status BuildLandmarkBasis(const FaceModel& model, const std::vector<Eigen::Vecto
   return Status::Ok();
 }
 
+LandmarkBasis ViewLandmarkBases::ForDirection(const Eigen::Vector3d& toward_camera) const {
+  if (nodes.empty()) return any_view;
+  LandmarkBasis out;
+  double heaviest = 0;
+  for (const auto& [node, weight] : embedding.NodeWeights(toward_camera)) {
+    const LandmarkBasis& b = nodes[node];
+    if (out.size() == 0) {
+      out = b;
+      out.base *= weight;
+      for (int i = 0; i < out.size(); ++i) {
+        out.identity[i] *= weight;
+        out.expression[i] *= weight;
+      }
+    } else {
+      out.base += weight * b.base;
+      for (int i = 0; i < out.size(); ++i) {
+        out.identity[i] += weight * b.identity[i];
+        out.expression[i] += weight * b.expression[i];
+      }
+    }
+    if (weight > heaviest) {  // the surface attachment of the nearest node
+      heaviest = weight;
+      out.triangle = b.triangle;
+      out.barycentric = b.barycentric;
+    }
+  }
+  return out;
+}
+
+Status BuildViewLandmarkBases(const FaceModel& model, const LandmarkEmbedding& embedding, int identity_modes,
+                              ViewLandmarkBases* bases) {
+  ViewLandmarkBases out;
+  out.embedding = embedding;
+  HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, embedding.points, identity_modes, &out.any_view));
+  for (const auto& points : embedding.nodes) {
+    out.nodes.emplace_back();
+    HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, points, identity_modes, &out.nodes.back()));
+  }
+  *bases = std::move(out);
+  return Status::Ok();
+}
+
 }  // namespace headforge

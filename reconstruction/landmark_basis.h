@@ -10,6 +10,7 @@
 
 #include <vector>
 
+#include "calibration/landmark_embedding.h"
 #include "core/face_model.h"
 #include "core/status.h"
 
@@ -35,5 +36,20 @@ struct LandmarkBasis {
 // model has no regions).
 Status BuildLandmarkBasis(const FaceModel& model, const std::vector<Eigen::Vector3d>& points,
                           int identity_modes, LandmarkBasis* basis);
+
+// The bases of a view-dependent embedding: one per grid node, blended for a
+// camera's direction. The blend of linear functions is the linear function of
+// the blended points, so a view sees the embedding's points for its direction.
+struct ViewLandmarkBases {
+  LandmarkBasis any_view;            // from the embedding's points over every direction
+  LandmarkEmbedding embedding;       // its grid
+  std::vector<LandmarkBasis> nodes;  // empty: the embedding is not view-dependent
+
+  // The basis for a camera whose centre lies in direction `toward_camera`
+  // from the head's origin (head frame).
+  LandmarkBasis ForDirection(const Eigen::Vector3d& toward_camera) const;
+};
+Status BuildViewLandmarkBases(const FaceModel& model, const LandmarkEmbedding& embedding, int identity_modes,
+                              ViewLandmarkBases* bases);
 
 }  // namespace headforge

@@ -56,6 +56,19 @@ Status BuildTrackingViews(const IngestedCapture& capture, const CameraSet& camer
   return Status::Ok();
 }
 
+// Each view's landmark basis for the direction its camera sees the head
+// from, the head moved by `motion` of its frame (none: at its initial pose);
+// nothing when the embedding is the same from every direction.
+void AttachViewBases(const ViewLandmarkBases& bases, const std::vector<Eigen::Isometry3d>& motion,
+                     std::vector<TrackingView>* views) {
+  if (bases.nodes.empty()) return;
+  for (TrackingView& view : *views) {
+    Eigen::Vector3d centre = -view.camera.rotation.transpose() * view.camera.translation;
+    if (view.frame < int(motion.size())) centre = motion[view.frame].inverse() * centre;
+    view.basis = std::make_shared<const LandmarkBasis>(bases.ForDirection(centre));
+  }
+}
+
 // The fitted head drawn over one frame: the face shaded toward the camera at
 // half opacity, detected landmarks green, fitted ones red.
 cv::Mat Overlay(const cv::Mat& frame, const Mesh& mesh, const TrackingCamera& camera,
@@ -109,6 +122,7 @@ Status WriteObj(const fs::path& path, const Eigen::Matrix3Xf& vertices, const Ei
 Status TrackStageOptions::Check() const {
   std::string why;
   if (!fit.Check(&why)) return Status::InvalidArgument("track: " + why);
+  if (!(grid_min_span_deg >= 0)) return Status::InvalidArgument("track: grid_min_span must be zero or positive");
   return Status::Ok();
 }
 
@@ -139,8 +153,14 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
   o->Add("track.max_iterations", &t->fit.max_iterations, "Levenberg-Marquardt iterations at most.",
          "track-iterations");
   o->Add("track.landmark_embedding", &t->landmark_embedding,
-         "Where the detector's 68 landmarks sit on the face model (JSON); empty: the shipped embedding.",
+         "Where the detector's 68 landmarks sit on the face model (JSON; embed-landmarks); empty: the shipped view "
+         "grid when the views see the head from directions more than --grid-min-span apart in yaw, else the shipped "
+         "points.",
          "track-landmark-embedding");
+  o->Add("track.grid_min_span", &t->grid_min_span_deg,
+         "With the default embedding: the spread of the views' yaws about the head (degrees) above which each view "
+         "uses the detector's points as seen from its side.",
+         "grid-min-span");
   o->Add("track.refine_head_pose", &t->refine_head_pose,
          "With head-pose cameras, refine each frame's head pose with the fitted shape (false: hold it).",
          "refine-head-pose");
@@ -156,17 +176,39 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
     return Status::InvalidArgument("track: the cameras are not in the head frame; run align first (cameras_head.json)");
   }
   if (model.num_expressions() == 0) return Status::DataError("track: the face model has no expressions");
-  const std::string embedding =
-      options.landmark_embedding.empty() ? DefaultLandmarkEmbedding() : options.landmark_embedding;
-  LandmarkBasis basis;
-  HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, DetectorLandmarkPoints(model, embedding),
-                                        options.fit.identity_modes, &basis));
   TrackOptions fit = options.fit;
   fit.fixed_head = cameras.mode == "head-pose" && !options.refine_head_pose;
 
   std::vector<TrackingView> views;
   std::vector<std::pair<int, int>> view_source;  // camera index, position in its frames
   HF_RETURN_IF_ERROR(BuildTrackingViews(capture, cameras, &views, &view_source));
+  std::string embedding = options.landmark_embedding;
+  if (embedding.empty()) {
+    // Views from one side see the points where the plain embedding has them
+    // (it was measured over +-25 degrees); views from far apart each see them
+    // from their side.
+    double low = 0, high = 0;
+    bool any = false;
+    for (const TrackingView& view : views) {
+      if (!view.landmarks) continue;
+      const Eigen::Vector3d c = -view.camera.rotation.transpose() * view.camera.translation;
+      const double yaw = std::atan2(c.x(), c.z()) * 180.0 / M_PI;
+      low = any ? std::min(low, yaw) : yaw;
+      high = any ? std::max(high, yaw) : yaw;
+      any = true;
+    }
+    const bool grid = high - low > options.grid_min_span_deg;
+    embedding = grid ? ViewLandmarkEmbedding() : DefaultLandmarkEmbedding();
+    if (grid) {
+      HF_LOG(Info) << "track: the views see the head from yaws " << std::lround(low) << " to " << std::lround(high)
+                   << " deg: each view uses the detector's points as seen from its side";
+    }
+  }
+  ViewLandmarkBases bases;
+  HF_RETURN_IF_ERROR(BuildViewLandmarkBases(model, LoadLandmarkEmbedding(model, embedding), options.fit.identity_modes,
+                                            &bases));
+  const LandmarkBasis& basis = bases.any_view;
+  AttachViewBases(bases, {}, &views);
   const int num_frames = capture.num_frames();
   HF_LOG(Info) << "track: " << views.size() << " views of " << num_frames << " frames, " << options.fit.identity_modes
                << " identity modes, " << model.num_expressions() << " expressions"
@@ -174,6 +216,16 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   progress->Start("track: fitting", 0);
   TrackResult result;
   HF_RETURN_IF_ERROR(TrackSequence(basis, views, num_frames, fit, &result));
+  if (!bases.nodes.empty() && !fit.fixed_head) {
+    // The first fit's head motion turns the head from its initial pose: each
+    // view's landmarks again for the direction it then sees the head from.
+    std::vector<Eigen::Isometry3d> motion;
+    for (const TrackedFrame& f : result.frames) motion.push_back(f.head_motion);
+    AttachViewBases(bases, motion, &views);
+    const double first_seconds = result.seconds;
+    HF_RETURN_IF_ERROR(TrackSequence(basis, views, num_frames, fit, &result));
+    result.seconds += first_seconds;
+  }
   progress->Finish(result.solver_report);
 
   // tracking.json
@@ -201,6 +253,8 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
       {"head_held_by_cameras", fit.fixed_head},
       {"median_residual_px", result.median_residual_px},
       {"dropped_views", result.dropped_views},
+      {"landmark_embedding", embedding},
+      {"view_dependent_landmarks", !bases.nodes.empty()},
       {"solver", result.solver_report},
       {"seconds", result.seconds},
       {"frames", frames}};
@@ -259,8 +313,9 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
       // Landmarks as detected and fitted ones through the lens (the shaded mesh is drawn without distortion).
       const CameraIntrinsics& lens = *cameras.FindCamera(cam.name);
       std::vector<Eigen::Vector2d> fitted;
+      const LandmarkBasis& seen_by = views[i].basis ? *views[i].basis : basis;
       for (int l = 0; l < 68; ++l) {
-        const Eigen::Vector3d head = f.head_motion * basis.Point(l, result.identity, f.expression);
+        const Eigen::Vector3d head = f.head_motion * seen_by.Point(l, result.identity, f.expression);
         fitted.push_back(lens.Project(views[i].camera.rotation * head + views[i].camera.translation));
       }
       std::optional<std::array<Eigen::Vector2d, 68>> detected;
@@ -303,6 +358,8 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
   if (max_rounds < 1 || !(min_change > 0)) return Status::InvalidArgument("the refinement needs rounds >= 1, change > 0");
   if (model.num_expressions() == 0) return Status::DataError("the face model has no expressions");
   const std::string embedding = landmark_embedding.empty() ? DefaultLandmarkEmbedding() : landmark_embedding;
+  // The points over every direction: a grid's points change as the head
+  // turns, which the focal length's fit would read as perspective.
   LandmarkBasis basis;
   HF_RETURN_IF_ERROR(
       BuildLandmarkBasis(model, DetectorLandmarkPoints(model, embedding), options.identity_modes, &basis));

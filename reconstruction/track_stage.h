@@ -16,9 +16,13 @@ namespace headforge {
 
 struct TrackStageOptions {
   TrackOptions fit;
-  // Where the detector's landmarks sit on the face model (JSON); empty: the
-  // model's landmark vertices.
+  // Where the detector's landmarks sit on the face model (JSON, see
+  // calibration/landmark_embedding.h); empty: the shipped view grid when the
+  // views see the head from directions more than `grid_min_span_deg` apart in
+  // yaw (each view then uses the points as seen from its side), else the
+  // shipped points for every view.
   std::string landmark_embedding;
+  double grid_min_span_deg = 30.0;
   // With head-pose cameras (which carry each frame's head pose), refine that
   // pose together with the fitted shape and expressions; false holds it as
   // calibrated (on talking_static: blendshape errors 0.08-0.10 refined against

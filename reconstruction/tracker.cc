@@ -102,9 +102,24 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   }
   const auto start = std::chrono::steady_clock::now();
   const int k = options.identity_modes, e = basis.num_expressions;
-  LandmarkBasis fit_basis = basis;
-  fit_basis.num_identity = k;
-  for (auto& m : fit_basis.identity) m = m.leftCols(k).eval();
+  // The bases cut to the fitted identity modes: the sequence's, and each
+  // view's own where it has one.
+  auto truncated = [k](const LandmarkBasis& b) {
+    LandmarkBasis t = b;
+    t.num_identity = k;
+    for (auto& m : t.identity) m = m.leftCols(k).eval();
+    return t;
+  };
+  const LandmarkBasis fit_basis = truncated(basis);
+  std::vector<LandmarkBasis> own_basis(views.size());
+  for (size_t v = 0; v < views.size(); ++v) {
+    if (!views[v].basis) continue;
+    if (views[v].basis->size() != 68 || views[v].basis->num_identity < k ||
+        views[v].basis->num_expressions != basis.num_expressions)
+      return Status::InvalidArgument("track: a view's landmark basis does not match the sequence's");
+    own_basis[v] = truncated(*views[v].basis);
+  }
+  auto basis_of = [&](size_t v) -> const LandmarkBasis& { return views[v].basis ? own_basis[v] : fit_basis; };
 
   std::vector<double> identity(k, 0.0);
   double focal_scale = 1.0;
@@ -147,7 +162,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
       const double weight = confidence * (i < 17 ? contour : 1.0);
       if (!(weight > 0)) continue;
       view_blocks[v].push_back(problem.AddResidualBlock(
-          LandmarkReprojectionCost::Create(fit_basis, i, view.camera, pixel, weight),
+          LandmarkReprojectionCost::Create(basis_of(v), i, view.camera, pixel, weight),
           new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, identity.data(),
           f.expression.data(), &focal_scale));
       f.observed = true;
@@ -220,7 +235,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
     const Eigen::VectorXd alpha = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
     for (size_t v = 0; v < views.size(); ++v) {
       if (!used[v]) continue;
-      view_median[v] = Median(ViewResiduals(views[v], fit_basis, alpha, frames[views[v].frame], focal_scale));
+      view_median[v] = Median(ViewResiduals(views[v], basis_of(v), alpha, frames[views[v].frame], focal_scale));
       all_used.push_back(view_median[v]);
     }
     const double limit = std::max(options.flag_residual_px, 3.0 * Median(all_used));
@@ -261,7 +276,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
     const TrackingView& view = views[v];
     if (!used[v]) continue;
     std::vector<int> indices;
-    const std::vector<double> r = ViewResiduals(view, fit_basis, alpha, frames[view.frame], focal_scale, &indices);
+    const std::vector<double> r = ViewResiduals(view, basis_of(v), alpha, frames[view.frame], focal_scale, &indices);
     residuals[view.frame].insert(residuals[view.frame].end(), r.begin(), r.end());
     seen[view.frame] += int(indices.size());
     Eigen::MatrixXd seen_points(2, indices.size());

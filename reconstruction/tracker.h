@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 
 #include <array>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -25,6 +26,9 @@ struct TrackingView {
   std::optional<std::array<Eigen::Vector2d, 68>> landmarks;
   // Per-landmark confidence in [0, 1] (0: ignore); all 1 when empty.
   std::vector<double> confidence;
+  // This view's landmarks on the model when they depend on the direction it
+  // sees the head from (ViewLandmarkBases); null: the sequence's basis.
+  std::shared_ptr<const LandmarkBasis> basis;
 };
 
 struct TrackOptions {

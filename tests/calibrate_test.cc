@@ -19,6 +19,7 @@
 #include "core/fs.h"
 #include "core/json_io.h"
 #include "core/paths.h"
+#include "core/statistics.h"
 
 namespace headforge {
 namespace {
@@ -673,6 +674,43 @@ TEST(LandmarkEmbedding, ShippedFileMatchesAFreshMeasurement) {
       EXPECT_LT((fresh[i] - vertex).norm(), 0.015) << "landmark " << i;
     }
   }
+}
+
+// The shipped view grid (data/ict_dlib68_landmark_embedding_views.json) is
+// what `headforge embed-landmarks --views` measures today. Seen from 40 deg
+// either side, the jaw contour runs along each side's silhouette, tens of
+// millimetres apart, while most inner points move by millimetres.
+TEST(LandmarkEmbedding, ShippedViewGridMatchesAFreshMeasurement) {
+  LandmarkEmbedding shipped, fresh;
+  ASSERT_TRUE(ReadLandmarkEmbedding(ViewLandmarkEmbedding(), &shipped).ok());
+  ASSERT_TRUE(shipped.view_dependent());
+  FaceDetectorOptions detector;
+  detector.ultraface_dir = (kData / "models" / "ultraface").string();
+  ASSERT_TRUE(MeasureViewLandmarkEmbedding(Model(), detector, DefaultLandmarkModel(), 2, &fresh).ok());
+  ASSERT_EQ(fresh.nodes.size(), shipped.nodes.size());
+  EXPECT_EQ(fresh.yaw_deg, shipped.yaw_deg);
+  EXPECT_EQ(fresh.pitch_deg, shipped.pitch_deg);
+  double worst = 0;
+  for (size_t n = 0; n < fresh.nodes.size(); ++n)
+    for (int i = 0; i < 68; ++i) worst = std::max(worst, (fresh.nodes[n][i] - shipped.nodes[n][i]).norm());
+  for (int i = 0; i < 68; ++i) worst = std::max(worst, (fresh.points[i] - shipped.points[i]).norm());
+  EXPECT_LT(worst, 0.0005);
+
+  auto node = [&](double yaw) {
+    const Eigen::Vector3d toward(std::sin(yaw * M_PI / 180), 0, std::cos(yaw * M_PI / 180));
+    const auto weights = fresh.NodeWeights(toward);
+    EXPECT_EQ(weights.size(), 1u) << "a grid node lies at yaw " << yaw;
+    return fresh.nodes[weights[0].first];
+  };
+  const auto left = node(-40), right = node(40);
+  double contour = 0;
+  std::vector<double> inner;
+  for (int i = 0; i < 17; ++i) contour = std::max(contour, (left[i] - right[i]).norm());
+  for (int i = 17; i < 68; ++i) inner.push_back((left[i] - right[i]).norm());
+  std::printf("yaw -40 vs +40: contour moves up to %.1f mm, inner points %.1f mm (median)\n", 1000 * contour,
+              1000 * Median(inner));
+  EXPECT_GT(contour, 0.02);
+  EXPECT_LT(Median(inner), 0.01);
 }
 
 }  // namespace

@@ -126,18 +126,12 @@ struct SimulatedScores {
   std::map<std::string, double> mae;
 };
 
-SimulatedScores RunSimulated(const std::string& scene, int frames, const std::vector<std::string>& animated) {
+// Scores the workspace root/ws against the simulator's truth in root/capture.
+SimulatedScores ScoreSimulated(const fs::path& root, const std::string& scene, int frames,
+                               const std::vector<std::string>& animated) {
   SimulatedScores s;
-  const fs::path root = Scratch(scene);
   const fs::path capture_dir = root / "capture";
-  const Result sim = Headforge({"simulate", "--scene", (fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / (scene + ".toml")).string(),
-                                "--out", capture_dir.string(), "--frames", std::to_string(frames)});
-  EXPECT_EQ(sim.code, 0) << sim.err;
   const auto truth = Json(capture_dir / "ground_truth.json");
-  std::vector<std::string> args = {"run", "--workspace", (root / "ws").string(), "--video"};
-  for (const auto& cam : truth["cameras"]) args.push_back((capture_dir / cam["input"].get<std::string>()).string());
-  const Result run = Headforge(args);
-  EXPECT_EQ(run.code, 0) << run.err;
   const auto tracking = Json(root / "ws" / "tracking.json");
   const auto capture = Json(root / "ws" / "capture.json");
   const auto cameras = Json(root / "ws" / "cameras_head.json");
@@ -197,6 +191,20 @@ SimulatedScores RunSimulated(const std::string& scene, int frames, const std::ve
   return s;
 }
 
+SimulatedScores RunSimulated(const std::string& scene, int frames, const std::vector<std::string>& animated) {
+  const fs::path root = Scratch(scene);
+  const fs::path capture_dir = root / "capture";
+  const Result sim = Headforge({"simulate", "--scene", (fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / (scene + ".toml")).string(),
+                                "--out", capture_dir.string(), "--frames", std::to_string(frames)});
+  EXPECT_EQ(sim.code, 0) << sim.err;
+  const auto truth = Json(capture_dir / "ground_truth.json");
+  std::vector<std::string> args = {"run", "--workspace", (root / "ws").string(), "--video"};
+  for (const auto& cam : truth["cameras"]) args.push_back((capture_dir / cam["input"].get<std::string>()).string());
+  const Result run = Headforge(args);
+  EXPECT_EQ(run.code, 0) << run.err;
+  return ScoreSimulated(root, scene, frames, animated);
+}
+
 TEST(SimulatedTrack, TalkingStatic) {
   const SimulatedScores s = RunSimulated(
       "talking_static", 125, {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"});
@@ -228,27 +236,37 @@ TEST(SimulatedTrack, TalkingStatic) {
 // the cameras from one instant, align puts them in the head frame, and every
 // frame is fitted from all views jointly.
 TEST(SimulatedTrack, Rig8Cam) {
-  const SimulatedScores s = RunSimulated(
-      "rig_8cam", 50, {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"});
-  // Over four runs (COLMAP's cameras differ from run to run): jawOpen
-  // 0.075-0.080, eyeBlink L/R 0.093-0.097 / 0.080-0.082, mouthSmile L/R
-  // 0.090-0.093 / 0.035-0.037, so the 0.1 target is met with little margin;
-  // the bound here leaves room for that spread. The one blink of the scene is
-  // missed (at this face size the detector draws a closed eye as open); it is
-  // short enough that the mean error stays under 0.1.
-  for (const auto& [name, mae] : s.mae) EXPECT_LT(mae, 0.12) << name;
-  EXPECT_LT(s.mae.at("jawOpen"), 0.1);
-  EXPECT_LT(s.mae.at("mouthSmile_R"), 0.1);
-  // 1.49-1.52 px: the 1.5 px target is not met. The jaw contour of views
-  // turned more than 20 deg is counted here though the fit leaves it out.
-  EXPECT_LT(s.residual_px, 1.6);
-  // 2.8-3.6 deg over seven runs, mostly a constant pitch of the head frame (the identity
-  // imitates most of a pitch of the landmarks, as on talking_static): the
-  // 1.5 deg target is not met.
-  EXPECT_LT(s.rotation_deg, 4.0);
-  // The eight cameras mostly agree: 5 of the 400 views are left out in the
-  // four runs that counted them.
+  const std::vector<std::string> animated = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"};
+  const SimulatedScores s = RunSimulated("rig_8cam", 50, animated);
+  // The cameras see the head from yaws 120 deg apart, so each view uses the
+  // detector's points as seen from its side (the shipped view grid). Over
+  // three workspaces: residual 1.33-1.37 px, jawOpen 0.048-0.050, eyeBlink
+  // L/R 0.083-0.085 / 0.078-0.079, mouthSmile L/R 0.051-0.058 / 0.048-0.058.
+  // The one blink of the scene is missed (at this face size the detector
+  // draws a closed eye as open); it is short enough that the mean error stays
+  // under 0.1.
+  for (const auto& [name, mae] : s.mae) EXPECT_LT(mae, 0.1) << name;
+  EXPECT_LT(s.residual_px, 1.5);
+  // 2.0-2.2 deg, mostly a constant rotation of the head frame of 1.2-1.7
+  // deg: the 1.5 deg target is not met.
+  EXPECT_LT(s.rotation_deg, 3.0);
+  // The eight cameras mostly agree: 5-7 of the 400 views are left out.
   EXPECT_LE(s.dropped_views, 20);
+
+  // The same workspace tracked again with one set of points for every view
+  // (the plain embedding, measured within 25 deg of frontal): the turned
+  // views' contour and inner points then disagree with the frontal ones.
+  // Over seven runs: residual 1.49-1.52 px, rotation 2.8-3.6 deg, jawOpen
+  // 0.073-0.080, mouthSmile_L 0.090-0.093.
+  const fs::path root = fs::temp_directory_path() / "hf_track_rig_8cam";  // RunSimulated's
+  const Result track = Headforge({"track", "--workspace", (root / "ws").string(), "--overlay=false",
+                                  "--track-landmark-embedding",
+                                  (fs::path(HEADFORGE_TEST_SOURCE_DIR) / "data" / "ict_dlib68_landmark_embedding.json").string()});
+  ASSERT_EQ(track.code, 0) << track.err;
+  const SimulatedScores plain = ScoreSimulated(root, "rig_8cam (one set of points for every view)", 50, animated);
+  EXPECT_GT(plain.residual_px, s.residual_px + 0.08);
+  EXPECT_GT(plain.rotation_deg, s.rotation_deg + 0.3);
+  EXPECT_GT(plain.mae.at("jawOpen"), s.mae.at("jawOpen"));
 }
 
 }  // namespace

@@ -149,32 +149,39 @@ Status WriteLandmarkEmbedding(const std::string& path, const LandmarkEmbedding& 
   return WriteJsonAtomic(path, j, 0);
 }
 
-Status ReadLandmarkEmbedding(const std::string& path, std::vector<Eigen::Vector3d>* points) {
-  nlohmann::json j;
-  HF_RETURN_IF_ERROR(ReadJson(path, &j));
+namespace {
+Status ReadPoints(const nlohmann::json& rows, const std::string& path, std::vector<Eigen::Vector3d>* points) {
   try {
     points->clear();
-    for (const auto& p : j.at("points")) points->emplace_back(p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>());
+    for (const auto& p : rows) points->emplace_back(p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>());
   } catch (const nlohmann::json::exception& e) {
     return Status::DataError(path + " is not a landmark embedding: " + e.what());
   }
   if (points->size() != 68) return Status::DataError(path + " does not hold 68 points");
   return Status::Ok();
 }
+}  // namespace
+
+Status ReadLandmarkEmbedding(const std::string& path, std::vector<Eigen::Vector3d>* points) {
+  LandmarkEmbedding e;
+  HF_RETURN_IF_ERROR(ReadLandmarkEmbedding(path, &e));
+  *points = std::move(e.points);
+  return Status::Ok();
+}
 
 Status ReadLandmarkEmbedding(const std::string& path, LandmarkEmbedding* embedding) {
-  LandmarkEmbedding out;
-  HF_RETURN_IF_ERROR(ReadLandmarkEmbedding(path, &out.points));
   nlohmann::json j;
   HF_RETURN_IF_ERROR(ReadJson(path, &j));
+  if (!j.is_object() || !j.contains("points")) return Status::DataError(path + " is not a landmark embedding (no points)");
+  LandmarkEmbedding out;
+  HF_RETURN_IF_ERROR(ReadPoints(j["points"], path, &out.points));
   if (j.contains("nodes")) {
     try {
       out.yaw_deg = j.at("yaw_deg").get<std::vector<double>>();
       out.pitch_deg = j.at("pitch_deg").get<std::vector<double>>();
       for (const auto& node : j.at("nodes")) {
         std::vector<Eigen::Vector3d> points;
-        for (const auto& p : node.at("points")) points.emplace_back(p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>());
-        if (points.size() != 68) return Status::DataError(path + ": a node does not hold 68 points");
+        HF_RETURN_IF_ERROR(ReadPoints(node.at("points"), path + " (a grid node)", &points));
         out.nodes.push_back(std::move(points));
       }
     } catch (const nlohmann::json::exception& e) {
@@ -194,6 +201,7 @@ Status ReadLandmarkEmbedding(const std::string& path, LandmarkEmbedding* embeddi
 }
 
 std::vector<std::pair<int, double>> LandmarkEmbedding::NodeWeights(const Eigen::Vector3d& toward_camera) const {
+  if (!view_dependent()) return {};
   const Eigen::Vector3d d = toward_camera.normalized();
   const double yaw = std::atan2(d.x(), d.z()) * 180.0 / M_PI;
   const double pitch = std::asin(std::clamp(d.y(), -1.0, 1.0)) * 180.0 / M_PI;
@@ -241,15 +249,7 @@ LandmarkEmbedding LoadLandmarkEmbedding(const FaceModel& model, const std::strin
 }
 
 std::vector<Eigen::Vector3d> DetectorLandmarkPoints(const FaceModel& model, const std::string& embedding_path) {
-  std::vector<Eigen::Vector3d> points;
-  if (!embedding_path.empty() && fs::exists(embedding_path)) {
-    const Status s = ReadLandmarkEmbedding(embedding_path, &points);
-    if (s.ok()) return points;
-    HF_LOG(Warning) << s.message() << "; using the model's landmark vertices";
-  }
-  points.clear();
-  for (int v : model.landmarks_ibug68()) points.push_back(model.neutral().col(v).cast<double>());
-  return points;
+  return LoadLandmarkEmbedding(model, embedding_path).points;
 }
 
 }  // namespace headforge

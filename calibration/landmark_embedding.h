@@ -4,7 +4,9 @@
 // bias head poses by degrees. The embedding is measured once on simulator
 // renders of the mean face under light, over a sweep of head rotations: each
 // detected point is carried back to the head frame through the render's depth
-// and the known pose, and the points are averaged.
+// and the known pose, and the points are averaged. A second measurement over
+// a wider sweep keeps the points apart by the camera's direction (a grid of
+// yaw and pitch), for fits whose views see the head from far apart.
 #pragma once
 
 #include <Eigen/Core>
@@ -36,7 +38,7 @@ struct LandmarkEmbedding {
 
   bool view_dependent() const { return !nodes.empty(); }
   // (node, weight) pairs summing to 1 for a direction from the head's origin
-  // toward the camera, in the head frame.
+  // toward the camera, in the head frame; none without a grid.
   std::vector<std::pair<int, double>> NodeWeights(const Eigen::Vector3d& toward_camera) const;
 };
 Status ReadLandmarkEmbedding(const std::string& path, LandmarkEmbedding* embedding);

@@ -201,7 +201,7 @@ Status ReadLandmarkEmbedding(const std::string& path, LandmarkEmbedding* embeddi
 }
 
 std::vector<std::pair<int, double>> LandmarkEmbedding::NodeWeights(const Eigen::Vector3d& toward_camera) const {
-  if (!view_dependent()) return {};
+  if (yaw_deg.empty() || pitch_deg.empty()) return {};
   const Eigen::Vector3d d = toward_camera.normalized();
   const double yaw = std::atan2(d.x(), d.z()) * 180.0 / M_PI;
   const double pitch = std::asin(std::clamp(d.y(), -1.0, 1.0)) * 180.0 / M_PI;

@@ -38,7 +38,7 @@ struct LandmarkEmbedding {
 
   bool view_dependent() const { return !nodes.empty(); }
   // (node, weight) pairs summing to 1 for a direction from the head's origin
-  // toward the camera, in the head frame; none without a grid.
+  // toward the camera, in the head frame; none without grid angles.
   std::vector<std::pair<int, double>> NodeWeights(const Eigen::Vector3d& toward_camera) const;
 };
 Status ReadLandmarkEmbedding(const std::string& path, LandmarkEmbedding* embedding);

@@ -6,6 +6,7 @@
 #include <opencv2/videoio.hpp>
 
 #include <fstream>
+#include <map>
 #include <numeric>
 
 #include "calibration/landmark_embedding.h"
@@ -154,12 +155,12 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
          "track-iterations");
   o->Add("track.landmark_embedding", &t->landmark_embedding,
          "Where the detector's 68 landmarks sit on the face model (JSON; embed-landmarks); empty: the shipped view "
-         "grid when the views see the head from directions more than --grid-min-span apart in yaw, else the shipped "
-         "points.",
+         "grid when the views of a frame see the head from directions more than --grid-min-span apart in yaw, else "
+         "the shipped points.",
          "track-landmark-embedding");
   o->Add("track.grid_min_span", &t->grid_min_span_deg,
-         "With the default embedding: the spread of the views' yaws about the head (degrees) above which each view "
-         "uses the detector's points as seen from its side.",
+         "With the default embedding: the spread of one frame's views' yaws about the head (degrees) above which "
+         "each view uses the detector's points as seen from its side.",
          "grid-min-span");
   o->Add("track.refine_head_pose", &t->refine_head_pose,
          "With head-pose cameras, refine each frame's head pose with the fitted shape (false: hold it).",
@@ -184,24 +185,26 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   HF_RETURN_IF_ERROR(BuildTrackingViews(capture, cameras, &views, &view_source));
   std::string embedding = options.landmark_embedding;
   if (embedding.empty()) {
-    // Views from one side see the points where the plain embedding has them
-    // (it was measured over +-25 degrees); views from far apart each see them
-    // from their side.
-    double low = 0, high = 0;
-    bool any = false;
+    // Views of one frame fitted together must agree on the head: from far
+    // apart each sees the detector's points where they fall from its side.
+    // Views from one side, or one view per frame (a single camera, an orbit),
+    // use the plain points, measured over +-25 degrees.
+    std::map<int, std::pair<double, double>> yaws;  // frame -> lowest, highest yaw of its views
+    double widest = 0;
     for (const TrackingView& view : views) {
       if (!view.landmarks) continue;
       const Eigen::Vector3d c = -view.camera.rotation.transpose() * view.camera.translation;
       const double yaw = std::atan2(c.x(), c.z()) * 180.0 / M_PI;
-      low = any ? std::min(low, yaw) : yaw;
-      high = any ? std::max(high, yaw) : yaw;
-      any = true;
+      const auto [it, first] = yaws.emplace(view.frame, std::make_pair(yaw, yaw));
+      it->second.first = std::min(it->second.first, yaw);
+      it->second.second = std::max(it->second.second, yaw);
+      widest = std::max(widest, it->second.second - it->second.first);
     }
-    const bool grid = high - low > options.grid_min_span_deg;
+    const bool grid = widest > options.grid_min_span_deg;
     embedding = grid ? ViewLandmarkEmbedding() : DefaultLandmarkEmbedding();
     if (grid) {
-      HF_LOG(Info) << "track: the views see the head from yaws " << std::lround(low) << " to " << std::lround(high)
-                   << " deg: each view uses the detector's points as seen from its side";
+      HF_LOG(Info) << "track: the views of a frame see the head from up to " << std::lround(widest)
+                   << " deg apart: each view uses the detector's points as seen from its side";
     }
   }
   ViewLandmarkBases bases;

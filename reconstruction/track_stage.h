@@ -18,9 +18,9 @@ struct TrackStageOptions {
   TrackOptions fit;
   // Where the detector's landmarks sit on the face model (JSON, see
   // calibration/landmark_embedding.h); empty: the shipped view grid when the
-  // views see the head from directions more than `grid_min_span_deg` apart in
-  // yaw (each view then uses the points as seen from its side), else the
-  // shipped points for every view.
+  // views of a frame see the head from directions more than
+  // `grid_min_span_deg` apart in yaw (each view then uses the points as seen
+  // from its side), else the shipped points for every view.
   std::string landmark_embedding;
   double grid_min_span_deg = 30.0;
   // With head-pose cameras (which carry each frame's head pose), refine that

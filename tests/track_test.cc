@@ -238,10 +238,10 @@ TEST(SimulatedTrack, TalkingStatic) {
 TEST(SimulatedTrack, Rig8Cam) {
   const std::vector<std::string> animated = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"};
   const SimulatedScores s = RunSimulated("rig_8cam", 50, animated);
-  // The cameras see the head from yaws 120 deg apart, so each view uses the
+  // The cameras of a frame see the head from 120 deg apart, so each view uses the
   // detector's points as seen from its side (the shipped view grid). Over
-  // three workspaces: residual 1.33-1.37 px, jawOpen 0.048-0.050, eyeBlink
-  // L/R 0.083-0.085 / 0.078-0.079, mouthSmile L/R 0.051-0.058 / 0.048-0.058.
+  // six runs: residual 1.33-1.38 px, jawOpen 0.048-0.050, eyeBlink L/R
+  // 0.083-0.085 / 0.078-0.079, mouthSmile L/R 0.051-0.058 / 0.048-0.059.
   // The one blink of the scene is missed (at this face size the detector
   // draws a closed eye as open); it is short enough that the mean error stays
   // under 0.1.

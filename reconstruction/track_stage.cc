@@ -64,7 +64,7 @@ void AttachViewBases(const ViewLandmarkBases& bases, const std::vector<Eigen::Is
                      std::vector<TrackingView>* views) {
   if (bases.nodes.empty()) return;
   for (TrackingView& view : *views) {
-    Eigen::Vector3d centre = -view.camera.rotation.transpose() * view.camera.translation;
+    Eigen::Vector3d centre = view.camera.Centre();
     if (view.frame < int(motion.size())) centre = motion[view.frame].inverse() * centre;
     view.basis = std::make_shared<const LandmarkBasis>(bases.ForDirection(centre));
   }
@@ -193,7 +193,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
     double widest = 0;
     for (const TrackingView& view : views) {
       if (!view.landmarks) continue;
-      const Eigen::Vector3d c = -view.camera.rotation.transpose() * view.camera.translation;
+      const Eigen::Vector3d c = view.camera.Centre();
       const double yaw = std::atan2(c.x(), c.z()) * 180.0 / M_PI;
       const auto [it, first] = yaws.emplace(view.frame, std::make_pair(yaw, yaw));
       it->second.first = std::min(it->second.first, yaw);

@@ -103,7 +103,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   const auto start = std::chrono::steady_clock::now();
   const int k = options.identity_modes, e = basis.num_expressions;
   // The bases cut to the fitted identity modes: the sequence's, and each
-  // view's own where it has one.
+  // view's own where it has one (shared as it is when it has no more modes).
   auto truncated = [k](const LandmarkBasis& b) {
     LandmarkBasis t = b;
     t.num_identity = k;
@@ -111,15 +111,15 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
     return t;
   };
   const LandmarkBasis fit_basis = truncated(basis);
-  std::vector<LandmarkBasis> own_basis(views.size());
+  std::vector<std::shared_ptr<const LandmarkBasis>> own_basis(views.size());
   for (size_t v = 0; v < views.size(); ++v) {
-    if (!views[v].basis) continue;
-    if (views[v].basis->size() != 68 || views[v].basis->num_identity < k ||
-        views[v].basis->num_expressions != basis.num_expressions)
+    const auto& b = views[v].basis;
+    if (!b) continue;
+    if (b->size() != 68 || b->num_identity < k || b->num_expressions != basis.num_expressions)
       return Status::InvalidArgument("track: a view's landmark basis does not match the sequence's");
-    own_basis[v] = truncated(*views[v].basis);
+    own_basis[v] = b->num_identity == k ? b : std::make_shared<const LandmarkBasis>(truncated(*b));
   }
-  auto basis_of = [&](size_t v) -> const LandmarkBasis& { return views[v].basis ? own_basis[v] : fit_basis; };
+  auto basis_of = [&](size_t v) -> const LandmarkBasis& { return own_basis[v] ? *own_basis[v] : fit_basis; };
 
   std::vector<double> identity(k, 0.0);
   double focal_scale = 1.0;

@@ -17,6 +17,8 @@ struct TrackingCamera {
   Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();  // cam_from_head
   Eigen::Vector3d translation = Eigen::Vector3d::Zero();
 
+  // The camera's centre in the head frame.
+  Eigen::Vector3d Centre() const { return -rotation.transpose() * translation; }
   // Pixel of a head-frame point.
   Eigen::Vector2d Pixel(const Eigen::Vector3d& head_point) const {
     const Eigen::Vector3d p = rotation * head_point + translation;

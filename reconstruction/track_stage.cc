@@ -124,6 +124,8 @@ Status TrackStageOptions::Check() const {
   std::string why;
   if (!fit.Check(&why)) return Status::InvalidArgument("track: " + why);
   if (!(grid_min_span_deg >= 0)) return Status::InvalidArgument("track: grid_min_span must be zero or positive");
+  if (!(multiview_contour_weight >= 0))
+    return Status::InvalidArgument("track: multiview_contour_weight must be zero or positive");
   return Status::Ok();
 }
 
@@ -162,6 +164,10 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
          "With the default embedding: the spread of one frame's views' yaws about the head (degrees) above which "
          "each view uses the detector's points as seen from its side.",
          "grid-min-span");
+  o->Add("track.multiview_contour_weight", &t->multiview_contour_weight,
+         "Weight of the jaw-contour landmarks instead of --contour-weight when the views of a frame see the head "
+         "from more than --grid-min-span apart in yaw (a rig around the face).",
+         "multiview-contour-weight");
   o->Add("track.refine_head_pose", &t->refine_head_pose,
          "With head-pose cameras, refine each frame's head pose with the fitted shape (false: hold it).",
          "refine-head-pose");
@@ -183,29 +189,35 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   std::vector<TrackingView> views;
   std::vector<std::pair<int, int>> view_source;  // camera index, position in its frames
   HF_RETURN_IF_ERROR(BuildTrackingViews(capture, cameras, &views, &view_source));
+  // How far apart the views of one frame see the head from.
+  std::map<int, std::pair<double, double>> yaws;  // frame -> lowest, highest yaw of its views
+  double widest = 0;
+  for (const TrackingView& view : views) {
+    if (!view.landmarks) continue;
+    const Eigen::Vector3d c = view.camera.Centre();
+    const double yaw = std::atan2(c.x(), c.z()) * 180.0 / M_PI;
+    const auto [it, first] = yaws.emplace(view.frame, std::make_pair(yaw, yaw));
+    it->second.first = std::min(it->second.first, yaw);
+    it->second.second = std::max(it->second.second, yaw);
+    widest = std::max(widest, it->second.second - it->second.first);
+  }
+  const bool surrounded = widest > options.grid_min_span_deg;
+  if (surrounded) {
+    // Each view draws the jaw contour where its own side of the face turns
+    // away; the inner points agree between views and set the head's pose.
+    fit.contour_weight = options.multiview_contour_weight;
+    HF_LOG(Info) << "track: the views of a frame see the head from up to " << std::lround(widest)
+                 << " deg apart: the jaw contour weighs " << fit.contour_weight
+                 << (options.landmark_embedding.empty() ? ", and each view uses the detector's points as seen from its side"
+                                                        : "");
+  }
   std::string embedding = options.landmark_embedding;
   if (embedding.empty()) {
     // Views of one frame fitted together must agree on the head: from far
     // apart each sees the detector's points where they fall from its side.
     // Views from one side, or one view per frame (a single camera, an orbit),
     // use the plain points, measured over +-25 degrees.
-    std::map<int, std::pair<double, double>> yaws;  // frame -> lowest, highest yaw of its views
-    double widest = 0;
-    for (const TrackingView& view : views) {
-      if (!view.landmarks) continue;
-      const Eigen::Vector3d c = view.camera.Centre();
-      const double yaw = std::atan2(c.x(), c.z()) * 180.0 / M_PI;
-      const auto [it, first] = yaws.emplace(view.frame, std::make_pair(yaw, yaw));
-      it->second.first = std::min(it->second.first, yaw);
-      it->second.second = std::max(it->second.second, yaw);
-      widest = std::max(widest, it->second.second - it->second.first);
-    }
-    const bool grid = widest > options.grid_min_span_deg;
-    embedding = grid ? ViewLandmarkEmbedding() : DefaultLandmarkEmbedding();
-    if (grid) {
-      HF_LOG(Info) << "track: the views of a frame see the head from up to " << std::lround(widest)
-                   << " deg apart: each view uses the detector's points as seen from its side";
-    }
+    embedding = surrounded ? ViewLandmarkEmbedding() : DefaultLandmarkEmbedding();
   }
   ViewLandmarkBases bases;
   HF_RETURN_IF_ERROR(BuildViewLandmarkBases(model, LoadLandmarkEmbedding(model, embedding), options.fit.identity_modes,
@@ -258,6 +270,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
       {"dropped_views", result.dropped_views},
       {"landmark_embedding", embedding},
       {"view_dependent_landmarks", !bases.nodes.empty()},
+      {"contour_weight", fit.contour_weight},
       {"solver", result.solver_report},
       {"seconds", result.seconds},
       {"frames", frames}};

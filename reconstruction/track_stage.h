@@ -23,6 +23,12 @@ struct TrackStageOptions {
   // from its side), else the shipped points for every view.
   std::string landmark_embedding;
   double grid_min_span_deg = 30.0;
+  // The jaw contour's weight (instead of fit.contour_weight) when the views of
+  // a frame see the head from more than `grid_min_span_deg` apart: each view
+  // then draws the silhouette where its own side of the jaw turns away, and
+  // the contour put the rig_8cam head frame 1-2 deg off in pitch (rotation
+  // 2.1 deg at 0.5, 1.3-1.4 deg at 0.05).
+  double multiview_contour_weight = 0.05;
   // With head-pose cameras (which carry each frame's head pose), refine that
   // pose together with the fitted shape and expressions; false holds it as
   // calibrated (on talking_static: blendshape errors 0.08-0.10 refined against

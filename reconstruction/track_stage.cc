@@ -161,8 +161,9 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
          "the shipped points.",
          "track-landmark-embedding");
   o->Add("track.grid_min_span", &t->grid_min_span_deg,
-         "With the default embedding: the spread of one frame's views' yaws about the head (degrees) above which "
-         "each view uses the detector's points as seen from its side.",
+         "The spread of one frame's views' yaws about the head (degrees) above which the views surround the head: "
+         "each then uses the detector's points as seen from its side (with the default embedding), and the jaw "
+         "contour weighs --multiview-contour-weight.",
          "grid-min-span");
   o->Add("track.multiview_contour_weight", &t->multiview_contour_weight,
          "Weight of the jaw-contour landmarks instead of --contour-weight when the views of a frame see the head "

@@ -22,6 +22,8 @@ struct TrackStageOptions {
   // `grid_min_span_deg` apart in yaw (each view then uses the points as seen
   // from its side), else the shipped points for every view.
   std::string landmark_embedding;
+  // Views of a frame this far apart in yaw (degrees) surround the head: they
+  // take the view grid (above) and `multiview_contour_weight`.
   double grid_min_span_deg = 30.0;
   // The jaw contour's weight (instead of fit.contour_weight) when the views of
   // a frame see the head from more than `grid_min_span_deg` apart: each view

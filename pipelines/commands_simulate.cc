@@ -63,8 +63,11 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   OptionSet options;
   CommonOptions common;
   AddCommonOptions(&options, &common, /*with_workspace=*/false);
-  std::string out = DefaultLandmarkEmbedding(), face_model;
-  options.Add("embed.out", &out, "Where to write the embedding (JSON).", "out");
+  std::string out, face_model;
+  options.Add("embed.out", &out,
+              "Where to write the embedding (JSON); default: the shipped file for what is measured, "
+              "data/ict_dlib68_landmark_embedding.json or, with --views, ..._views.json.",
+              "out");
   options.Add("embed.face_model", &face_model, "Face model; default DATA/ict_facekit/ict_face_model.h5.", "face-model");
   bool views = false;
   options.Add("embed.views", &views,
@@ -82,6 +85,7 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   FaceDetectorOptions detector;
   detector.ultraface_dir = (fs::path(common.data_dir) / "models" / "ultraface").string();
   const int threads = common.threads > 0 ? common.threads : HardwareThreads();
+  if (out.empty()) out = views ? ViewLandmarkEmbedding() : DefaultLandmarkEmbedding();
   if (views) {
     LandmarkEmbedding embedding;
     if (Status s = MeasureViewLandmarkEmbedding(model, detector, DefaultLandmarkModel(), threads, &embedding); !s.ok())

@@ -29,7 +29,7 @@ struct TrackStageOptions {
   // a frame see the head from more than `grid_min_span_deg` apart: each view
   // then draws the silhouette where its own side of the jaw turns away, and
   // the contour put the rig_8cam head frame 1-2 deg off in pitch (rotation
-  // 2.1 deg at 0.5, 1.3-1.4 deg at 0.05).
+  // 2.0-2.2 deg at 0.5, 1.3-1.4 deg at 0.05).
   double multiview_contour_weight = 0.05;
   // With head-pose cameras (which carry each frame's head pose), refine that
   // pose together with the fitted shape and expressions; false holds it as

@@ -162,7 +162,7 @@ TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   std::printf("orbit: rotation %.3f deg, centre %.2f mm (median), align scale error %.2f%%, residual %.1f mm\n",
               errors.median_rotation_deg, errors.median_centre_mm, 100 * errors.scale_error, aligned.median_mm);
   // A small, low-resolution orbit: the full-size figures come from `headforge bench calibrate`.
-  // Over nine runs (COLMAP's mapper differs run to run): rotation 0.09-0.71
+  // Over ten runs (COLMAP's mapper differs run to run): rotation 0.09-0.72
   // deg, centre 2.4-14.8 mm, the centre error following align's scale (1.7-20%
   // off, from the few near-frontal views of this short orbit).
   EXPECT_LT(errors.median_rotation_deg, 1.0);
@@ -218,8 +218,8 @@ TEST(Calibrate, SequentialMatchingThatBreaksFallsBackToEveryPair) {
   ASSERT_TRUE(EvaluateWorldCameras(cameras, capture, truth, nullptr, &errors).ok());
   std::printf("every pair: rotation %.2f deg, centre %.1f mm (median)\n", errors.median_rotation_deg,
               errors.median_centre_mm);
-  // With every frame registered the orbit is accurate (0.08-0.09 deg, 1.3-1.5
-  // mm in three runs); a model that left frames out was 6.6 deg off in one of
+  // With every frame registered the orbit is accurate (0.08-0.09 deg, 1.3-1.6
+  // mm in four runs); a model that left frames out was 6.6 deg off in one of
   // ten runs (21 of 24).
   EXPECT_LT(errors.median_rotation_deg, 10.0);
   if (summary.registered == 24) {

@@ -243,7 +243,7 @@ TEST(SimulatedTrack, Rig8Cam) {
   // The cameras of a frame see the head from 120 deg apart, so each view uses the
   // detector's points as seen from its side (the shipped view grid) and the
   // jaw contour, which each view draws on its own silhouette, weighs 0.05
-  // (--multiview-contour-weight). Over five runs: residual 1.37-1.43 px,
+  // (--multiview-contour-weight). Over six runs: residual 1.37-1.43 px,
   // rotation 1.29-1.41 deg, jawOpen 0.061-0.065, eyeBlink L/R 0.091-0.093 /
   // 0.081-0.083, mouthSmile L/R 0.053-0.059 / 0.045-0.048. With the contour
   // at 0.5, as for a single camera, the rotation was 2.0-2.2 deg, mostly a
@@ -262,7 +262,7 @@ TEST(SimulatedTrack, Rig8Cam) {
   // The same workspace tracked again with one set of points for every view
   // (the plain embedding, measured within 25 deg of frontal): the turned
   // views' contour and inner points then disagree with the frontal ones.
-  // Over five runs: residual 1.56-1.60 px, rotation 2.87-3.24 deg, jawOpen
+  // Over six runs: residual 1.56-1.60 px, rotation 2.87-3.24 deg, jawOpen
   // 0.089-0.091, mouthSmile_L 0.094-0.101.
   const Result track = Headforge({"track", "--workspace", (root / "ws").string(), "--overlay=false",
                                   "--track-landmark-embedding",

@@ -56,6 +56,13 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
          "When sequential matching leaves over 10% of the frames unregistered, match every pair and map again, "
          "for up to this many frames (0: never).",
          "exhaustive-fallback");
+  o->Add("calibrate.colmap.revisit_angle_deg", &c->colmap.revisit_angle_deg,
+         "One video: after a first model, also match images it shows looking at the same part of the scene from "
+         "within this angle (degrees) but further apart in time than --overlap (the camera came back, e.g. "
+         "round the head), and refine the model with those matches; closes the loop. 0: off.",
+         "revisit-angle");
+  o->Add("calibrate.colmap.revisit_pairs", &c->colmap.revisit_pairs,
+         "Most revisit pairs per image (--revisit-angle), the nearest in direction first.", "revisit-pairs");
   o->Add("calibrate.static_rig", &c->static_rig,
          "Several cameras: auto (fixed when no camera's background moves), yes or no. Fixed cameras are "
          "calibrated from synchronised frames and keep one pose each.",
@@ -267,6 +274,10 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
                        std::to_string(report.sequential_registered) + " of " + std::to_string(report.total) +
                        ", then every pair was matched";
   }
+  summary->revisit_pairs = report.revisit_pairs;
+  if (report.revisit_pairs > 0)
+    summary->reason += (summary->reason.empty() ? "" : "; ") + std::to_string(report.revisit_pairs) +
+                       " pairs of revisited views matched";
   const bool too_few = status.ok() && report.registered < options.min_registered * report.total;
   if (status.ok() && !too_few) {
     summary->mode = "colmap";

@@ -50,6 +50,8 @@ struct CalibrateSummary {
   // colmap: registered after sequential matching alone when every pair was
   // matched after it (ColmapOptions::exhaustive_fallback_max); -1 otherwise.
   int sequential_registered = -1;
+  // colmap: pairs of revisited views matched after the first model (ColmapOptions::revisit_angle_deg).
+  int revisit_pairs = 0;
   std::string OneLine() const;
 };
 

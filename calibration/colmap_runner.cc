@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <fstream>
 #include <map>
+#include <set>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
@@ -34,6 +35,9 @@ Status ColmapOptions::Check() const {
   if (mapper_attempts < 1) return Status::InvalidArgument("mapper attempts must be at least 1");
   if (exhaustive_fallback_max < 0)
     return Status::InvalidArgument("--exhaustive-fallback must be 0 (never) or more images");
+  if (!(revisit_angle_deg >= 0 && revisit_angle_deg < 90))
+    return Status::InvalidArgument("--revisit-angle must be 0 (off) or an angle below 90 degrees");
+  if (revisit_pairs < 1) return Status::InvalidArgument("--revisit-pairs must be at least 1");
   if (!(max_instant_rotation_deg > 0) || !(max_instant_shift > 0))
     return Status::InvalidArgument("the fixed cameras' instant limits must be positive");
   return Status::Ok();
@@ -126,9 +130,84 @@ Status ReadColmapCamerasAndImages(const fs::path& dir, ColmapTextModel* model) {
     if (!model->cameras.count(camera_id))
       return Status::DataError("COLMAP image " + name + " names an unknown camera " + std::to_string(camera_id));
     model->images[name] = {camera_id, t};
+    // POINTS2D[] as (X, Y, POINT3D_ID); -1 for a feature without a point.
     std::getline(images, line);
+    std::istringstream obs(line);
+    std::vector<long>& ids = model->observed[name];
+    double x, y;
+    long point;
+    while (obs >> x >> y >> point)
+      if (point >= 0) ids.push_back(point);
   }
   return Status::Ok();
+}
+
+Status ReadColmapPoints(const fs::path& dir, std::map<long, Eigen::Vector3d>* points) {
+  std::ifstream in(dir / "points3D.txt");
+  if (!in) return Status::NotFound("no points3D.txt in " + dir.string());
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream row(line);
+    long id;
+    Eigen::Vector3d p;
+    if (row >> id >> p.x() >> p.y() >> p.z()) (*points)[id] = p;
+  }
+  return Status::Ok();
+}
+
+std::vector<std::pair<std::string, std::string>> FindRevisitPairs(const ColmapTextModel& model,
+                                                                  const std::map<long, Eigen::Vector3d>& points,
+                                                                  const std::vector<std::string>& order,
+                                                                  double max_angle_deg, int min_index_gap,
+                                                                  int per_image) {
+  std::vector<std::string> names;  // the images in the model, and their places in `order`
+  std::vector<long> place;
+  for (size_t k = 0; k < order.size(); ++k)
+    if (model.images.count(order[k])) {
+      names.push_back(order[k]);
+      place.push_back(static_cast<long>(k));
+    }
+  const double min_cos = std::cos(max_angle_deg * M_PI / 180.0);
+  constexpr double kShared = 0.15;
+  // Whether at least kShared of what image a observes lies in front of image b
+  // and inside its frame (asked both ways for a pair). Low, since a turn of a
+  // third of the field of view with parallax on top leaves a third in view;
+  // it only keeps out views that look the same way from elsewhere.
+  auto overlaps = [&](const std::string& a, const std::string& b) {
+    const auto& [camera_b, pose_b] = model.images.at(b);
+    const CameraIntrinsics& in = model.cameras.at(camera_b);
+    const auto observed = model.observed.find(a);
+    if (observed == model.observed.end()) return false;
+    int seen = 0, inside = 0;
+    for (long id : observed->second) {
+      const auto p = points.find(id);
+      if (p == points.end()) continue;
+      ++seen;
+      const Eigen::Vector3d x = pose_b * p->second;
+      if (x.z() <= 0) continue;
+      const double u = in.fx * x.x() / x.z() + in.cx, v = in.fy * x.y() / x.z() + in.cy;
+      inside += u >= -0.5 && v >= -0.5 && u < in.width - 0.5 && v < in.height - 0.5;
+    }
+    return seen > 0 && inside >= kShared * seen;
+  };
+  std::set<std::pair<size_t, size_t>> chosen;
+  for (size_t i = 0; i < names.size(); ++i) {
+    const Eigen::Vector3d axis_i = model.images.at(names[i]).second.linear().row(2).transpose();
+    std::vector<std::pair<double, size_t>> partners;  // (-cos, j): nearest in direction first
+    for (size_t j = 0; j < names.size(); ++j) {
+      if (std::abs(place[i] - place[j]) <= min_index_gap) continue;
+      const double cos = axis_i.dot(model.images.at(names[j]).second.linear().row(2).transpose());
+      if (cos < min_cos || !overlaps(names[i], names[j]) || !overlaps(names[j], names[i])) continue;
+      partners.push_back({-cos, j});
+    }
+    std::sort(partners.begin(), partners.end());
+    for (size_t k = 0; k < partners.size() && static_cast<int>(k) < per_image; ++k)
+      chosen.insert({std::min(i, partners[k].second), std::max(i, partners[k].second)});
+  }
+  std::vector<std::pair<std::string, std::string>> pairs;
+  for (const auto& [a, b] : chosen) pairs.push_back({names[a], names[b]});
+  return pairs;
 }
 
 Status ReadColmapTextModel(const fs::path& dir, const IngestedCapture& capture, CameraSet* cameras,
@@ -314,8 +393,9 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
   // Runs the mapper attempts into sparse/, sparse_1/, ... (numbered on across
   // rounds); fails only when the last attempt fails and nothing was mapped yet.
   auto map = [&]() -> Status {
-    for (size_t a = 0; a < num_attempts; ++a, ++run) {
-      const fs::path sparse = work_dir / ("sparse" + (run == 0 ? std::string() : "_" + std::to_string(run)));
+    for (size_t a = 0; a < num_attempts; ++a) {
+      const int this_run = run++;
+      const fs::path sparse = work_dir / ("sparse" + (this_run == 0 ? std::string() : "_" + std::to_string(this_run)));
       RemoveAll(sparse);
       HF_RETURN_IF_ERROR(EnsureDirectory(sparse));
       HF_LOG(Info) << "calibrate: COLMAP mapper" << (a == 0 ? "" : " (again, relaxed initialisation)");
@@ -348,6 +428,75 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
   if (best.empty())
     return Status::DataError("COLMAP reconstructed nothing from " + std::to_string(total) +
                              " images (too few features or matches: textureless frames? see " + log.string() + ")");
+  if (report->matcher == "sequential" && report->sequential_registered < 0 && options.revisit_angle_deg > 0) {
+    // Loop closure: match the views the first model shows the camera coming back to, and refine it with them.
+    const fs::path first = work_dir / "model_first";
+    RemoveAll(first);
+    HF_RETURN_IF_ERROR(EnsureDirectory(first));
+    HF_RETURN_IF_ERROR(RunTool({exe, "model_converter", "--input_path", best.string(), "--output_path", first.string(),
+                                "--output_type", "TXT"},
+                               log));
+    ColmapTextModel model;
+    std::map<long, Eigen::Vector3d> points;
+    HF_RETURN_IF_ERROR(ReadColmapCamerasAndImages(first, &model));
+    HF_RETURN_IF_ERROR(ReadColmapPoints(first, &points));
+    RemoveAll(first);
+    std::vector<std::string> order;  // as the sequential matcher orders them: by name
+    for (size_t c = 0; c < capture.cameras.size(); ++c)
+      for (size_t i : chosen[c]) order.push_back(capture.cameras[c].name + "/" + FrameFileName(capture.cameras[c].frames[i].index));
+    std::sort(order.begin(), order.end());
+    const auto pairs = FindRevisitPairs(model, points, order, options.revisit_angle_deg, options.overlap,
+                                        options.revisit_pairs);
+    if (!pairs.empty()) {
+      const fs::path pair_list = work_dir / "revisit_pairs.txt";
+      std::ofstream out(pair_list);
+      for (const auto& [a, b] : pairs) out << a << " " << b << "\n";
+      out.close();
+      if (!out) return Status::IoError("cannot write " + pair_list.string());
+      HF_LOG(Info) << "calibrate: the camera comes back to views it saw before: COLMAP matches " << pairs.size()
+                   << " more pairs of images (looking within " << options.revisit_angle_deg
+                   << " deg of each other) and refines the model with them";
+      HF_RETURN_IF_ERROR(RunTool({exe, "matches_importer", "--database_path", database.string(), "--match_list_path",
+                                  pair_list.string(), "--match_type", "pairs", "--SiftMatching.use_gpu", "0",
+                                  "--SiftMatching.num_threads", std::to_string(threads)},
+                                 log));
+      report->revisit_pairs = static_cast<int>(pairs.size());
+      // The first model stays the start: its points are triangulated again
+      // with the new matches (tracks that span the return merge) and the
+      // whole model is bundle adjusted, twice (the second pass merges what the
+      // first brought within reach). Mapping again from scratch instead rolls
+      // the incremental mapper's dice once more, and it sometimes returns a
+      // model that registers every image in the wrong places.
+      fs::path refined = best;
+      auto refine = [&]() -> Status {
+        for (int round = 1; round <= 2; ++round) {
+          const fs::path triangulated = work_dir / "revisit_triangulated";
+          const fs::path adjusted = work_dir / ("revisit_adjusted_" + std::to_string(round));
+          for (const fs::path& dir : {triangulated, adjusted}) {
+            RemoveAll(dir);
+            HF_RETURN_IF_ERROR(EnsureDirectory(dir));
+          }
+          HF_RETURN_IF_ERROR(RunTool({exe, "point_triangulator", "--database_path", database.string(), "--image_path",
+                                      image_path, "--input_path", refined.string(), "--output_path",
+                                      triangulated.string(), "--Mapper.num_threads", std::to_string(threads)},
+                                     log));
+          HF_RETURN_IF_ERROR(RunTool({exe, "bundle_adjuster", "--input_path", triangulated.string(),
+                                      "--output_path", adjusted.string()},
+                                     log));
+          RemoveAll(triangulated);
+          if (refined != best) RemoveAll(refined);
+          refined = adjusted;
+        }
+        return Status::Ok();
+      };
+      if (Status s = refine(); s.ok()) {
+        best = refined;
+      } else {
+        HF_LOG(Warning) << "calibrate: refining with the revisited views failed (" << s.message()
+                        << "); keeping the first model";
+      }
+    }
+  }
   const fs::path text = work_dir / "model";
   RemoveAll(text);
   HF_RETURN_IF_ERROR(EnsureDirectory(text));

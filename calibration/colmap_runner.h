@@ -42,6 +42,17 @@ struct ColmapOptions {
   // images, every pair is matched (pairs already matched are kept) and the
   // mapper runs again, for at most this many images (0: never).
   int exhaustive_fallback_max = 300;
+  // A camera that comes back to views it saw before (round the head and on
+  // past the start, or a second ring) drifts along the way, since sequential
+  // matching never pairs the returning frames with the first. After a first
+  // model, pairs of images that it shows looking at the same part of the
+  // scene from directions within `revisit_angle_deg`, further apart in the
+  // video than `overlap`, are matched too (at most `revisit_pairs` per image,
+  // the closest in direction first), and the first model is refined with
+  // them: its points triangulated again and the whole bundle adjusted, twice.
+  // 0: off.
+  double revisit_angle_deg = 25.0;
+  int revisit_pairs = 8;
   // Fixed cameras: how far one camera's instants may lie apart in COLMAP's
   // model before the model counts as broken (degrees; fraction of the median
   // distance between the cameras).
@@ -59,6 +70,8 @@ struct ColmapReport {
   // When sequential matching registered too few and every pair was matched
   // after it: the images registered before that; -1 otherwise.
   int sequential_registered = -1;
+  // Pairs of revisited views matched after the first model (0: none found or off).
+  int revisit_pairs = 0;
 };
 
 // Runs COLMAP in `work_dir` (kept: database, sparse/ and text model, logs) and
@@ -77,12 +90,29 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
 Status CheckFixedCameraInstants(const CameraSet& cameras, double max_rotation_deg, double max_shift);
 
 // The parts of a COLMAP text model: cameras by id (pixel centres moved to
-// integers), and images by name with their camera id and cam_from_world.
+// integers), images by name with their camera id and cam_from_world, and the
+// ids of the 3D points each image observes.
 struct ColmapTextModel {
   std::map<int, CameraIntrinsics> cameras;
   std::map<std::string, std::pair<int, Eigen::Isometry3d>> images;
+  std::map<std::string, std::vector<long>> observed;
 };
 Status ReadColmapCamerasAndImages(const fs::path& dir, ColmapTextModel* model);
+
+// Pairs of images (by name) that a model shows revisiting a view: their
+// optical axes within `max_angle_deg`, each seeing at least 15% of the
+// points the other observes in front of it and inside its frame, and more than
+// `min_index_gap` apart in `order` (every image given to COLMAP, in the
+// sequential matcher's order; pairs nearer than that were matched
+// sequentially). At most `per_image` partners per image, nearest in angle
+// first; each pair appears once.
+std::vector<std::pair<std::string, std::string>> FindRevisitPairs(const ColmapTextModel& model,
+                                                                  const std::map<long, Eigen::Vector3d>& points,
+                                                                  const std::vector<std::string>& order,
+                                                                  double max_angle_deg, int min_index_gap,
+                                                                  int per_image);
+// points3D.txt of a text model: id -> position.
+Status ReadColmapPoints(const fs::path& dir, std::map<long, Eigen::Vector3d>* points);
 
 // Reads a COLMAP text model (cameras.txt, images.txt, points3D.txt). Image
 // names "<camera>/<index>.png" map to views.

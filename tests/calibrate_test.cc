@@ -5,7 +5,9 @@
 
 #include <nlohmann/json.hpp>
 #include <cstring>
+#include <map>
 #include <random>
+#include <set>
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -159,14 +161,17 @@ TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   ASSERT_TRUE(align.ok()) << align.message();
   CameraErrors errors;
   ASSERT_TRUE(EvaluateWorldCameras(cameras, capture, truth, &aligned.head_from_world, &errors).ok());
-  std::printf("orbit: rotation %.3f deg, centre %.2f mm (median), align scale error %.2f%%, residual %.1f mm\n",
-              errors.median_rotation_deg, errors.median_centre_mm, 100 * errors.scale_error, aligned.median_mm);
+  std::printf("orbit: rotation %.3f deg, centre %.2f mm (median), align scale error %.2f%%, residual %.1f mm; "
+              "%d revisit pairs\n",
+              errors.median_rotation_deg, errors.median_centre_mm, 100 * errors.scale_error, aligned.median_mm,
+              summary.revisit_pairs);
   // A small, low-resolution orbit: the full-size figures come from `headforge bench calibrate`.
-  // Over ten runs (COLMAP's mapper differs run to run): rotation 0.09-0.72
-  // deg, centre 2.4-14.8 mm, the centre error following align's scale (1.7-20%
-  // off, from the few near-frontal views of this short orbit).
-  EXPECT_LT(errors.median_rotation_deg, 1.0);
-  EXPECT_LT(errors.median_centre_mm, 20.0);
+  // The last frame comes back to the first (15 deg apart), which sequential
+  // matching does not pair; matching that revisit closes the loop. Over
+  // eight runs (COLMAP's mapper differs run to run): rotation 0.05-0.36 deg,
+  // centre 1.6-3.8 mm. Without it, over ten: 0.09-0.72 deg, 2.4-14.8 mm.
+  EXPECT_LT(errors.median_rotation_deg, 0.6);
+  EXPECT_LT(errors.median_centre_mm, 10.0);
   // Align fits the mean face from the few near-frontal views of this short
   // orbit; this subject's eye-to-nose distance is 12% off the mean. The scale
   // is right to tens of percent here (see README for what remains).
@@ -334,6 +339,72 @@ TEST(Calibrate, FixedCamerasMustAgreeAcrossInstants) {
   // An unregistered instant does not count; nor does a camera seen once.
   moved.views[7].registered = false;
   EXPECT_TRUE(CheckFixedCameraInstants(moved, 2.0, 0.05).ok());
+}
+
+// A camera circling a scene and coming back past its start: the views at the
+// start and the end look the same way but lie far apart in the video, which
+// sequential matching never pairs. The model's geometry finds them.
+TEST(Calibrate, RevisitPairsCloseTheLoopOfAnOrbit) {
+  ColmapTextModel model;
+  CameraIntrinsics in;
+  in.width = in.height = 320;
+  in.fx = in.fy = 400;
+  in.cx = in.cy = 159.5;
+  model.cameras[1] = in;
+  std::map<long, Eigen::Vector3d> points;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> cube(-0.15, 0.15);
+  for (long id = 0; id < 400; ++id) points[id] = Eigen::Vector3d(cube(rng), cube(rng), cube(rng));
+  // 26 frames 15 deg apart on a 0.8 m circle looking at the middle: 375 deg,
+  // so frames 24 and 25 come back over frames 0 and 1.
+  auto add_orbit = [&](int frames, double step_deg) {
+    model.images.clear();
+    model.observed.clear();
+    for (int f = 0; f < frames; ++f) {
+      const double yaw = f * step_deg * M_PI / 180;
+      const Eigen::Vector3d centre = 0.8 * Eigen::Vector3d(std::sin(yaw), 0, std::cos(yaw));
+      Eigen::Isometry3d cam_from_world = Eigen::Isometry3d::Identity();
+      // Looking at the origin: the camera's +z points from its centre to the middle.
+      cam_from_world.linear() = Eigen::AngleAxisd(yaw + M_PI, Eigen::Vector3d::UnitY()).toRotationMatrix().transpose();
+      cam_from_world.translation() = -cam_from_world.linear() * centre;
+      const std::string name = "cam0/" + FrameFileName(f);
+      model.images[name] = {1, cam_from_world};
+      for (const auto& [id, p] : points) {
+        const Eigen::Vector3d x = cam_from_world * p;
+        // Each view observes the points on its side of the middle.
+        if (x.z() > 0 && x.z() < 0.8) model.observed[name].push_back(id);
+      }
+    }
+  };
+  add_orbit(26, 15.0);
+  // The optical axis of frame 0 points at the middle from +z.
+  EXPECT_NEAR((model.images.at("cam0/" + FrameFileName(0)).second * Eigen::Vector3d::Zero()).z(), 0.8, 1e-9);
+  std::vector<std::string> order;
+  for (const auto& [n, image] : model.images) order.push_back(n);
+  auto pairs = FindRevisitPairs(model, points, order, 25.0, 10, 8);
+  std::set<std::pair<std::string, std::string>> found(pairs.begin(), pairs.end());
+  auto name = [](int f) { return "cam0/" + FrameFileName(f); };
+  // Within 25 deg and more than 10 frames apart.
+  const std::set<std::pair<std::string, std::string>> expected = {
+      {name(0), name(23)}, {name(0), name(24)}, {name(0), name(25)},
+      {name(1), name(24)}, {name(1), name(25)}, {name(2), name(25)}};
+  EXPECT_EQ(found, expected);
+  // One partner per image, the nearest in direction: 0-25 and 1-24 go, since
+  // each of their four images has a partner straight ahead.
+  pairs = FindRevisitPairs(model, points, order, 25.0, 10, 1);
+  found = {pairs.begin(), pairs.end()};
+  const std::set<std::pair<std::string, std::string>> nearest = {
+      {name(0), name(23)}, {name(0), name(24)}, {name(1), name(25)}, {name(2), name(25)}};
+  EXPECT_EQ(found, nearest);
+  // Half an orbit never comes back: nothing to match.
+  add_orbit(13, 15.0);
+  EXPECT_TRUE(FindRevisitPairs(model, points, order, 25.0, 10, 8).empty());
+  // Views looking the same way but at other points (most of what one sees is outside the other's frame) are no pair.
+  add_orbit(26, 15.0);
+  for (auto& [n, image] : model.images)
+    if (n == name(24)) image.second.translation() += Eigen::Vector3d(2.0, 0, 0);
+  pairs = FindRevisitPairs(model, points, order, 25.0, 10, 8);
+  for (const auto& [a, b] : pairs) EXPECT_TRUE(a != name(24) && b != name(24)) << a << " " << b;
 }
 
 TEST(Calibrate, RigFilesAreImportedThroughTheCrop) {

@@ -154,6 +154,14 @@ Status HeadPoseCameras(const CalibrateOptions& options, const IngestedCapture& c
   return Status::Ok();
 }
 
+// Equal lens parameters, up to the precision of a text model.
+bool SameIntrinsics(const CameraIntrinsics& a, const CameraIntrinsics& b) {
+  auto near = [](double x, double y) { return std::abs(x - y) <= 1e-6 * std::max(1.0, std::abs(x)); };
+  return a.model == b.model && a.width == b.width && a.height == b.height && near(a.fx, b.fx) && near(a.fy, b.fy) &&
+         near(a.cx, b.cx) && near(a.cy, b.cy) && near(a.k1, b.k1) && near(a.k2, b.k2) && near(a.p1, b.p1) &&
+         near(a.p2, b.p2);
+}
+
 }  // namespace
 
 Status ImportRig(const std::string& path, const IngestedCapture& capture, CameraSet* cameras) {
@@ -161,13 +169,31 @@ Status ImportRig(const std::string& path, const IngestedCapture& capture, Camera
   std::error_code ec;
   if (fs::is_directory(path, ec)) {
     // A COLMAP text model: image names "<camera>/..." or "<camera>.<ext>" name the camera.
+    // Several images may name one camera (a rig seen at several instants):
+    // they must agree, since a fixed camera has one pose and one lens.
     ColmapTextModel model;
     HF_RETURN_IF_ERROR(ReadColmapCamerasAndImages(path, &model).WithContext("rig folder"));
+    CameraSet instants;
     for (const auto& [name, image] : model.images) {
       const std::string camera = name.find('/') != std::string::npos ? name.substr(0, name.find('/'))
                                                                      : fs::path(name).stem().string();
-      rig[camera] = {model.cameras.at(image.first), image.second};
+      const CameraIntrinsics& in = model.cameras.at(image.first);
+      const auto [it, first] = rig.insert({camera, {in, image.second}});
+      if (!first && !SameIntrinsics(it->second.first, in))
+        return Status::DataError("rig folder " + path + ": the images of camera " + camera +
+                                 " have different intrinsics (COLMAP camera ids with other parameters); a fixed "
+                                 "camera has one lens");
+      CameraView view;
+      view.camera = camera;
+      view.registered = true;
+      view.cam_from_world = image.second;
+      instants.views.push_back(view);
     }
+    if (Status s = CheckFixedCameraInstants(instants, ColmapOptions().max_instant_rotation_deg,
+                                            ColmapOptions().max_instant_shift);
+        !s.ok())
+      return Status::DataError("rig folder " + path + ": " + s.message() +
+                               "; a fixed camera has one pose: keep one image per camera in the folder");
   } else {
     nlohmann::json j;
     HF_RETURN_IF_ERROR(ReadJson(path, &j).WithContext("rig file"));

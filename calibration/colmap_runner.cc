@@ -298,9 +298,8 @@ Status CheckFixedCameraInstants(const CameraSet& cameras, double max_rotation_de
   if (worst.empty()) return Status::Ok();
   char text[320];
   std::snprintf(text, sizeof(text),
-                "COLMAP's model is inconsistent: it places fixed camera %s at two instants %.1f deg and %.0f%% of the "
-                "rig's size apart (limits --max-instant-rotation %.1f deg, --max-instant-shift %.0f%%; fewer "
-                "--rig-instants or a rig file, --mode rig, may help)",
+                "fixed camera %s lies at two instants %.1f deg and %.0f%% of the rig's size apart "
+                "(limits %.1f deg, %.0f%%)",
                 worst.c_str(), worst_deg, 100 * worst_shift, max_rotation_deg, 100 * max_shift);
   return Status::DataError(text);
 }
@@ -508,7 +507,9 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
   if (options.static_cameras) {
     if (Status s = CheckFixedCameraInstants(*cameras, options.max_instant_rotation_deg, options.max_instant_shift);
         !s.ok())
-      return Status::DataError(s.message() + "; see " + log.string());
+      return Status::DataError("COLMAP's model is inconsistent: " + s.message() +
+                               "; --max-instant-rotation and --max-instant-shift set the limits; fewer "
+                               "--rig-instants or a rig file (--mode rig) may help; see " + log.string());
     // Each fixed camera's pose (from its first registered instant) holds for
     // all of its frames; registration counts the instants COLMAP was given.
     std::map<std::string, Eigen::Isometry3d> pose;

@@ -444,6 +444,27 @@ TEST(Calibrate, RigFilesAreImportedThroughTheCrop) {
   EXPECT_NEAR(from_colmap.cameras[0].cx, in.cx, 1e-9);
   EXPECT_NEAR(from_colmap.cameras[0].fx, in.fx, 1e-9);
   EXPECT_NEAR(from_colmap.views[1].cam_from_world.translation().x(), 0.1, 1e-12);
+  // The folder may hold a camera at several instants, if they agree: another
+  // image of cam0 a millimetre away is accepted, one turned by 5 deg is not, nor
+  // one through another lens.
+  ASSERT_TRUE(WriteFileAtomic(dir / "colmap_rig" / "images.txt",
+                              "1 1 0 0 0 0.1 0 0.7 1 cam0/000000.png\n\n"
+                              "2 1 0 0 0 0.101 0 0.7 1 cam0/000001.png\n\n").ok());
+  ASSERT_TRUE(RunCalibrate(options, capture, Model(), dir / "out3", &progress, &from_colmap, &result).ok());
+  const double half = 2.5 * M_PI / 180;  // quaternion of a 5 deg turn about y
+  ASSERT_TRUE(WriteFileAtomic(dir / "colmap_rig" / "images.txt",
+                              "1 1 0 0 0 0.1 0 0.7 1 cam0/000000.png\n\n2 " + std::to_string(std::cos(half)) +
+                                  " 0 " + std::to_string(std::sin(half)) + " 0 0.1 0 0.7 1 cam0/000001.png\n\n").ok());
+  Status turned = RunCalibrate(options, capture, Model(), dir / "out4", &progress, &from_colmap, &result);
+  EXPECT_EQ(turned.code(), Status::Code::kDataError);
+  EXPECT_NE(turned.message().find("fixed camera cam0 lies at two instants 5.0 deg"), std::string::npos) << turned.message();
+  ASSERT_TRUE(WriteFileAtomic(dir / "colmap_rig" / "cameras.txt",
+                              "1 PINHOLE 360 288 600 600 180 144\n2 PINHOLE 360 288 640 640 180 144\n").ok());
+  ASSERT_TRUE(WriteFileAtomic(dir / "colmap_rig" / "images.txt",
+                              "1 1 0 0 0 0.1 0 0.7 1 cam0/000000.png\n\n2 1 0 0 0 0.1 0 0.7 2 cam0/000001.png\n\n").ok());
+  turned = RunCalibrate(options, capture, Model(), dir / "out5", &progress, &from_colmap, &result);
+  EXPECT_EQ(turned.code(), Status::Code::kDataError);
+  EXPECT_NE(turned.message().find("camera cam0 have different intrinsics"), std::string::npos) << turned.message();
   // A rig file for another camera size is refused.
   ASSERT_TRUE(WriteJsonAtomic(dir / "bad.json", nlohmann::json{{"cameras", {{{"name", "cam0"}, {"width", 640}, {"height", 480}, {"fx", 1.0}, {"cx", 1.0}, {"cy", 1.0}, {"cam_from_world", {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}}}}}}}).ok());
   options.rig = (dir / "bad.json").string();

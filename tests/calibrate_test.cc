@@ -132,7 +132,9 @@ TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   const fs::path dir = Scratch("orbit");
   IngestedCapture capture;
   nlohmann::json truth;
-  SimulateAndIngest(kSmallOrbit, dir, &capture, &truth);
+  std::string scene = kSmallOrbit;
+  scene.replace(scene.find("frames = 24"), 11, "frames = 36");
+  SimulateAndIngest(scene.c_str(), dir, &capture, &truth);
   // Auto mode sees the camera move: frames a quarter of the orbit apart share
   // no background that optical flow can follow, but the background changed.
   BackgroundMotion motion;
@@ -150,7 +152,7 @@ TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   const Status status = RunCalibrate(options, capture, Model(), dir / "out", &progress, &cameras, &summary);
   ASSERT_TRUE(status.ok()) << status.message();
   EXPECT_EQ(summary.mode, "colmap");
-  EXPECT_GE(summary.registered, 22);  // COLMAP's multithreaded mapper varies a little from run to run
+  EXPECT_GE(summary.registered, 33);  // COLMAP's multithreaded mapper varies a little from run to run
   EXPECT_TRUE(fs::exists(dir / "out" / "colmap" / "model" / "images.txt"));
   CameraSet reread;
   ASSERT_TRUE(CameraSet::Read(dir / "out" / "cameras.json", &reread).ok());
@@ -162,16 +164,25 @@ TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   CameraErrors errors;
   ASSERT_TRUE(EvaluateWorldCameras(cameras, capture, truth, &aligned.head_from_world, &errors).ok());
   std::printf("orbit: rotation %.3f deg, centre %.2f mm (median), align scale error %.2f%%, residual %.1f mm; "
-              "%d revisit pairs\n",
+              "%d revisit pairs (%s)\n",
               errors.median_rotation_deg, errors.median_centre_mm, 100 * errors.scale_error, aligned.median_mm,
-              summary.revisit_pairs);
+              summary.revisit_pairs, summary.reason.c_str());
   // A small, low-resolution orbit: the full-size figures come from `headforge bench calibrate`.
-  // The last frame comes back to the first (15 deg apart), which sequential
-  // matching does not pair; matching that revisit closes the loop. Over
-  // eight runs (COLMAP's mapper differs run to run): rotation 0.05-0.36 deg,
-  // centre 1.6-3.8 mm. Without it, over ten: 0.09-0.72 deg, 2.4-14.8 mm.
+  // Over seventeen runs (COLMAP's mapper differs run to run): rotation
+  // 0.06-0.14 deg, centre 1.3-3.1 mm.
   EXPECT_LT(errors.median_rotation_deg, 0.6);
   EXPECT_LT(errors.median_centre_mm, 10.0);
+  // The last frame comes back to 10 deg short of the first, a revisit that
+  // sequential matching (ten neighbours) never pairs; calibrate matches it
+  // and refines the model. When the first mapping registers too few frames,
+  // every pair is matched instead and revisits are not looked for (three of
+  // those runs found no pairs and took twice as long, as matching every pair
+  // does). On this short orbit the drift is small either way
+  // (six runs without revisits: 0.08-0.11 deg, 1.5-2.2 mm); on orbit_360's
+  // three rings revisits take the median centre error from 3-31 mm to
+  // 0.5-0.6 mm (README).
+  if (summary.sequential_registered < 0) EXPECT_GE(summary.revisit_pairs, 1);
+  EXPECT_TRUE(fs::exists(dir / "out" / "colmap" / "revisit_pairs.txt") || summary.sequential_registered >= 0);
   // Align fits the mean face from the few near-frontal views of this short
   // orbit; this subject's eye-to-nose distance is 12% off the mean. The scale
   // is right to tens of percent here (see README for what remains).

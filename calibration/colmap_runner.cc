@@ -330,14 +330,15 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
     }
   }
   const fs::path list = work_dir / "images.txt";
+  std::vector<std::string> image_names;
   std::ofstream names(list);
-  int total = 0;
   for (size_t c = 0; c < capture.cameras.size(); ++c)
     for (size_t i : chosen[c]) {
-      names << capture.cameras[c].name << "/" << FrameFileName(capture.cameras[c].frames[i].index) << "\n";
-      ++total;
+      image_names.push_back(capture.cameras[c].name + "/" + FrameFileName(capture.cameras[c].frames[i].index));
+      names << image_names.back() << "\n";
     }
   names.close();
+  const int total = static_cast<int>(image_names.size());
   report->total = total;
   // Masks: COLMAP reads <mask_path>/<image name>.png and ignores pixels that are 0.
   const fs::path mask_dir = work_dir / "masks";
@@ -440,9 +441,7 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
     HF_RETURN_IF_ERROR(ReadColmapCamerasAndImages(first, &model));
     HF_RETURN_IF_ERROR(ReadColmapPoints(first, &points));
     RemoveAll(first);
-    std::vector<std::string> order;  // as the sequential matcher orders them: by name
-    for (size_t c = 0; c < capture.cameras.size(); ++c)
-      for (size_t i : chosen[c]) order.push_back(capture.cameras[c].name + "/" + FrameFileName(capture.cameras[c].frames[i].index));
+    std::vector<std::string> order = image_names;  // as the sequential matcher orders them: by name
     std::sort(order.begin(), order.end());
     const auto pairs = FindRevisitPairs(model, points, order, options.revisit_angle_deg, options.overlap,
                                         options.revisit_pairs);

@@ -181,7 +181,9 @@ TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   // (six runs without revisits: 0.08-0.11 deg, 1.5-2.2 mm); on orbit_360's
   // three rings revisits take the median centre error from 3-31 mm to
   // 0.5-0.6 mm (README).
-  if (summary.sequential_registered < 0) EXPECT_GE(summary.revisit_pairs, 1);
+  if (summary.sequential_registered < 0) {
+    EXPECT_GE(summary.revisit_pairs, 1);
+  }
   EXPECT_TRUE(fs::exists(dir / "out" / "colmap" / "revisit_pairs.txt") || summary.sequential_registered >= 0);
   // Align fits the mean face from the few near-frontal views of this short
   // orbit; this subject's eye-to-nose distance is 12% off the mean. The scale

@@ -13,6 +13,7 @@ namespace headforge {
 
 std::string DefaultLandmarkEmbedding() { return HEADFORGE_LANDMARK_EMBEDDING; }
 std::string ViewLandmarkEmbedding() { return HEADFORGE_VIEW_LANDMARK_EMBEDDING; }
+std::string IdentityLandmarkEmbedding() { return HEADFORGE_IDENTITY_LANDMARK_EMBEDDING; }
 
 namespace {
 
@@ -51,18 +52,26 @@ Status ForEachDetectedPoint(const std::string& scene_text, const FaceModel& mode
   return Status::Ok();
 }
 
-// The mean face under one light, the camera 0.65 m in front; the head turns
-// and nods by these amplitudes (degrees) over `frames` frames.
-std::string EmbeddingScene(int frames, double yaw, double yaw_period, double pitch, double pitch_period) {
-  char text[1024];
+// A subject under one light, the camera 0.65 m in front; the head turns and
+// nods by these amplitudes (degrees) over `frames` frames.
+std::string EmbeddingScene(int frames, double yaw, double yaw_period, double pitch, double pitch_period,
+                           const SubjectLook& look = SubjectLook()) {
+  std::string identity = "[0.0]";
+  if (look.alpha.size() > 0) {
+    identity = "[";
+    for (int i = 0; i < look.alpha.size(); ++i) identity += (i ? ", " : "") + std::to_string(look.alpha[i]);
+    identity += "]";
+  }
+  char text[2048];
   std::snprintf(text, sizeof(text),
                 "name = \"landmark_embedding\"\nfps = 25\nframes = %d\neffects = [\"lighting\"]\n"
-                "[subject]\nidentity = [0.0]\n[background]\ntype = \"flat\"\n"
+                "[subject]\nidentity = %s\n[appearance]\nskin = [%.3f, %.3f, %.3f]\n[background]\ntype = \"flat\"\n"
                 "[camera]\nposition = [0.0, 0.0, 0.65]\n[camera.intrinsics]\nwidth = 512\nheight = 512\nfocal = 1100.0\n"
                 "[head]\nyaw = { type = \"sine\", amplitude = %.1f, period = %.2f }\n"
                 "pitch = { type = \"sine\", amplitude = %.1f, period = %.2f }\n"
-                "[effect.lighting]\nx = 0.4\ny = 0.5\nz = 0.9\nambient = 0.45\ndiffuse = 0.7\n",
-                frames, yaw, yaw_period, pitch, pitch_period);
+                "[effect.lighting]\nx = %.3f\ny = %.3f\nz = %.3f\nambient = %.3f\ndiffuse = %.3f\n",
+                frames, identity.c_str(), look.skin.x(), look.skin.y(), look.skin.z(), yaw, yaw_period, pitch,
+                pitch_period, look.light.x(), look.light.y(), look.light.z(), look.ambient, look.diffuse);
   return text;
 }
 
@@ -86,6 +95,24 @@ Status MeasureLandmarkEmbedding(const FaceModel& model, const FaceDetectorOption
                                    : Eigen::Vector3d(model.neutral().col(model.landmarks_ibug68()[i]).cast<double>()));
   }
   if (seen < 60) return Status::DataError("the detector found too few landmarks on the calibration renders");
+  return Status::Ok();
+}
+
+Status MeasureSubjectLandmarks(const FaceModel& model, const FaceDetectorOptions& detector,
+                               const std::string& landmark_model, int threads, const SubjectLook& look,
+                               std::vector<Eigen::Vector3d>* points, std::vector<int>* seen) {
+  std::vector<Eigen::Vector3d> sum(68, Eigen::Vector3d::Zero());
+  std::vector<int> count(68, 0);
+  HF_RETURN_IF_ERROR(ForEachDetectedPoint(EmbeddingScene(60, 25.0, 2.4, 12.0, 1.1, look), model, detector,
+                                          landmark_model, threads,
+                                          [&](int i, const Eigen::Vector3d& p, const Eigen::Vector3d&) {
+                                            sum[i] += p;
+                                            ++count[i];
+                                          }));
+  points->assign(68, Eigen::Vector3d::Zero());
+  for (int i = 0; i < 68; ++i)
+    if (count[i] > 0) (*points)[i] = sum[i] / count[i];
+  *seen = std::move(count);
   return Status::Ok();
 }
 
@@ -146,6 +173,22 @@ Status WriteLandmarkEmbedding(const std::string& path, const LandmarkEmbedding& 
     for (const auto& points : embedding.nodes) nodes.push_back({{"points", PointRows(points)}});
     j["nodes"] = nodes;
   }
+  if (!embedding.identity.empty()) {
+    // Per landmark three rows (x, y, z) of K coefficients.
+    nlohmann::json blocks = nlohmann::json::array();
+    for (const auto& block : embedding.identity) {
+      nlohmann::json rows = nlohmann::json::array();
+      for (int r = 0; r < 3; ++r) {
+        std::vector<double> row(block.cols());
+        for (int c = 0; c < block.cols(); ++c) row[c] = std::round(block(r, c) * 1e8) / 1e8;
+        rows.push_back(row);
+      }
+      blocks.push_back(rows);
+    }
+    j["identity"] = blocks;
+    j["format"] = "ibug68 head-frame points at identity 0, metres; identity: per point [3][K], metres per standard "
+                  "deviation of each identity coefficient";
+  }
   return WriteJsonAtomic(path, j, 0);
 }
 
@@ -195,6 +238,23 @@ Status ReadLandmarkEmbedding(const std::string& path, LandmarkEmbedding* embeddi
     if (!ascending(out.yaw_deg) || !ascending(out.pitch_deg) ||
         out.nodes.size() != out.yaw_deg.size() * out.pitch_deg.size())
       return Status::DataError(path + ": the view grid's angles must ascend and its nodes number yaws x pitches");
+  }
+  if (j.contains("identity")) {
+    try {
+      for (const auto& rows : j.at("identity")) {
+        const auto x = rows.at(0).get<std::vector<double>>(), y = rows.at(1).get<std::vector<double>>(),
+                   z = rows.at(2).get<std::vector<double>>();
+        if (x.empty() || y.size() != x.size() || z.size() != x.size() ||
+            (!out.identity.empty() && int(x.size()) != out.identity[0].cols()))
+          return Status::DataError(path + ": every identity block must have three rows of one length");
+        Eigen::Matrix<double, 3, Eigen::Dynamic> block(3, int(x.size()));
+        for (size_t c = 0; c < x.size(); ++c) block.col(int(c)) = Eigen::Vector3d(x[c], y[c], z[c]);
+        out.identity.push_back(std::move(block));
+      }
+    } catch (const nlohmann::json::exception& e) {
+      return Status::DataError(path + " has malformed identity columns: " + e.what());
+    }
+    if (out.identity.size() != 68) return Status::DataError(path + " does not hold identity columns for 68 points");
   }
   *embedding = std::move(out);
   return Status::Ok();

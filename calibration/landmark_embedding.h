@@ -35,6 +35,11 @@ struct LandmarkEmbedding {
   std::vector<Eigen::Vector3d> points;  // 68, over every direction
   std::vector<double> yaw_deg, pitch_deg;  // ascending; empty: no view dependence
   std::vector<std::vector<Eigen::Vector3d>> nodes;  // [pitch * yaw_deg.size() + yaw] -> 68 points
+  // How each point moves with the face model's first identity coefficients:
+  // 68 blocks [3, K] (metres per standard deviation), measured over many
+  // subjects; `points` then hold the points at alpha = 0. Empty: the points
+  // move with the surface they are attached to.
+  std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> identity;
 
   bool view_dependent() const { return !nodes.empty(); }
   // (node, weight) pairs summing to 1 for a direction from the head's origin
@@ -48,6 +53,21 @@ Status WriteLandmarkEmbedding(const std::string& path, const LandmarkEmbedding& 
 // nods +-22 before the camera.
 Status MeasureViewLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
                                     const std::string& landmark_model, int threads, LandmarkEmbedding* embedding);
+// One subject's sweep: the face model with identity `alpha`, skin colour
+// `skin` and a light from `light` (head frame, toward the light) turns +-25
+// degrees and nods +-12 over 60 renders. `points` gets each landmark's mean
+// head-frame point and `seen` how many renders it was found on (0: the
+// point is undefined).
+struct SubjectLook {
+  Eigen::VectorXd alpha;
+  Eigen::Vector3d skin{0.78, 0.58, 0.47};
+  Eigen::Vector3d light{0.4, 0.5, 0.9};
+  double ambient = 0.45, diffuse = 0.7;
+};
+Status MeasureSubjectLandmarks(const FaceModel& model, const FaceDetectorOptions& detector,
+                               const std::string& landmark_model, int threads, const SubjectLook& look,
+                               std::vector<Eigen::Vector3d>* points, std::vector<int>* seen);
+
 // The embedding file when it exists and loads, else the model's landmark vertices.
 LandmarkEmbedding LoadLandmarkEmbedding(const FaceModel& model, const std::string& embedding_path);
 
@@ -59,5 +79,7 @@ std::vector<Eigen::Vector3d> DetectorLandmarkPoints(const FaceModel& model, cons
 std::string DefaultLandmarkEmbedding();
 // The same with the view grid (embed-landmarks --views), for `track`.
 std::string ViewLandmarkEmbedding();
+// The points with their identity columns (embed-landmarks --identity), for `track`.
+std::string IdentityLandmarkEmbedding();
 
 }  // namespace headforge

@@ -7,6 +7,7 @@
 #include "core/log.h"
 #include "core/parallel.h"
 #include "pipelines/commands.h"
+#include "reconstruction/landmark_basis.h"
 
 namespace headforge {
 
@@ -66,7 +67,8 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   std::string out, face_model;
   options.Add("embed.out", &out,
               "Where to write the embedding (JSON); default: the shipped file for what is measured, "
-              "data/ict_dlib68_landmark_embedding.json or, with --views, ..._views.json.",
+              "data/ict_dlib68_landmark_embedding.json or, with --views or --identity, ..._views.json or "
+              "..._identity.json.",
               "out");
   options.Add("embed.face_model", &face_model, "Face model; default DATA/ict_facekit/ict_face_model.h5.", "face-model");
   bool views = false;
@@ -74,7 +76,15 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
               "Also measure the points from each direction of the camera (yaw -60..60, pitch -20..20 degrees), "
               "which track uses view by view (400 more renders).",
               "views");
-  const int parsed = ParseOrExit(&options, args, "headforge embed-landmarks [--out FILE] [--views]",
+  bool identity = false;
+  int subjects = 40;
+  options.Add("embed.identity", &identity,
+              "Instead, measure how the points move with the subject's identity: random subjects (varied face, skin "
+              "and light) are measured one by one (60 renders each) and the points' identity columns fitted; track "
+              "uses them with one camera.",
+              "identity");
+  options.Add("embed.subjects", &subjects, "Subjects measured with --identity (at least 10).", "subjects");
+  const int parsed = ParseOrExit(&options, args, "headforge embed-landmarks [--out FILE] [--views | --identity]",
                                  "Measures where the landmark detector's 68 points sit on the face model, from\n"
                                  "simulator renders of the mean face (calibration/landmark_embedding.h).");
   if (parsed >= 0) return parsed;
@@ -85,8 +95,23 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   FaceDetectorOptions detector;
   detector.ultraface_dir = (fs::path(common.data_dir) / "models" / "ultraface").string();
   const int threads = common.threads > 0 ? common.threads : HardwareThreads();
-  if (out.empty()) out = views ? ViewLandmarkEmbedding() : DefaultLandmarkEmbedding();
-  if (views) {
+  if (views && identity) return ReportFailure(Status::InvalidArgument("embed-landmarks: --views and --identity measure different files; give one"));
+  if (out.empty()) out = views ? ViewLandmarkEmbedding() : identity ? IdentityLandmarkEmbedding() : DefaultLandmarkEmbedding();
+  if (identity) {
+    LandmarkEmbedding embedding;
+    IdentityFitReport report;
+    if (Status s = MeasureIdentityLandmarkEmbedding(model, detector, DefaultLandmarkModel(), threads, subjects,
+                                                    &embedding, &report);
+        !s.ok())
+      return ReportFailure(s);
+    if (Status s = WriteLandmarkEmbedding(out, embedding); !s.ok()) return ReportFailure(s);
+    char line[256];
+    std::snprintf(line, sizeof(line),
+                  "embed-landmarks: %d subjects; a held-out subject's points predicted within %.2f mm (median), "
+                  "%.2f mm when they ride on the surface (ridge weight %.0f)",
+                  report.subjects, 1e3 * report.loo_median, 1e3 * report.loo_median_surface, report.lambda);
+    HF_LOG(Info) << line;
+  } else if (views) {
     LandmarkEmbedding embedding;
     if (Status s = MeasureViewLandmarkEmbedding(model, detector, DefaultLandmarkModel(), threads, &embedding); !s.ok())
       return ReportFailure(s);

@@ -1,6 +1,12 @@
 #include "reconstruction/landmark_basis.h"
 
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
 #include <limits>
+#include <random>
+
+#include "core/log.h"
 
 namespace headforge {
 namespace {
@@ -140,12 +146,164 @@ Status BuildViewLandmarkBases(const FaceModel& model, const LandmarkEmbedding& e
   ViewLandmarkBases out;
   out.embedding = embedding;
   HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, embedding.points, identity_modes, &out.any_view));
+  if (!embedding.identity.empty()) {
+    // The measured identity columns replace the surface's; modes beyond them
+    // keep the surface's.
+    if (int(embedding.identity.size()) != out.any_view.size())
+      return Status::DataError("landmark basis: the embedding's identity columns do not match its points");
+    const int k = std::min(out.any_view.num_identity, int(embedding.identity[0].cols()));
+    for (int i = 0; i < out.any_view.size(); ++i) out.any_view.identity[i].leftCols(k) = embedding.identity[i].leftCols(k);
+  }
   for (const auto& points : embedding.nodes) {
     out.nodes.emplace_back();
     HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, points, identity_modes, &out.nodes.back()));
   }
   *bases = std::move(out);
   return Status::Ok();
+}
+
+namespace {
+
+double MedianOf(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+// One landmark's ridge fit of r_s = c + D alpha_s (r: the point less the
+// surface's motion). Returns the [K+1, 3] coefficients (c on the first row)
+// and appends each subject's leave-one-out error (metres) to `loo`.
+// lambda < 0: D = 0.
+Eigen::MatrixXd FitOneLandmark(const Eigen::MatrixXd& a, const Eigen::MatrixXd& r, double lambda,
+                               std::vector<double>* loo) {
+  const int n = int(a.rows()), k1 = int(a.cols());
+  Eigen::MatrixXd x = Eigen::MatrixXd::Zero(k1, 3);
+  Eigen::VectorXd leverage(n);
+  if (lambda < 0) {
+    x.row(0) = r.colwise().mean();
+    leverage.setConstant(1.0 / n);
+  } else {
+    Eigen::MatrixXd m = a.transpose() * a;
+    m.diagonal().tail(k1 - 1).array() += lambda;
+    const Eigen::LDLT<Eigen::MatrixXd> solve(m);
+    x = solve.solve(a.transpose() * r);
+    const Eigen::MatrixXd mia = solve.solve(a.transpose());  // [K+1, n]
+    for (int i = 0; i < n; ++i) leverage[i] = a.row(i).dot(mia.col(i));
+  }
+  const Eigen::MatrixXd e = r - a * x;
+  for (int i = 0; i < n; ++i) loo->push_back(e.row(i).norm() / std::max(1e-9, 1.0 - leverage[i]));
+  return x;
+}
+
+}  // namespace
+
+Status FitIdentityLandmarks(const LandmarkBasis& surface, const std::vector<SubjectLandmarks>& subjects, int modes,
+                            int min_seen, LandmarkEmbedding* embedding, IdentityFitReport* report) {
+  if (modes <= 0) return Status::InvalidArgument("identity landmarks: modes must be positive");
+  if (surface.num_identity < modes)
+    return Status::InvalidArgument("identity landmarks: the surface basis has fewer identity modes than asked for");
+  const int num_points = surface.size();
+  for (const SubjectLandmarks& s : subjects) {
+    if (s.alpha.size() < modes || int(s.points.size()) != num_points || int(s.seen.size()) != num_points)
+      return Status::InvalidArgument("identity landmarks: every subject needs " + std::to_string(modes) +
+                                     " coefficients and " + std::to_string(num_points) + " points");
+  }
+  constexpr int kMinSubjects = 8;
+  // Per landmark: the subjects that saw it, as design rows [1, alpha] and
+  // points less the surface's motion.
+  std::vector<Eigen::MatrixXd> designs(num_points), targets(num_points);
+  for (int i = 0; i < num_points; ++i) {
+    std::vector<int> used;
+    for (int s = 0; s < int(subjects.size()); ++s)
+      if (subjects[s].seen[i] >= min_seen) used.push_back(s);
+    if (int(used.size()) < kMinSubjects) {
+      return Status::DataError("identity landmarks: landmark " + std::to_string(i) + " was found on " +
+                               std::to_string(used.size()) + " subjects; at least " + std::to_string(kMinSubjects) +
+                               " are needed");
+    }
+    Eigen::MatrixXd a(used.size(), modes + 1), r(used.size(), 3);
+    for (size_t u = 0; u < used.size(); ++u) {
+      const SubjectLandmarks& s = subjects[used[u]];
+      a(u, 0) = 1;
+      a.row(u).tail(modes) = s.alpha.head(modes).transpose();
+      r.row(u) = (s.points[i] - surface.identity[i].leftCols(modes) * s.alpha.head(modes)).transpose();
+    }
+    designs[i] = std::move(a);
+    targets[i] = std::move(r);
+  }
+  // One lambda for every landmark, the one whose held-out predictions are best.
+  IdentityFitReport out;
+  out.subjects = int(subjects.size());
+  std::vector<double> loo;
+  for (int i = 0; i < num_points; ++i) FitOneLandmark(designs[i], targets[i], -1, &loo);
+  out.loo_median_surface = MedianOf(loo);
+  double best = std::numeric_limits<double>::infinity();
+  for (double lambda : {1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0, 3000.0}) {
+    loo.clear();
+    for (int i = 0; i < num_points; ++i) FitOneLandmark(designs[i], targets[i], lambda, &loo);
+    const double m = MedianOf(loo);
+    if (m < best) {
+      best = m;
+      out.lambda = lambda;
+    }
+  }
+  out.loo_median = best;
+  LandmarkEmbedding result;
+  for (int i = 0; i < num_points; ++i) {
+    std::vector<double> unused;
+    const Eigen::MatrixXd x = FitOneLandmark(designs[i], targets[i], out.lambda, &unused);
+    result.points.push_back(x.row(0).transpose());
+    result.identity.push_back(surface.identity[i].leftCols(modes) + x.bottomRows(modes).transpose());
+  }
+  *embedding = std::move(result);
+  if (report) *report = out;
+  return Status::Ok();
+}
+
+Status MeasureIdentityLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
+                                        const std::string& landmark_model, int threads, int num_subjects,
+                                        LandmarkEmbedding* embedding, IdentityFitReport* report) {
+  const int modes = std::min(20, model.num_identity());
+  if (modes == 0) return Status::DataError("identity landmarks: the face model has no identity modes");
+  if (num_subjects < 10) return Status::InvalidArgument("identity landmarks: measure at least 10 subjects");
+  std::vector<SubjectLandmarks> subjects;
+  for (int s = 0; s < num_subjects; ++s) {
+    // Subject s: its own draw of identity, skin between fair and dark, and a
+    // key light somewhere above and in front.
+    std::mt19937_64 rng(1000 + uint64_t(s));
+    std::normal_distribution<double> normal;
+    std::uniform_real_distribution<double> uniform;
+    SubjectLook look;
+    look.alpha.resize(modes);
+    for (int m = 0; m < modes; ++m) look.alpha[m] = normal(rng);
+    const double t = uniform(rng);
+    look.skin = (1 - t) * Eigen::Vector3d(0.88, 0.70, 0.60) + t * Eigen::Vector3d(0.42, 0.28, 0.20);
+    look.light = Eigen::Vector3d(-0.6 + 1.2 * uniform(rng), 0.1 + 0.6 * uniform(rng), 0.9);
+    look.ambient = 0.35 + 0.2 * uniform(rng);
+    look.diffuse = 0.6 + 0.2 * uniform(rng);
+    SubjectLandmarks subject;
+    subject.alpha = look.alpha;
+    HF_RETURN_IF_ERROR(
+        MeasureSubjectLandmarks(model, detector, landmark_model, threads, look, &subject.points, &subject.seen));
+    subjects.push_back(std::move(subject));
+    HF_LOG(Info) << "embed-landmarks: subject " << s + 1 << " of " << num_subjects << " measured";
+  }
+  // The surface points the landmarks attach to: the subjects' average points.
+  std::vector<Eigen::Vector3d> average(68, Eigen::Vector3d::Zero());
+  const std::vector<int>& ibug = model.landmarks_ibug68();
+  for (int i = 0; i < 68; ++i) {
+    int n = 0;
+    for (const SubjectLandmarks& s : subjects) {
+      if (s.seen[i] == 0) continue;
+      average[i] += s.points[i];
+      ++n;
+    }
+    average[i] = n > 0 ? Eigen::Vector3d(average[i] / n) : Eigen::Vector3d(model.neutral().col(ibug[i]).cast<double>());
+  }
+  LandmarkBasis surface;
+  HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, average, modes, &surface));
+  constexpr int kMinSeen = 10;  // of 60 renders
+  return FitIdentityLandmarks(surface, subjects, modes, kMinSeen, embedding, report);
 }
 
 }  // namespace headforge

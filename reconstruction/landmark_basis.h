@@ -52,4 +52,37 @@ struct ViewLandmarkBases {
 Status BuildViewLandmarkBases(const FaceModel& model, const LandmarkEmbedding& embedding, int identity_modes,
                               ViewLandmarkBases* bases);
 
+// How the detector's points move with the subject's identity. A detector
+// places a point by the face's look, not by a vertex, so on a wider jaw or a
+// longer nose its points slide over the surface rather than ride on it. From
+// each subject's measured points, per landmark
+//   P_s = c + (S + D) alpha_s,
+// where S is how the surface point the landmark is attached to moves with
+// identity and D what the detector adds, fitted by ridge regression that pulls
+// D toward zero with a weight lambda chosen by leave-one-out error.
+struct SubjectLandmarks {
+  Eigen::VectorXd alpha;                // identity coefficients (standard deviations)
+  std::vector<Eigen::Vector3d> points;  // 68 head-frame points
+  std::vector<int> seen;                // renders each point was found on; below min_seen it is left out
+};
+struct IdentityFitReport {
+  double lambda = 0;
+  // Leave-one-out prediction error of a subject's points (metres; median over
+  // every point of every subject): with the fitted D, and with D = 0.
+  double loo_median = 0, loo_median_surface = 0;
+  int subjects = 0;
+};
+// `surface` is the basis built from the subjects' average points (its
+// identity blocks give S; at least `modes` columns). The result holds the
+// points c and the identity blocks S + D with `modes` columns.
+Status FitIdentityLandmarks(const LandmarkBasis& surface, const std::vector<SubjectLandmarks>& subjects, int modes,
+                            int min_seen, LandmarkEmbedding* embedding, IdentityFitReport* report);
+
+// Renders `subjects` random subjects (identity coefficients drawn from the
+// model's prior over 20 modes, varied skin and light), measures each one's
+// points (MeasureSubjectLandmarks) and fits FitIdentityLandmarks.
+Status MeasureIdentityLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
+                                        const std::string& landmark_model, int threads, int subjects,
+                                        LandmarkEmbedding* embedding, IdentityFitReport* report);
+
 }  // namespace headforge

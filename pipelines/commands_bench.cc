@@ -2,6 +2,9 @@
 // the orbit_360 and rig_8cam scenes (and talking_static for head-pose cameras),
 // ingests them, runs calibrate and align at several settings and compares the
 // cameras with the ground truth.
+// `headforge bench track`: tracking accuracy over many subjects. Simulates
+// talking_static with several random faces, calibrates head-pose cameras and
+// tracks each with the plain landmark points and with the identity columns.
 #include <chrono>
 #include <cstdio>
 #include <nlohmann/json.hpp>
@@ -18,8 +21,11 @@
 #include "core/log.h"
 #include "core/parallel.h"
 #include "core/paths.h"
+#include "core/rotation.h"
+#include "core/statistics.h"
 #include "pipelines/commands.h"
 #include "pipelines/stages.h"
+#include "reconstruction/track_stage.h"
 
 namespace headforge {
 namespace {
@@ -331,13 +337,179 @@ int BenchCalibrate(const std::vector<std::string>& args) {
   return kExitOk;
 }
 
+// What one track of a simulated capture scores against its truth.
+struct TrackScore {
+  bool ok = false;
+  std::string error;
+  double seconds = 0;
+  double residual_px = 0;     // median landmark residual, source pixels
+  double rotation_deg = 0;    // median error of each view's cam_from_head
+  double motion_deg = 0;      // the same after one constant rotation of the head frame
+  Eigen::Vector3d constant_deg = Eigen::Vector3d::Zero();  // that rotation (head x = pitch, y = yaw, z = roll)
+  std::map<std::string, double> mae;  // blendshape weight mean absolute error
+};
+
+const std::vector<std::string> kScoredBlendshapes = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L",
+                                                     "mouthSmile_R"};
+
+Status ScoreTrack(const fs::path& tracking_file, const CameraSet& cameras, const IngestedCapture& capture,
+                  const nlohmann::json& truth, TrackScore* score) {
+  nlohmann::json tracking;
+  HF_RETURN_IF_ERROR(ReadJson(tracking_file, &tracking));
+  try {
+    const IngestedCamera& cam = capture.cameras.at(0);
+    score->residual_px = tracking.at("median_residual_px").get<double>() / cam.crop_scale;
+    const auto& frames = tracking.at("frames");
+    for (const std::string& name : kScoredBlendshapes) {
+      double sum = 0;
+      for (const auto& f : frames) {
+        const int source = cam.frames.at(f.at("frame").get<int>()).source_frame;
+        sum += std::abs(f.at("expression").at(name).get<double>() -
+                        truth.at("frames").at(source).at("expression").at(name).get<double>());
+      }
+      score->mae[name] = frames.empty() ? 0 : sum / frames.size();
+    }
+    std::vector<Eigen::Matrix3d> estimated, real;
+    std::vector<double> errors;
+    for (const CameraView& v : cameras.views) {
+      if (!v.registered) continue;
+      const int source = cam.frames.at(v.frame).source_frame;
+      const Eigen::Isometry3d motion = PoseFromJson(frames.at(v.frame).at("head_motion"));
+      const auto& tf = truth.at("frames").at(source);
+      estimated.push_back(v.cam_from_world.linear() * motion.linear());
+      real.push_back((PoseFromJson(tf.at("views").at(cam.name).at("cam_from_world")) *
+                      PoseFromJson(tf.at("world_from_head")))
+                         .linear());
+      errors.push_back(Eigen::AngleAxisd(estimated.back().transpose() * real.back()).angle() * 180 / M_PI);
+    }
+    if (errors.empty()) return Status::DataError("no registered views to score");
+    score->rotation_deg = Median(errors);
+    // estimated = real * g for one constant g: the chordal mean of real^T estimated.
+    Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+    for (size_t i = 0; i < real.size(); ++i) sum += real[i].transpose() * estimated[i];
+    const Eigen::Matrix3d g = NearestRotation(sum);
+    const Eigen::AngleAxisd constant(g);
+    score->constant_deg = constant.axis() * constant.angle() * 180 / M_PI;
+    std::vector<double> motion;
+    for (size_t i = 0; i < real.size(); ++i)
+      motion.push_back(Eigen::AngleAxisd((estimated[i] * g.transpose()).transpose() * real[i]).angle() * 180 / M_PI);
+    score->motion_deg = Median(motion);
+  } catch (const std::exception& e) {
+    return Status::DataError(tracking_file.string() + " does not match the capture or its truth: " + e.what());
+  }
+  return Status::Ok();
+}
+
+int BenchTrack(const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  AddCommonOptions(&options, &common, false);
+  bool json = false;
+  std::string out = "bench_track";
+  std::vector<int> seeds = {11, 3, 7, 19, 27, 31, 42, 50};
+  options.Add("bench.json", &json, "Print one JSON document instead of the table.", "json");
+  options.Add("bench.out", &out, "Folder for the simulated captures and workspaces (reused).", "out");
+  options.Add("bench.seeds", &seeds, "Identity seeds of the subjects (11 is talking_static's own).", "seeds");
+  const int parsed = ParseOrExit(&options, args, "headforge bench track [--json] [--out DIR] [--seeds A,B,...]",
+                                 "Simulates talking_static with each subject, calibrates head-pose cameras and tracks\n"
+                                 "it with the plain landmark points and with the points' identity columns, and\n"
+                                 "prints per subject and points: landmark residual, head rotation error (also after\n"
+                                 "one constant rotation of the head frame, and that rotation), blendshape MAE.");
+  if (parsed >= 0) return parsed;
+  if (seeds.empty()) return ReportFailure(Status::InvalidArgument("--seeds names no subject"));
+  ApplyCommonOptions(common);
+  if (json) SetLogLevel(LogLevel::kWarning);
+  const int threads = common.threads > 0 ? common.threads : HardwareThreads();
+  FaceModel model;
+  if (Status s = FaceModel::Load(common.data_dir + "/ict_facekit/ict_face_model.h5", &model); !s.ok()) return ReportFailure(s);
+  const fs::path scene_file = fs::path(HEADFORGE_SOURCE_DIR) / "scenes" / "talking_static.toml";
+  const std::vector<std::pair<std::string, std::string>> embeddings = {{"plain", DefaultLandmarkEmbedding()},
+                                                                       {"identity columns", IdentityLandmarkEmbedding()}};
+  if (!json) {
+    std::printf("| subject | landmark points | residual (px) | head rotation (deg) | after one constant rotation (deg) "
+                "| that rotation: pitch / yaw / roll (deg) | jawOpen | eyeBlink L / R | mouthSmile L / R | track time |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
+  }
+  nlohmann::json rows = nlohmann::json::array();
+  std::map<std::string, std::vector<double>> rotations;
+  for (int seed : seeds) {
+    const std::string subject = "identity seed " + std::to_string(seed);
+    const fs::path dir = fs::path(out) / ("talking_static_identity_" + std::to_string(seed));
+    IngestedCapture capture;
+    nlohmann::json truth;
+    if (Status s = PrepareScene(scene_file, dir, model, common.data_dir, threads, "sequence", seed, &capture, &truth);
+        !s.ok())
+      return ReportFailure(s.WithContext(subject));
+    CalibrateOptions calibrate;
+    calibrate.mode = "head-pose";
+    CameraSet cameras;
+    CalibrateSummary calibrated;
+    NullProgress progress;
+    Status status = RunCalibrate(calibrate, capture, model, dir / "runs" / "head_pose", &progress, &cameras, &calibrated);
+    if (status.ok()) status = RefineHeadPoseStep(calibrate, capture, model, 0, &progress, &cameras, &calibrated);
+    if (!status.ok()) return ReportFailure(status.WithContext(subject + ": calibrate"));
+    for (const auto& [label, file] : embeddings) {
+      TrackStageOptions track;
+      track.overlay = false;
+      track.landmark_embedding = file;
+      const fs::path track_dir = dir / "runs" / (label == "plain" ? "track_plain" : "track_identity");
+      TrackScore score;
+      TrackSummary summary;
+      const auto start = std::chrono::steady_clock::now();
+      Status s = EnsureDirectory(track_dir);
+      if (s.ok()) s = RunTrack(track, capture, cameras, model, track_dir, &progress, &summary);
+      score.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (s.ok()) s = ScoreTrack(track_dir / "tracking.json", cameras, capture, truth, &score);
+      score.ok = s.ok();
+      score.error = s.message();
+      nlohmann::json row = {{"subject", subject}, {"points", label}, {"ok", score.ok}, {"error", score.error},
+                            {"seconds", score.seconds}};
+      if (score.ok) {
+        rotations[label].push_back(score.rotation_deg);
+        row.update({{"residual_px", score.residual_px},
+                    {"rotation_deg", score.rotation_deg},
+                    {"rotation_after_constant_deg", score.motion_deg},
+                    {"constant_rotation_deg", {score.constant_deg.x(), score.constant_deg.y(), score.constant_deg.z()}},
+                    {"blendshape_mae", score.mae}});
+      }
+      rows.push_back(row);
+      if (json) continue;
+      if (!score.ok) {
+        std::printf("| %s | %s | failed: %s |\n", subject.c_str(), label.c_str(), score.error.c_str());
+      } else {
+        std::printf("| %s | %s | %.2f | %.2f | %.2f | %+.2f / %+.2f / %+.2f | %.3f | %.3f / %.3f | %.3f / %.3f | %.0f s |\n",
+                    subject.c_str(), label.c_str(), score.residual_px, score.rotation_deg, score.motion_deg,
+                    score.constant_deg.x(), score.constant_deg.y(), score.constant_deg.z(), score.mae["jawOpen"],
+                    score.mae["eyeBlink_L"], score.mae["eyeBlink_R"], score.mae["mouthSmile_L"],
+                    score.mae["mouthSmile_R"], score.seconds);
+      }
+      std::fflush(stdout);
+    }
+  }
+  if (json) {
+    std::printf("%s\n", nlohmann::json{{"tracks", rows}}.dump(1).c_str());
+  } else {
+    std::printf("\n| landmark points | head rotation over the subjects: median / mean / worst (deg) |\n|---|---|\n");
+    for (const auto& [label, file] : embeddings) {
+      const auto& r = rotations[label];
+      if (r.empty()) continue;
+      double mean = 0;
+      for (double x : r) mean += x / r.size();
+      std::printf("| %s | %.2f / %.2f / %.2f |\n", label.c_str(), Median(r), mean, *std::max_element(r.begin(), r.end()));
+    }
+  }
+  return kExitOk;
+}
+
 }  // namespace
 
 int BenchCommand(const std::vector<std::string>& args) {
   if (!args.empty() && args[0] == "calibrate") return BenchCalibrate(std::vector<std::string>(args.begin() + 1, args.end()));
+  if (!args.empty() && args[0] == "track") return BenchTrack(std::vector<std::string>(args.begin() + 1, args.end()));
   std::fprintf(stderr,
-               "Usage: headforge bench calibrate [--json] [--out DIR] [--quick] [--repeat N]\n"
+               "Usage: headforge bench calibrate|track [options]\n"
                "  calibrate   camera accuracy against time on simulated scenes\n"
+               "  track       tracking accuracy over many simulated subjects\n"
                "(rendering and kernel speed: build/bench/headforge_bench)\n");
   return args.empty() || args[0] == "--help" ? (args.empty() ? kExitUsage : kExitOk) : kExitUsage;
 }

@@ -158,7 +158,7 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
   o->Add("track.landmark_embedding", &t->landmark_embedding,
          "Where the detector's 68 landmarks sit on the face model (JSON; embed-landmarks); empty: the shipped view "
          "grid when the views of a frame see the head from directions more than --grid-min-span apart in yaw, else "
-         "the shipped points.",
+         "the shipped points with their identity columns (embed-landmarks --identity).",
          "track-landmark-embedding");
   o->Add("track.grid_min_span", &t->grid_min_span_deg,
          "The spread of one frame's views' yaws about the head (degrees) above which the views surround the head: "
@@ -217,8 +217,9 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
     // Views of one frame fitted together must agree on the head: from far
     // apart each sees the detector's points where they fall from its side.
     // Views from one side, or one view per frame (a single camera, an orbit),
-    // use the plain points, measured over +-25 degrees.
-    embedding = surrounded ? ViewLandmarkEmbedding() : DefaultLandmarkEmbedding();
+    // use the points measured over +-25 degrees on many subjects, which move
+    // with the fitted identity the way the detector's points do.
+    embedding = surrounded ? ViewLandmarkEmbedding() : IdentityLandmarkEmbedding();
   }
   ViewLandmarkBases bases;
   HF_RETURN_IF_ERROR(BuildViewLandmarkBases(model, LoadLandmarkEmbedding(model, embedding), options.fit.identity_modes,
@@ -377,9 +378,10 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
   const std::string embedding = landmark_embedding.empty() ? DefaultLandmarkEmbedding() : landmark_embedding;
   // The points over every direction: a grid's points change as the head
   // turns, which the focal length's fit would read as perspective.
-  LandmarkBasis basis;
+  ViewLandmarkBases bases;
   HF_RETURN_IF_ERROR(
-      BuildLandmarkBasis(model, DetectorLandmarkPoints(model, embedding), options.identity_modes, &basis));
+      BuildViewLandmarkBases(model, LoadLandmarkEmbedding(model, embedding), options.identity_modes, &bases));
+  const LandmarkBasis& basis = bases.any_view;
   TrackOptions fit = options;
   fit.fixed_head = false;
   fit.fit_focal = true;

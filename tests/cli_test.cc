@@ -231,6 +231,14 @@ TEST(Cli, HelpVersionAndUsageErrors) {
   EXPECT_EQ(no_repeat.code, 2);
   EXPECT_TRUE(Contains(no_repeat.err, "--repeat must be at least 1")) << no_repeat.err;
   EXPECT_FALSE(fs::exists("/tmp/hf_cli_bench"));  // refused before anything was simulated
+  const Result track_bench_help = Headforge({"bench", "track", "--help"});
+  EXPECT_EQ(track_bench_help.code, 0);
+  for (const char* text : {"--seeds", "--json", "identity columns"})
+    EXPECT_TRUE(Contains(track_bench_help.out, text)) << text;
+  const Result both = Headforge({"embed-landmarks", "--views", "--identity", "--out", "/tmp/hf_cli_embedding.json"});
+  EXPECT_EQ(both.code, 2);
+  EXPECT_TRUE(Contains(both.err, "give one")) << both.err;
+  EXPECT_FALSE(fs::exists("/tmp/hf_cli_embedding.json"));
 }
 
 // face-model inspect on the shipped model: its summary and one table row per

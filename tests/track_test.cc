@@ -220,12 +220,11 @@ TEST(SimulatedTrack, TalkingStatic) {
   // length (2.4% off; 40% from the mean face's landmarks alone).
   ASSERT_GE(s.focal_error, 0.0) << "calibrate did not choose head-pose cameras";
   EXPECT_LT(s.focal_error, 0.05);
-  // With the focal length right, the head's rotation is 1.7 deg off, mostly a
-  // constant pitch of about 1.3 deg (the fitted pitch follows the true one
-  // with a slope of 0.85). The tracking target of 1.5 deg is not met; it was,
-  // at 1.1 deg, with the focal length 40% long, whose flatter perspective hid
-  // the pitch.
-  EXPECT_LT(s.rotation_deg, 2.0);
+  // The head's rotation: 1.33 deg with the landmark points' identity columns
+  // (track's default for one camera); with the plain points it was 1.73 deg,
+  // mostly a constant pitch of about 1.3 deg. Over eight subjects (`headforge
+  // bench track`) the columns help some faces and hurt others: README.
+  EXPECT_LT(s.rotation_deg, 1.5);
   // Most of that is where the head frame sits (a constant rotation of about
   // 1.3 deg that moves by degrees with sub-millimetre changes in where the
   // detector's points are taken to sit: docs/tracking.md); the head's motion

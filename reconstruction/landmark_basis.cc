@@ -7,6 +7,7 @@
 #include <random>
 
 #include "core/log.h"
+#include "core/statistics.h"
 
 namespace headforge {
 namespace {
@@ -164,12 +165,6 @@ Status BuildViewLandmarkBases(const FaceModel& model, const LandmarkEmbedding& e
 
 namespace {
 
-double MedianOf(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-
 // One landmark's ridge fit of r_s = c + D alpha_s (r: the point less the
 // surface's motion). Returns the [K+1, 3] coefficients (c on the first row)
 // and appends each subject's leave-one-out error (metres) to `loo`.
@@ -236,12 +231,12 @@ Status FitIdentityLandmarks(const LandmarkBasis& surface, const std::vector<Subj
   out.subjects = int(subjects.size());
   std::vector<double> loo;
   for (int i = 0; i < num_points; ++i) FitOneLandmark(designs[i], targets[i], -1, &loo);
-  out.loo_median_surface = MedianOf(loo);
+  out.loo_median_surface = Median(loo);
   double best = std::numeric_limits<double>::infinity();
   for (double lambda : {1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0, 3000.0}) {
     loo.clear();
     for (int i = 0; i < num_points; ++i) FitOneLandmark(designs[i], targets[i], lambda, &loo);
-    const double m = MedianOf(loo);
+    const double m = Median(loo);
     if (m < best) {
       best = m;
       out.lambda = lambda;

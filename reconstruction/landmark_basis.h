@@ -49,6 +49,8 @@ struct ViewLandmarkBases {
   // from the head's origin (head frame).
   LandmarkBasis ForDirection(const Eigen::Vector3d& toward_camera) const;
 };
+// An embedding's identity columns, when it has them, apply to `any_view`
+// (the grid's nodes ride on the surface).
 Status BuildViewLandmarkBases(const FaceModel& model, const LandmarkEmbedding& embedding, int identity_modes,
                               ViewLandmarkBases* bases);
 

@@ -79,20 +79,15 @@ std::string EmbeddingScene(int frames, double yaw, double yaw_period, double pit
 
 Status MeasureLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
                                 const std::string& landmark_model, int threads, std::vector<Eigen::Vector3d>* points) {
-  // Turning +-25 degrees and nodding +-12.
-  std::vector<Eigen::Vector3d> sum(68, Eigen::Vector3d::Zero());
-  std::vector<int> count(68, 0);
-  HF_RETURN_IF_ERROR(ForEachDetectedPoint(EmbeddingScene(60, 25.0, 2.4, 12.0, 1.1), model, detector, landmark_model,
-                                          threads, [&](int i, const Eigen::Vector3d& p, const Eigen::Vector3d&) {
-                                            sum[i] += p;
-                                            ++count[i];
-                                          }));
-  points->clear();
+  // The mean face under the default look; landmarks never found keep the model's vertex.
+  std::vector<int> count;
+  HF_RETURN_IF_ERROR(MeasureSubjectLandmarks(model, detector, landmark_model, threads, SubjectLook(), points, &count));
   int seen = 0;
   for (int i = 0; i < 68; ++i) {
-    seen += count[i] > 0;
-    points->push_back(count[i] > 0 ? Eigen::Vector3d(sum[i] / count[i])
-                                   : Eigen::Vector3d(model.neutral().col(model.landmarks_ibug68()[i]).cast<double>()));
+    if (count[i] > 0)
+      ++seen;
+    else
+      (*points)[i] = model.neutral().col(model.landmarks_ibug68()[i]).cast<double>();
   }
   if (seen < 60) return Status::DataError("the detector found too few landmarks on the calibration renders");
   return Status::Ok();

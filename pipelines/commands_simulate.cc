@@ -95,8 +95,11 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   FaceDetectorOptions detector;
   detector.ultraface_dir = (fs::path(common.data_dir) / "models" / "ultraface").string();
   const int threads = common.threads > 0 ? common.threads : HardwareThreads();
-  if (views && identity) return ReportFailure(Status::InvalidArgument("embed-landmarks: --views and --identity measure different files; give one"));
-  if (out.empty()) out = views ? ViewLandmarkEmbedding() : identity ? IdentityLandmarkEmbedding() : DefaultLandmarkEmbedding();
+  if (views && identity)
+    return ReportFailure(
+        Status::InvalidArgument("embed-landmarks: --views and --identity measure different files; give one"));
+  if (out.empty())
+    out = views ? ViewLandmarkEmbedding() : identity ? IdentityLandmarkEmbedding() : DefaultLandmarkEmbedding();
   if (identity) {
     LandmarkEmbedding embedding;
     IdentityFitReport report;

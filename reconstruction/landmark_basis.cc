@@ -113,6 +113,20 @@ Status BuildLandmarkBasis(const FaceModel& model, const std::vector<Eigen::Vecto
   return Status::Ok();
 }
 
+Status BuildLandmarkBasis(const FaceModel& model, const LandmarkEmbedding& embedding, int identity_modes,
+                          LandmarkBasis* basis) {
+  LandmarkBasis out;
+  HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, embedding.points, identity_modes, &out));
+  if (!embedding.identity.empty()) {
+    if (int(embedding.identity.size()) != out.size())
+      return Status::DataError("landmark basis: the embedding's identity columns do not match its points");
+    const int k = std::min(out.num_identity, int(embedding.identity[0].cols()));
+    for (int i = 0; i < out.size(); ++i) out.identity[i].leftCols(k) = embedding.identity[i].leftCols(k);
+  }
+  *basis = std::move(out);
+  return Status::Ok();
+}
+
 LandmarkBasis ViewLandmarkBases::ForDirection(const Eigen::Vector3d& toward_camera) const {
   if (nodes.empty()) return any_view;
   LandmarkBasis out;
@@ -146,15 +160,7 @@ Status BuildViewLandmarkBases(const FaceModel& model, const LandmarkEmbedding& e
                               ViewLandmarkBases* bases) {
   ViewLandmarkBases out;
   out.embedding = embedding;
-  HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, embedding.points, identity_modes, &out.any_view));
-  if (!embedding.identity.empty()) {
-    // The measured identity columns replace the surface's; modes beyond them
-    // keep the surface's.
-    if (int(embedding.identity.size()) != out.any_view.size())
-      return Status::DataError("landmark basis: the embedding's identity columns do not match its points");
-    const int k = std::min(out.any_view.num_identity, int(embedding.identity[0].cols()));
-    for (int i = 0; i < out.any_view.size(); ++i) out.any_view.identity[i].leftCols(k) = embedding.identity[i].leftCols(k);
-  }
+  HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, embedding, identity_modes, &out.any_view));
   for (const auto& points : embedding.nodes) {
     out.nodes.emplace_back();
     HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, points, identity_modes, &out.nodes.back()));

@@ -37,6 +37,12 @@ struct LandmarkBasis {
 Status BuildLandmarkBasis(const FaceModel& model, const std::vector<Eigen::Vector3d>& points,
                           int identity_modes, LandmarkBasis* basis);
 
+// The basis of an embedding's points over every direction, with its identity
+// columns in place of the surface's when it has them (modes beyond them keep
+// the surface's).
+Status BuildLandmarkBasis(const FaceModel& model, const LandmarkEmbedding& embedding, int identity_modes,
+                          LandmarkBasis* basis);
+
 // The bases of a view-dependent embedding: one per grid node, blended for a
 // camera's direction. The blend of linear functions is the linear function of
 // the blended points, so a view sees the embedding's points for its direction.

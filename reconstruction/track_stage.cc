@@ -378,10 +378,8 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
   const std::string embedding = landmark_embedding.empty() ? DefaultLandmarkEmbedding() : landmark_embedding;
   // The points over every direction: a grid's points change as the head
   // turns, which the focal length's fit would read as perspective.
-  ViewLandmarkBases bases;
-  HF_RETURN_IF_ERROR(
-      BuildViewLandmarkBases(model, LoadLandmarkEmbedding(model, embedding), options.identity_modes, &bases));
-  const LandmarkBasis& basis = bases.any_view;
+  LandmarkBasis basis;
+  HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, LoadLandmarkEmbedding(model, embedding), options.identity_modes, &basis));
   TrackOptions fit = options;
   fit.fixed_head = false;
   fit.fit_focal = true;

@@ -25,6 +25,7 @@
 #include "core/statistics.h"
 #include "pipelines/commands.h"
 #include "pipelines/stages.h"
+#include "reconstruction/track_evaluation.h"
 #include "reconstruction/track_stage.h"
 
 namespace headforge {
@@ -337,68 +338,8 @@ int BenchCalibrate(const std::vector<std::string>& args) {
   return kExitOk;
 }
 
-// What one track of a simulated capture scores against its truth.
-struct TrackScore {
-  bool ok = false;
-  std::string error;
-  double seconds = 0;
-  double residual_px = 0;     // median landmark residual, source pixels
-  double rotation_deg = 0;    // median error of each view's cam_from_head
-  double motion_deg = 0;      // the same after one constant rotation of the head frame
-  Eigen::Vector3d constant_deg = Eigen::Vector3d::Zero();  // that rotation (head x = pitch, y = yaw, z = roll)
-  std::map<std::string, double> mae;  // blendshape weight mean absolute error
-};
-
 const std::vector<std::string> kScoredBlendshapes = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L",
                                                      "mouthSmile_R"};
-
-Status ScoreTrack(const fs::path& tracking_file, const CameraSet& cameras, const IngestedCapture& capture,
-                  const nlohmann::json& truth, TrackScore* score) {
-  nlohmann::json tracking;
-  HF_RETURN_IF_ERROR(ReadJson(tracking_file, &tracking));
-  try {
-    const IngestedCamera& cam = capture.cameras.at(0);
-    score->residual_px = tracking.at("median_residual_px").get<double>() / cam.crop_scale;
-    const auto& frames = tracking.at("frames");
-    for (const std::string& name : kScoredBlendshapes) {
-      double sum = 0;
-      for (const auto& f : frames) {
-        const int source = cam.frames.at(f.at("frame").get<int>()).source_frame;
-        sum += std::abs(f.at("expression").at(name).get<double>() -
-                        truth.at("frames").at(source).at("expression").at(name).get<double>());
-      }
-      score->mae[name] = frames.empty() ? 0 : sum / frames.size();
-    }
-    std::vector<Eigen::Matrix3d> estimated, real;
-    std::vector<double> errors;
-    for (const CameraView& v : cameras.views) {
-      if (!v.registered) continue;
-      const int source = cam.frames.at(v.frame).source_frame;
-      const Eigen::Isometry3d motion = PoseFromJson(frames.at(v.frame).at("head_motion"));
-      const auto& tf = truth.at("frames").at(source);
-      estimated.push_back(v.cam_from_world.linear() * motion.linear());
-      real.push_back((PoseFromJson(tf.at("views").at(cam.name).at("cam_from_world")) *
-                      PoseFromJson(tf.at("world_from_head")))
-                         .linear());
-      errors.push_back(Eigen::AngleAxisd(estimated.back().transpose() * real.back()).angle() * 180 / M_PI);
-    }
-    if (errors.empty()) return Status::DataError("no registered views to score");
-    score->rotation_deg = Median(errors);
-    // estimated = real * g for one constant g: the chordal mean of real^T estimated.
-    Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
-    for (size_t i = 0; i < real.size(); ++i) sum += real[i].transpose() * estimated[i];
-    const Eigen::Matrix3d g = NearestRotation(sum);
-    const Eigen::AngleAxisd constant(g);
-    score->constant_deg = constant.axis() * constant.angle() * 180 / M_PI;
-    std::vector<double> motion;
-    for (size_t i = 0; i < real.size(); ++i)
-      motion.push_back(Eigen::AngleAxisd((estimated[i] * g.transpose()).transpose() * real[i]).angle() * 180 / M_PI);
-    score->motion_deg = Median(motion);
-  } catch (const std::exception& e) {
-    return Status::DataError(tracking_file.string() + " does not match the capture or its truth: " + e.what());
-  }
-  return Status::Ok();
-}
 
 int BenchTrack(const std::vector<std::string>& args) {
   OptionSet options;
@@ -453,18 +394,18 @@ int BenchTrack(const std::vector<std::string>& args) {
       track.overlay = false;
       track.landmark_embedding = file;
       const fs::path track_dir = dir / "runs" / (label == "plain" ? "track_plain" : "track_identity");
-      TrackScore score;
+      TrackingErrors score;
       TrackSummary summary;
       const auto start = std::chrono::steady_clock::now();
       Status s = EnsureDirectory(track_dir);
       if (s.ok()) s = RunTrack(track, capture, cameras, model, track_dir, &progress, &summary);
-      score.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      if (s.ok()) s = ScoreTrack(track_dir / "tracking.json", cameras, capture, truth, &score);
-      score.ok = s.ok();
-      score.error = s.message();
-      nlohmann::json row = {{"subject", subject}, {"points", label}, {"ok", score.ok}, {"error", score.error},
-                            {"seconds", score.seconds}};
-      if (score.ok) {
+      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      nlohmann::json tracking;
+      if (s.ok()) s = ReadJson(track_dir / "tracking.json", &tracking);
+      if (s.ok()) s = EvaluateTracking(tracking, cameras, capture, truth, kScoredBlendshapes, &score);
+      nlohmann::json row = {{"subject", subject}, {"points", label}, {"ok", s.ok()}, {"error", s.message()},
+                            {"seconds", seconds}};
+      if (s.ok()) {
         rotations[label].push_back(score.rotation_deg);
         row.update({{"residual_px", score.residual_px},
                     {"rotation_deg", score.rotation_deg},
@@ -474,14 +415,14 @@ int BenchTrack(const std::vector<std::string>& args) {
       }
       rows.push_back(row);
       if (json) continue;
-      if (!score.ok) {
-        std::printf("| %s | %s | failed: %s |\n", subject.c_str(), label.c_str(), score.error.c_str());
+      if (!s.ok()) {
+        std::printf("| %s | %s | failed: %s |\n", subject.c_str(), label.c_str(), s.message().c_str());
       } else {
         std::printf("| %s | %s | %.2f | %.2f | %.2f | %+.2f / %+.2f / %+.2f | %.3f | %.3f / %.3f | %.3f / %.3f | %.0f s |\n",
                     subject.c_str(), label.c_str(), score.residual_px, score.rotation_deg, score.motion_deg,
                     score.constant_deg.x(), score.constant_deg.y(), score.constant_deg.z(), score.mae["jawOpen"],
                     score.mae["eyeBlink_L"], score.mae["eyeBlink_R"], score.mae["mouthSmile_L"],
-                    score.mae["mouthSmile_R"], score.seconds);
+                    score.mae["mouthSmile_R"], seconds);
       }
       std::fflush(stdout);
     }

@@ -1,0 +1,39 @@
+// Tracking accuracy against a simulator's ground_truth.json: what `headforge
+// bench track` reports and the track tests assert.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include "calibration/camera_set.h"
+#include "capture/capture_io.h"
+
+namespace headforge {
+
+struct TrackingErrors {
+  int views = 0;               // registered views scored
+  int dropped_views = 0;       // views the fit left out (tracking.json)
+  double contour_weight = 0;   // the jaw contour's weight the fit used (tracking.json)
+  double residual_px = 0;      // median landmark residual, source pixels
+  double rotation_deg = 0;     // median error of each view's cam_from_head · head motion
+  // The same after one constant rotation of the head frame (the one that best
+  // maps the estimated head frame onto the true one): how well the head's
+  // motion is followed, apart from where the head frame itself sits.
+  double motion_deg = 0;
+  Eigen::Vector3d constant_deg = Eigen::Vector3d::Zero();  // that rotation, axis × angle (x pitch, y yaw, z roll)
+  std::map<std::string, double> mae;  // per blendshape asked for: mean absolute weight error over the frames
+};
+
+// Scores `tracking` (tracking.json) fitted with `cameras` (head frame) on
+// `capture` against the simulator's `truth`. Every camera's registered views
+// count toward the rotation; the blendshapes are scored on the first camera's
+// frames.
+Status EvaluateTracking(const nlohmann::json& tracking, const CameraSet& cameras, const IngestedCapture& capture,
+                        const nlohmann::json& truth, const std::vector<std::string>& blendshapes,
+                        TrackingErrors* errors);
+
+}  // namespace headforge

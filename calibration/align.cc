@@ -11,6 +11,7 @@
 #include "calibration/landmark_embedding.h"
 #include "calibration/pnp.h"
 #include "calibration/reprojection_cost.h"
+#include "calibration/surface_fit.h"
 #include "calibration/triangulation.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -29,6 +30,8 @@ Status AlignOptions::Check() const {
   if (refine != "reprojection" && refine != "off") return Status::InvalidArgument("--align-refine must be reprojection or off");
   if (!(refine_robust_px > 0)) return Status::InvalidArgument("--align-refine-robust must be positive");
   if (!(max_residual_mm > 0)) return Status::InvalidArgument("--max-align-residual must be positive");
+  if (surface != "points" && surface != "off") return Status::InvalidArgument("--align-surface must be points or off");
+  if (!(surface_prior_mm2 > 0)) return Status::InvalidArgument("--align-surface-prior must be positive");
   return Status::Ok();
 }
 
@@ -60,6 +63,15 @@ void AddAlignOptions(OptionSet* o, AlignOptions* a) {
          "align-refine");
   o->Add("align.refine_robust_px", &a->refine_robust_px, "Huber scale of the reprojection refinement, pixels.",
          "align-refine-robust");
+  o->Add("align.surface", &a->surface,
+         "points: with one camera moving round a still head, turn the head frame in yaw (and move it) so that the "
+         "face model's surface, with a fitted identity, passes through COLMAP's 3D points on the face (pitch, roll "
+         "and scale stay the landmarks'); off: keep the landmarks' rotation.",
+         "align-surface");
+  o->Add("align.surface_prior_mm2", &a->surface_prior_mm2,
+         "Surface fit: squared point-to-surface distance (mm^2) one standard deviation of an identity coefficient "
+         "costs.",
+         "align-surface-prior");
   o->Add("align.max_residual_mm", &a->max_residual_mm,
          "Fail when the triangulated landmarks miss the face model by more than this median (mm): the cameras do not "
          "see one consistent head.",
@@ -289,7 +301,7 @@ bool RefineByReprojection(const std::vector<std::vector<Observation>>& per_landm
 }  // namespace
 
 Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
-                const FaceModel& model, AlignResult* result) {
+                const FaceModel& model, const std::vector<Eigen::Vector3d>& world_points, AlignResult* result) {
   HF_RETURN_IF_ERROR(options.Check());
   if (model.landmarks_ibug68().size() != 68) return Status::InvalidArgument("the face model has no iBUG-68 landmarks");
   const bool head_frame = cameras.frame == "head";
@@ -510,6 +522,15 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
                              "landmarks seen in 2 or more registered views with enough parallax)");
   if (best.quality != SimilarityQuality::kGood)
     best.message = std::string("alignment quality: ") + SimilarityQualityName(best.quality);
+  // The landmarks' residuals and inliers under best.head_from_world.
+  auto rescore = [&] {
+    for (size_t k = 0; k < best.landmarks_used.size(); ++k) {
+      best.residuals_mm[k] =
+          1000.0 * (model_points[best.landmarks_used[k]] - best.head_from_world * best.points[k]).norm();
+      best.inlier[k] = best.residuals_mm[k] < options.inlier_mm;
+    }
+    SummariseResiduals(&best);
+  };
   // The refinement reprojects every rigid landmark, triangulated or not (it
   // needs only their detections). Restricting it to the 3D fit's inliers was
   // tried: that set is chosen under the diluted scale, often a few landmarks
@@ -521,12 +542,37 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
                              options.refine_robust_px, &best.head_from_world, &median_px)) {
       best.method += "+reprojection";
       best.reprojection_median_px = median_px;
-      for (size_t k = 0; k < best.landmarks_used.size(); ++k) {
-        best.residuals_mm[k] =
-            1000.0 * (model_points[best.landmarks_used[k]] - best.head_from_world * best.points[k]).norm();
-        best.inlier[k] = best.residuals_mm[k] < options.inlier_mm;
+      rescore();
+    }
+  }
+  // The landmarks' rotation is off where the detector reads the head as
+  // nearly frontal; the skin's reconstructed points are not. Only for a still
+  // head: with several cameras watching a moving head, the points come from
+  // whichever instants COLMAP was given.
+  if (options.surface == "points") {
+    if (per_frame) {
+      best.surface_note = "surface fit: not for several cameras (the head moves between instants)";
+    } else if (world_points.empty()) {
+      best.surface_note = "surface fit: no reconstructed points given";
+    } else {
+      SurfaceFitOptions fit;
+      fit.identity_prior_mm2 = options.surface_prior_mm2;
+      SurfaceFitResult surface;
+      Sim3 refined = best.head_from_world;
+      const Status fitted = FitFaceSurface(model, world_points, fit, &refined, &surface);
+      if (fitted.ok()) {
+        best.head_from_world = refined;
+        best.method += "+surface";
+        best.surface_points = surface.points;
+        best.surface_median_mm = surface.median_mm;
+        best.surface_yaw_deg = surface.yaw_deg;
+        rescore();
+        HF_LOG(Info) << "align: surface fit on " << surface.points << " points on the face: turned "
+                     << surface.yaw_deg << " deg in yaw; median distance " << surface.median_mm << " mm";
+      } else {
+        best.surface_note = fitted.message() + "; the landmarks' rotation is kept";
+        HF_LOG(Warning) << "align: " << best.surface_note;
       }
-      SummariseResiduals(&best);
     }
   }
   // A face is some 150 mm across: landmarks that miss the model by tens of
@@ -569,6 +615,8 @@ Status WriteAlignment(const AlignResult& r, const fs::path& path) {
       {"reference_frame", r.reference_frame},
       {"views_used", r.views_used},
       {"reprojection_median_px", r.reprojection_median_px},
+      {"surface", {{"points", r.surface_points}, {"median_mm", r.surface_median_mm}, {"yaw_deg", r.surface_yaw_deg},
+                   {"note", r.surface_note}}},
       {"rms_mm", r.rms_mm},
       {"median_mm", r.median_mm},
       {"residuals", residuals},

@@ -38,6 +38,12 @@ struct AlignOptions {
   // keep the fit to the triangulated landmarks.
   std::string refine = "reprojection";
   double refine_robust_px = 2.0;  // Huber scale of that refinement
+  // "points": one camera moving round a still head, with the reconstruction's
+  // 3D points given: then turn the head frame in yaw (and move it) so that the
+  // face model's surface, with a fitted identity, passes through the points on
+  // the face (surface_fit.h); "off": keep the landmarks' rotation.
+  std::string surface = "points";
+  double surface_prior_mm2 = 3.0;  // identity prior of that fit (SurfaceFitOptions)
   // World-frame cameras: fail when the triangulated landmarks miss the model by
   // more than this median (mm), a sign of a broken reconstruction.
   double max_residual_mm = 40.0;
@@ -57,15 +63,20 @@ struct AlignResult {
   int reference_frame = -1;            // several cameras: the frame whose head pose defines the head frame
   int views_used = 0;                  // views whose head poses gave the rotation (method views)
   double reprojection_median_px = 0.0;  // landmark reprojection after the refinement (0: not refined)
+  // The surface fit (surface_points 0: not run; surface_note says why).
+  int surface_points = 0;
+  double surface_median_mm = 0, surface_yaw_deg = 0;
+  std::string surface_note;
   CameraSet cameras;                   // the views re-expressed in the head frame
   std::string message;
 };
 
 // Aligns `cameras` (frame "world"). For head-pose cameras (frame "head") the
 // transform is the identity and the residuals of the triangulated landmarks
-// against the model are still reported.
+// against the model are still reported. `world_points`: the reconstruction's
+// 3D points (COLMAP's), for the surface fit; may be empty.
 Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
-                const FaceModel& model, AlignResult* result);
+                const FaceModel& model, const std::vector<Eigen::Vector3d>& world_points, AlignResult* result);
 
 // Re-expresses cameras through a similarity: cam_from_head = cam_from_world * world_from_head,
 // with the translation rescaled so that the head frame stays metric.

@@ -1,5 +1,8 @@
 #include "pipelines/stages.h"
 
+#include <cstring>
+
+#include "calibration/colmap_runner.h"
 #include "core/hash.h"
 #include "core/log.h"
 #include "core/parallel.h"
@@ -123,16 +126,22 @@ Status RunAlignStage(Workspace* workspace, const AlignOptions& align, const std:
         HF_RETURN_IF_ERROR(CameraSet::Read(workspace->Path("cameras.json"), &cameras));
         FaceModel model;
         HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+        std::vector<Eigen::Vector3d> points;  // COLMAP's, for the surface fit
+        HF_RETURN_IF_ERROR(ReadCalibratePoints(workspace->root(), &points));
         AlignResult aligned;
-        HF_RETURN_IF_ERROR(RunAlign(align, capture, cameras, model, &aligned));
+        HF_RETURN_IF_ERROR(RunAlign(align, capture, cameras, model, points, &aligned));
         HF_RETURN_IF_ERROR(WriteAlignment(aligned, staging / "alignment.json"));
         HF_RETURN_IF_ERROR(aligned.cameras.Write(staging / "cameras_head.json"));
         result->outputs = {"alignment.json", "cameras_head.json"};
         char refined[80] = "";
         if (aligned.reprojection_median_px > 0)
           std::snprintf(refined, sizeof(refined), ", landmark reprojection %.1f px", aligned.reprojection_median_px);
-        char views[64] = "";
+        char views[160] = "";
         if (aligned.views_used > 0) std::snprintf(views, sizeof(views), ", rotation from %d views", aligned.views_used);
+        if (aligned.surface_points > 0)
+          std::snprintf(views + std::strlen(views), sizeof(views) - std::strlen(views),
+                        ", turned %.2f deg in yaw by %d points on the face", aligned.surface_yaw_deg,
+                        aligned.surface_points);
         char text[400];
         std::snprintf(text, sizeof(text), "scale %.4g, %zu landmarks, median residual %.1f mm, rms %.1f mm%s%s%s",
                       aligned.head_from_world.scale, aligned.landmarks_used.size(), aligned.median_mm,

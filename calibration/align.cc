@@ -549,6 +549,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   // nearly frontal; the skin's reconstructed points are not. Only for a still
   // head: with several cameras watching a moving head, the points come from
   // whichever instants COLMAP was given.
+  best.landmarks_head_from_world = best.head_from_world;
   if (options.surface == "points") {
     if (per_frame) {
       best.surface_note = "surface fit: not for several cameras (the head moves between instants)";

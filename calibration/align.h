@@ -63,6 +63,7 @@ struct AlignResult {
   int reference_frame = -1;            // several cameras: the frame whose head pose defines the head frame
   int views_used = 0;                  // views whose head poses gave the rotation (method views)
   double reprojection_median_px = 0.0;  // landmark reprojection after the refinement (0: not refined)
+  Sim3 landmarks_head_from_world;  // before the surface fit (head_from_world when it did not turn it)
   // The surface fit (surface_points 0: not run; surface_note says why).
   int surface_points = 0;
   double surface_median_mm = 0, surface_yaw_deg = 0;

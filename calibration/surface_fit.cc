@@ -8,31 +8,10 @@
 #include <Eigen/Geometry>
 
 #include "core/log.h"
+#include "core/mesh_renderer.h"
 #include "core/statistics.h"
 
 namespace headforge {
-namespace {
-
-// Area-weighted vertex normals of the whole mesh (a vertex of the fitting
-// region may take its normal from triangles outside it).
-Eigen::Matrix3Xd VertexNormals(const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& triangles) {
-  Eigen::Matrix3Xd normals = Eigen::Matrix3Xd::Zero(3, vertices.cols());
-  for (Eigen::Index t = 0; t < triangles.cols(); ++t) {
-    const Eigen::Vector3d a = vertices.col(triangles(0, t)).cast<double>();
-    const Eigen::Vector3d b = vertices.col(triangles(1, t)).cast<double>();
-    const Eigen::Vector3d c = vertices.col(triangles(2, t)).cast<double>();
-    const Eigen::Vector3d n = (b - a).cross(c - a);
-    for (int k = 0; k < 3; ++k) normals.col(triangles(k, t)) += n;
-  }
-  for (Eigen::Index v = 0; v < normals.cols(); ++v) {
-    const double norm = normals.col(v).norm();
-    if (norm > 0) normals.col(v) /= norm;
-  }
-  return normals;
-}
-
-}  // namespace
-
 Status FitFaceSurface(const FaceModel& model, const std::vector<Eigen::Vector3d>& world_points,
                       const SurfaceFitOptions& options, Sim3* head_from_world, SurfaceFitResult* result) {
   const std::vector<int>& region = model.fitting_vertices();
@@ -60,7 +39,7 @@ Status FitFaceSurface(const FaceModel& model, const std::vector<Eigen::Vector3d>
   std::vector<double> last_distances;
   for (int round = 0; round < options.rounds; ++round) {
     const Eigen::Matrix3Xf shape = model.Identity(alpha.cast<float>());
-    const Eigen::Matrix3Xd normals = VertexNormals(shape, model.triangles());
+    const Eigen::Matrix3Xd normals = VertexNormals(shape, model.triangles()).cast<double>();
     Eigen::Matrix3Xd surface(3, n_region);
     for (int i = 0; i < n_region; ++i) surface.col(i) = shape.col(region[i]).cast<double>();
     const double limit = std::max(options.end_mm, options.start_mm * std::pow(0.85, round)) / 1000.0;

@@ -119,13 +119,9 @@ Row RunSetting(const std::string& scene, const Setting& s, const IngestedCapture
   if (status.ok()) status = EvaluateWorldCameras(cameras, capture, truth, &aligned.head_from_world, &row.world);
   if (status.ok()) status = EvaluateHeadCameras(aligned.cameras, capture, truth, &row.head);
   if (status.ok() && aligned.surface_points > 0) {
-    // What the surface fit bought: the same alignment without it (not timed).
-    AlignOptions landmarks_only;
-    landmarks_only.surface = "off";
-    AlignResult by_landmarks;
+    // What the surface fit bought: the landmarks' head frame, before the fit.
     CameraErrors head;
-    status = RunAlign(landmarks_only, capture, cameras, model, points, &by_landmarks);
-    if (status.ok()) status = EvaluateHeadCameras(by_landmarks.cameras, capture, truth, &head);
+    status = EvaluateHeadCameras(ToHeadFrame(cameras, aligned.landmarks_head_from_world), capture, truth, &head);
     row.surface_points = aligned.surface_points;
     row.landmarks_only_rotation_deg = head.median_rotation_deg;
   }

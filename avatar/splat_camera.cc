@@ -4,23 +4,6 @@
 
 namespace headforge {
 
-SplatCamera SplatCamera::FromPinhole(const PinholeCamera& camera) {
-  SplatCamera out;
-  const Eigen::Matrix3d r = camera.cam_from_world.linear();
-  const Eigen::Vector3d t = camera.cam_from_world.translation();
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) out.cam_from_world[4 * i + j] = r(i, j);
-    out.cam_from_world[4 * i + 3] = t[i];
-  }
-  out.fx = camera.fx;
-  out.fy = camera.fy;
-  out.cx = camera.cx;
-  out.cy = camera.cy;
-  out.width = camera.width;
-  out.height = camera.height;
-  return out;
-}
-
 SplatCamera SplatCamera::Downscaled(double factor) const {
   SplatCamera out = *this;
   out.width = static_cast<int>(std::lround(width / factor));

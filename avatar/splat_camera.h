@@ -1,11 +1,9 @@
-// The camera and settings of the Gaussian rasterizer, kept free of LibTorch so
-// that stages which only describe a render can include it cheaply.
+// The camera and settings of the Gaussian rasterizer, kept free of LibTorch
+// and of the rest of the project (the CUDA kernels include it too).
 #pragma once
 
 #include <array>
 #include <string>
-
-#include "core/mesh_renderer.h"
 
 namespace headforge {
 
@@ -17,7 +15,6 @@ struct SplatCamera {
   double fx = 500, fy = 500, cx = 255.5, cy = 255.5;  // pixels
   int width = 512, height = 512;
 
-  static SplatCamera FromPinhole(const PinholeCamera& camera);
   // The same camera rendering `factor` times fewer pixels per side.
   SplatCamera Downscaled(double factor) const;
 };

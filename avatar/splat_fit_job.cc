@@ -26,9 +26,27 @@ cv::Mat ToImage(const torch::Tensor& rgb) {
   return bgr;
 }
 
+// The rasterizer's camera for a pinhole camera (same conventions).
+SplatCamera ToSplatCamera(const PinholeCamera& camera) {
+  SplatCamera out;
+  const Eigen::Matrix3d r = camera.cam_from_world.linear();
+  const Eigen::Vector3d t = camera.cam_from_world.translation();
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) out.cam_from_world[4 * i + j] = r(i, j);
+    out.cam_from_world[4 * i + 3] = t[i];
+  }
+  out.fx = camera.fx;
+  out.fy = camera.fy;
+  out.cx = camera.cx;
+  out.cy = camera.cy;
+  out.width = camera.width;
+  out.height = camera.height;
+  return out;
+}
+
 std::vector<PosedImage> ToPosed(const std::vector<SplatFitView>& views) {
   std::vector<PosedImage> out;
-  for (const SplatFitView& v : views) out.push_back({SplatCamera::FromPinhole(v.camera), ToTensor(v.image), v.name});
+  for (const SplatFitView& v : views) out.push_back({ToSplatCamera(v.camera), ToTensor(v.image), v.name});
   return out;
 }
 

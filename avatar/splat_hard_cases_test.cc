@@ -36,7 +36,7 @@ TEST(SplatHardCases, BehindAndOnTheCameraPlaneAreCulled) {
   Scene s = RandomScene(6, 3, 10);
   s.camera.cam_from_world = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
   s = WithDepths(s, {-1.0, 0.0, 1e-9, 0.005, 2.0, -1e-12});
-  const auto p = ProjectGaussians(s.means, s.quats, s.log_scales, s.camera);
+  const auto p = ProjectKernel(s);
   const auto radii = p.radii.accessor<int32_t, 1>();
   for (int i : {0, 1, 2, 3, 5}) EXPECT_EQ(radii[i], 0) << i;
   EXPECT_GT(radii[4], 0);
@@ -56,7 +56,7 @@ TEST(SplatHardCases, TinyAndHugeScales) {
     s.log_scales.slice(0, 0, 10).fill_(std::log(1e-8));
     s.log_scales.slice(0, 10, 12).fill_(std::log(1e3));
   }
-  const auto p = ProjectGaussians(s.means, s.quats, s.log_scales, s.camera);
+  const auto p = ProjectKernel(s);
   // Tiny Gaussians still project to the low-pass footprint: 3 sigma of
   // sqrt(0.3 + sqrt(0.1)) pixels, rounded up.
   const auto r = p.radii.accessor<int32_t, 1>();
@@ -83,7 +83,7 @@ TEST(SplatHardCases, NearlySingularCovariances) {
   // culled, not NaN.
   SplatOptions options;
   options.eps2d = 0;
-  const auto p = ProjectGaussians(s.means, s.quats, s.log_scales, s.camera, options);
+  const auto p = ProjectKernel(s, options);
   EXPECT_TRUE(AllFinite(p.conics) && AllFinite(p.means2d));
 }
 
@@ -134,7 +134,7 @@ TEST(SplatHardCases, OffScreenGaussiansDoNothing) {
     torch::NoGradGuard no_grad;
     s.means.select(1, 0).add_(100.0);  // far to the right of the view
   }
-  const auto p = ProjectGaussians(s.means, s.quats, s.log_scales, s.camera);
+  const auto p = ProjectKernel(s);
   EXPECT_EQ(p.radii.sum().item<int64_t>(), 0);
   const Rendered k = RenderKernel(s);
   EXPECT_EQ(MaxAbs(k.alpha), 0.0);
@@ -172,7 +172,7 @@ TEST(SplatHardCases, ZeroQuaternionIsCulledNotNaN) {
     torch::NoGradGuard no_grad;
     s.quats[2].zero_();
   }
-  const auto p = ProjectGaussians(s.means, s.quats, s.log_scales, s.camera);
+  const auto p = ProjectKernel(s);
   EXPECT_EQ(p.radii[2].item<int32_t>(), 0);
   const Loss loss(3, 36, 40, 4);
   const auto g = Gradients(s, loss, [](const Scene& x) { return RenderKernel(x); });

@@ -68,16 +68,34 @@ ProjectParams Unpack(const std::vector<double>& v) {
   return p;
 }
 
-// Every kernel set is CPU in this build; other devices get a clear error
-// until their kernels are compiled in.
-void CheckDevice(const Tensor& t, const char* op) {
-  TORCH_CHECK(t.device().is_cpu(), op, ": no kernels for device ", t.device(),
-              " in this build (built for CPU)");
+// The kernel set for a tensor's device: CPU always, CUDA in builds whose
+// LibTorch has it (HEADFORGE_WITH_CUDA); other devices get a clear error.
+struct Backend {
+  decltype(&cpu::ProjectForward) project_forward;
+  decltype(&cpu::ProjectBackward) project_backward;
+  decltype(&cpu::IntersectTiles) intersect_tiles;
+  decltype(&cpu::RasterizeForward) rasterize_forward;
+  decltype(&cpu::RasterizeBackward) rasterize_backward;
+};
+
+const Backend& BackendFor(const Tensor& t, const char* op) {
+  static const Backend kCpu{cpu::ProjectForward, cpu::ProjectBackward, cpu::IntersectTiles,
+                            cpu::RasterizeForward, cpu::RasterizeBackward};
+  if (t.device().is_cpu()) return kCpu;
+#ifdef HEADFORGE_WITH_CUDA
+  static const Backend kCuda{cuda::ProjectForward, cuda::ProjectBackward, cuda::IntersectTiles,
+                             cuda::RasterizeForward, cuda::RasterizeBackward};
+  if (t.device().is_cuda()) return kCuda;
+  TORCH_CHECK(false, op, ": no kernels for device ", t.device(), " (this build has CPU and CUDA)");
+#else
+  TORCH_CHECK(false, op, ": no kernels for device ", t.device(),
+              " in this build (built for CPU: LibTorch without CUDA was found)");
+#endif
 }
 
 void CheckFloat(const Tensor& t, const Tensor& like, const char* op, const char* name) {
-  TORCH_CHECK(t.scalar_type() == like.scalar_type(), op, ": ", name, " has type ",
-              t.scalar_type(), ", expected ", like.scalar_type());
+  TORCH_CHECK(t.scalar_type() == like.scalar_type(), op, ": ", name, " has type ", t.scalar_type(),
+              ", expected ", like.scalar_type());
   TORCH_CHECK(t.device() == like.device(), op, ": ", name, " is on ", t.device(), ", expected ",
               like.device());
 }
@@ -91,7 +109,8 @@ class ProjectFunction : public torch::autograd::Function<ProjectFunction> {
     auto conics = torch::empty({n, 3}, means.options());
     auto depths = torch::empty({n}, means.options());
     auto radii = torch::empty({n}, means.options().dtype(torch::kInt32));
-    splat::cpu::ProjectForward(means, quats, log_scales, params, means2d, conics, depths, radii);
+    BackendFor(means, "ProjectGaussians")
+        .project_forward(means, quats, log_scales, params, means2d, conics, depths, radii);
     ctx->save_for_backward({means, quats, log_scales, radii});
     ctx->saved_data["params"] = Pack(params);
     ctx->mark_non_differentiable({radii});
@@ -112,8 +131,9 @@ class ProjectFunction : public torch::autograd::Function<ProjectFunction> {
     auto v_means = torch::empty_like(means);
     auto v_quats = torch::empty_like(saved[1]);
     auto v_log_scales = torch::empty_like(saved[2]);
-    splat::cpu::ProjectBackward(means, saved[1], saved[2], saved[3], params, v_means2d, v_conics,
-                                v_depths, v_means, v_quats, v_log_scales);
+    BackendFor(means, "ProjectGaussians")
+        .project_backward(means, saved[1], saved[2], saved[3], params, v_means2d, v_conics,
+                          v_depths, v_means, v_quats, v_log_scales);
     return {v_means, v_quats, v_log_scales, Tensor()};
   }
 };
@@ -128,8 +148,9 @@ class RasterizeFunction : public torch::autograd::Function<RasterizeFunction> {
     auto image = torch::empty({channels, height, width}, features.options());
     auto transmittance = torch::empty({height, width}, features.options());
     auto last = torch::empty({height, width}, features.options().dtype(torch::kInt32));
-    splat::cpu::RasterizeForward(means2d, conics, features, opacities, background, tile_offsets,
-                                 gaussian_ids, int(width), int(height), image, transmittance, last);
+    BackendFor(means2d, "RasterizeGaussians")
+        .rasterize_forward(means2d, conics, features, opacities, background, tile_offsets,
+                           gaussian_ids, int(width), int(height), image, transmittance, last);
     ctx->save_for_backward({means2d, conics, features, opacities, background, tile_offsets,
                             gaussian_ids, transmittance, last});
     ctx->saved_data["width"] = width;
@@ -147,13 +168,17 @@ class RasterizeFunction : public torch::autograd::Function<RasterizeFunction> {
                                : torch::zeros({s[2].size(1), height, width}, s[2].options());
     const Tensor v_alpha =
         grads[1].defined() ? grads[1].contiguous() : torch::zeros_like(transmittance);
-    Tensor v_means2d, v_conics, v_features, v_opacities;
-    splat::cpu::RasterizeBackward(s[0], s[1], s[2], s[3], s[4], s[5], s[6], width, height,
-                                  transmittance, s[8], v_image, v_alpha, v_means2d, v_conics,
-                                  v_features, v_opacities);
+    // [N, 6 + C]: mean x, y; conic a, b, c; opacity; features.
+    const Tensor total = BackendFor(s[0], "RasterizeGaussians")
+                             .rasterize_backward(s[0], s[1], s[2], s[3], s[4], s[5], s[6], width,
+                                                 height, transmittance, s[8], v_image, v_alpha);
+    const Tensor v_means2d = total.slice(1, 0, 2).contiguous();
+    const Tensor v_conics = total.slice(1, 2, 5).contiguous();
+    const Tensor v_opacities = total.select(1, 5).contiguous();
+    const Tensor v_features = total.slice(1, 6).contiguous();
     const Tensor v_background = (v_image * transmittance.unsqueeze(0)).sum({1, 2});
     return {v_means2d, v_conics, v_features, v_opacities, v_background,
-            Tensor(),  Tensor(),   Tensor(),   Tensor()};
+            Tensor(),  Tensor(), Tensor(),   Tensor()};
   }
 };
 
@@ -178,10 +203,10 @@ ProjectResult ProjectGaussians(const torch::Tensor& means, const torch::Tensor& 
               ": log_scales must be [N, 3], got ", log_scales.sizes());
   splat::CheckFloat(quats, means, op, "quats");
   splat::CheckFloat(log_scales, means, op, "log_scales");
-  splat::CheckDevice(means, op);
-  const auto out = splat::ProjectFunction::apply(means.contiguous(), quats.contiguous(),
-                                                 log_scales.contiguous(),
-                                                 splat::ProjectParams::From(camera, options));
+  splat::BackendFor(means, op);
+  const auto out =
+      splat::ProjectFunction::apply(means.contiguous(), quats.contiguous(), log_scales.contiguous(),
+                                    splat::ProjectParams::From(camera, options));
   return {out[0], out[1], out[2], out[3]};
 }
 
@@ -195,14 +220,17 @@ TileIntersections IntersectTiles(const torch::Tensor& means2d, const torch::Tens
               ": radii must be [N] int32");
   TORCH_CHECK(depths.dim() == 1 && depths.size(0) == n, op, ": depths must be [N]");
   splat::CheckFloat(depths, means2d, op, "depths");
-  splat::CheckDevice(means2d, op);
+  splat::BackendFor(means2d, op);
+  TORCH_CHECK(radii.device() == means2d.device(), op, ": radii is on ", radii.device(),
+              ", expected ", means2d.device());
   TileIntersections out;
   out.tiles_x = (width + kSplatTileSize - 1) / kSplatTileSize;
   out.tiles_y = (height + kSplatTileSize - 1) / kSplatTileSize;
   torch::NoGradGuard no_grad;
   std::tie(out.tile_offsets, out.gaussian_ids) =
-      splat::cpu::IntersectTiles(means2d.detach().contiguous(), radii.contiguous(),
-                                 depths.detach().contiguous(), out.tiles_x, out.tiles_y);
+      splat::BackendFor(means2d, op)
+          .intersect_tiles(means2d.detach().contiguous(), radii.contiguous(),
+                           depths.detach().contiguous(), out.tiles_x, out.tiles_y);
   return out;
 }
 
@@ -229,7 +257,11 @@ RasterizeResult RasterizeGaussians(const torch::Tensor& means2d, const torch::Te
   splat::CheckFloat(conics, means2d, op, "conics");
   splat::CheckFloat(features, means2d, op, "features");
   splat::CheckFloat(opacities, means2d, op, "opacities");
-  splat::CheckDevice(means2d, op);
+  splat::BackendFor(means2d, op);
+  TORCH_CHECK(tiles.tile_offsets.device() == means2d.device() &&
+                  tiles.gaussian_ids.device() == means2d.device(),
+              op, ": the tile lists are on ", tiles.tile_offsets.device(), ", expected ",
+              means2d.device());
   torch::Tensor bg = background;
   if (!bg.defined()) {
     bg = torch::zeros({channels}, features.options());
@@ -245,11 +277,10 @@ RasterizeResult RasterizeGaussians(const torch::Tensor& means2d, const torch::Te
 }
 
 SplatRenderResult RenderGaussians(const torch::Tensor& means, const torch::Tensor& quats,
-                             const torch::Tensor& log_scales, const torch::Tensor& opacities,
-                             const torch::Tensor& features, const torch::Tensor& background,
-                             const SplatCamera& camera, const SplatRenderOptions& options) {
-  const ProjectResult projected =
-      ProjectGaussians(means, quats, log_scales, camera, options.splat);
+                                  const torch::Tensor& log_scales, const torch::Tensor& opacities,
+                                  const torch::Tensor& features, const torch::Tensor& background,
+                                  const SplatCamera& camera, const SplatRenderOptions& options) {
+  const ProjectResult projected = ProjectGaussians(means, quats, log_scales, camera, options.splat);
   const TileIntersections tiles = IntersectTiles(projected.means2d, projected.radii,
                                                  projected.depths, camera.width, camera.height);
   torch::Tensor feats = features;
@@ -259,9 +290,9 @@ SplatRenderResult RenderGaussians(const torch::Tensor& means, const torch::Tenso
     if (!bg.defined()) bg = torch::zeros({features.size(1)}, features.options());
     bg = torch::cat({bg, torch::zeros({1}, bg.options())});
   }
-  const RasterizeResult raster = RasterizeGaussians(projected.means2d, projected.conics, feats,
-                                                    opacities, bg, tiles, camera.width,
-                                                    camera.height);
+  const RasterizeResult raster =
+      RasterizeGaussians(projected.means2d, projected.conics, feats, opacities, bg, tiles,
+                         camera.width, camera.height);
   SplatRenderResult out;
   out.alpha = raster.alpha;
   out.means2d = projected.means2d;

@@ -8,6 +8,7 @@
 #include <cmath>
 
 #include "avatar/splat_kernels.h"
+#include "avatar/splat_quat.h"
 
 namespace headforge::splat::cpu {
 namespace {
@@ -20,29 +21,6 @@ using Mat23 = Eigen::Matrix<double, 2, 3>;
 
 constexpr int64_t kGrain = 2048;
 
-Matrix3d RotationFromUnitQuat(const Vector4d& q) {
-  const double w = q[0], x = q[1], y = q[2], z = q[3];
-  Matrix3d r;
-  r << 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-      2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-      2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y);
-  return r;
-}
-
-// d loss / d q from d loss / d R for R = RotationFromUnitQuat(q).
-Vector4d UnitQuatGradient(const Vector4d& q, const Matrix3d& g) {
-  const double w = q[0], x = q[1], y = q[2], z = q[3];
-  Vector4d d;
-  d[0] = 2 * (-z * g(0, 1) + y * g(0, 2) + z * g(1, 0) - x * g(1, 2) - y * g(2, 0) + x * g(2, 1));
-  d[1] = 2 * (y * g(0, 1) + z * g(0, 2) + y * g(1, 0) - 2 * x * g(1, 1) - w * g(1, 2) +
-              z * g(2, 0) + w * g(2, 1) - 2 * x * g(2, 2));
-  d[2] = 2 * (-2 * y * g(0, 0) + x * g(0, 1) + w * g(0, 2) + x * g(1, 0) + z * g(1, 2) -
-              w * g(2, 0) + z * g(2, 1) - 2 * y * g(2, 2));
-  d[3] = 2 * (-2 * z * g(0, 0) - w * g(0, 1) + x * g(0, 2) + w * g(1, 0) - 2 * z * g(1, 1) +
-              y * g(1, 2) + x * g(2, 0) + y * g(2, 1));
-  return d;
-}
-
 // Everything the forward computes for one Gaussian, kept for the backward.
 struct Projected {
   bool visible = false;
@@ -50,12 +28,12 @@ struct Projected {
   double q_norm = 0;
   Matrix3d rotation;  // of the Gaussian
   Vector3d scales;
-  Matrix3d cov_cam;   // camera-frame 3D covariance
+  Matrix3d cov_cam;  // camera-frame 3D covariance
   Vector3d p_cam;
   double tx = 0, ty = 0;
   bool clamped_x = false, clamped_y = false;
   Mat23 jacobian;
-  Matrix2d cov2d;     // with the low-pass term
+  Matrix2d cov2d;  // with the low-pass term
   Matrix2d conic;
   double u = 0, v = 0;
   int radius = 0;
@@ -69,7 +47,7 @@ Projected ProjectOne(const T* mean, const T* quat, const T* log_scale, const Pro
   out.q_norm = q.norm();
   if (!(out.q_norm > 0) || !std::isfinite(out.q_norm)) return out;
   out.q_unit = q / out.q_norm;
-  out.rotation = RotationFromUnitQuat(out.q_unit);
+  RotationFromUnitQuat(out.q_unit, out.rotation);
   out.scales = Vector3d(std::exp(double(log_scale[0])), std::exp(double(log_scale[1])),
                         std::exp(double(log_scale[2])));
   out.p_cam = cam_r * Vector3d(mean[0], mean[1], mean[2]) + cam_t;
@@ -115,7 +93,8 @@ void ProjectForward(const torch::Tensor& means, const torch::Tensor& quats,
                     const torch::Tensor& log_scales, const ProjectParams& params,
                     torch::Tensor& means2d, torch::Tensor& conics, torch::Tensor& depths,
                     torch::Tensor& radii) {
-  const Matrix3d cam_r = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(params.rotation);
+  const Matrix3d cam_r =
+      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(params.rotation);
   const Vector3d cam_t(params.translation[0], params.translation[1], params.translation[2]);
   const int64_t n = means.size(0);
   AT_DISPATCH_FLOATING_TYPES(means.scalar_type(), "ProjectForward", [&] {
@@ -153,7 +132,8 @@ void ProjectBackward(const torch::Tensor& means, const torch::Tensor& quats,
                      const ProjectParams& params, const torch::Tensor& v_means2d,
                      const torch::Tensor& v_conics, const torch::Tensor& v_depths,
                      torch::Tensor& v_means, torch::Tensor& v_quats, torch::Tensor& v_log_scales) {
-  const Matrix3d cam_r = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(params.rotation);
+  const Matrix3d cam_r =
+      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(params.rotation);
   const Vector3d cam_t(params.translation[0], params.translation[1], params.translation[2]);
   const int64_t n = means.size(0);
   AT_DISPATCH_FLOATING_TYPES(means.scalar_type(), "ProjectBackward", [&] {
@@ -178,9 +158,9 @@ void ProjectBackward(const torch::Tensor& means, const torch::Tensor& quats,
         const double z = g.p_cam.z(), x = g.p_cam.x(), y = g.p_cam.y();
 
         // Pixel position u = fx x / z + cx, v = fy y / z + cy; depth = z.
-        Vector3d v_p(params.fx / z * gm[2 * i], params.fy / z * gm[2 * i + 1],
-                     -params.fx * x / (z * z) * gm[2 * i] - params.fy * y / (z * z) * gm[2 * i + 1] +
-                         gd[i]);
+        Vector3d v_p(
+            params.fx / z * gm[2 * i], params.fy / z * gm[2 * i + 1],
+            -params.fx * x / (z * z) * gm[2 * i] - params.fy * y / (z * z) * gm[2 * i + 1] + gd[i]);
 
         // Conic = inverse(cov2d): d cov2d = -conic * G * conic, G symmetric
         // with the off-diagonal gradient split over its two entries.
@@ -212,7 +192,8 @@ void ProjectBackward(const torch::Tensor& means, const torch::Tensor& quats,
         const Matrix3d v_m = (v_sigma + v_sigma.transpose()) * mm;
         const Matrix3d v_r = v_m * g.scales.asDiagonal();
         const Vector3d v_s = (v_m.cwiseProduct(g.rotation)).colwise().sum().transpose();
-        const Vector4d v_qu = UnitQuatGradient(g.q_unit, v_r);
+        Vector4d v_qu;
+        UnitQuatGradient(g.q_unit, v_r, v_qu);
         const Vector4d v_q = (v_qu - g.q_unit * g.q_unit.dot(v_qu)) / g.q_norm;
 
         for (int k = 0; k < 3; ++k) {

@@ -10,15 +10,12 @@
 #include <cstdint>
 #include <cstring>
 
-#include "avatar/splat_camera.h"
+#include "avatar/splat_params.h"
 
 namespace headforge::splat::cpu {
 
 constexpr int kTile = kSplatTileSize;
 constexpr int kTilePixels = kTile * kTile;
-constexpr double kMinAlpha = 1.0 / 255.0;
-constexpr double kMaxAlpha = 0.999;
-constexpr double kMinTransmittance = 1e-4;
 
 // One tile row as a GCC vector: 16 lanes of T, and the matching lane mask
 // (comparisons give all-ones or zero lanes). The compiler maps these onto

@@ -12,7 +12,7 @@
 namespace headforge::splat::cpu {
 namespace {
 
-// Layout of one Gaussian's row in a slot's gradient buffer.
+// Layout of one Gaussian's row in a slot's gradient buffer (and of the result).
 enum : int { kGradMx, kGradMy, kGradA, kGradB, kGradC, kGradO, kGradFeatures };
 
 template <typename T>
@@ -131,14 +131,12 @@ void BackwardTile(int64_t tile, int tiles_x, int width, int height, int channels
 
 }  // namespace
 
-void RasterizeBackward(const torch::Tensor& means2d, const torch::Tensor& conics,
-                       const torch::Tensor& features, const torch::Tensor& opacities,
-                       const torch::Tensor& background, const torch::Tensor& tile_offsets,
-                       const torch::Tensor& gaussian_ids, int width, int height,
-                       const torch::Tensor& transmittance, const torch::Tensor& last,
-                       const torch::Tensor& v_image, const torch::Tensor& v_alpha,
-                       torch::Tensor& v_means2d, torch::Tensor& v_conics,
-                       torch::Tensor& v_features, torch::Tensor& v_opacities) {
+torch::Tensor RasterizeBackward(const torch::Tensor& means2d, const torch::Tensor& conics,
+                                const torch::Tensor& features, const torch::Tensor& opacities,
+                                const torch::Tensor& background, const torch::Tensor& tile_offsets,
+                                const torch::Tensor& gaussian_ids, int width, int height,
+                                const torch::Tensor& transmittance, const torch::Tensor& last,
+                                const torch::Tensor& v_image, const torch::Tensor& v_alpha) {
   const int tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
   const int64_t num_tiles = int64_t(tiles_x) * tiles_y;
   const int64_t n = means2d.size(0);
@@ -165,11 +163,7 @@ void RasterizeBackward(const torch::Tensor& means2d, const torch::Tensor& conics
                              scratch[slot], grad_data + int64_t(slot) * n * stride);
     });
   });
-  const auto total = slots == 1 ? grads[0] : grads.sum(0);
-  v_means2d = total.slice(1, kGradMx, kGradMy + 1).contiguous();
-  v_conics = total.slice(1, kGradA, kGradC + 1).contiguous();
-  v_opacities = total.select(1, kGradO).contiguous();
-  v_features = total.slice(1, kGradFeatures, stride).contiguous();
+  return slots == 1 ? grads[0] : grads.sum(0);
 }
 
 }  // namespace headforge::splat::cpu

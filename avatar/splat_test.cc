@@ -8,7 +8,7 @@ class SplatChannels : public ::testing::TestWithParam<int> {};
 
 TEST_P(SplatChannels, ProjectionMatchesReference) {
   const Scene s = RandomScene(80, GetParam(), 1);
-  const auto k = ProjectGaussians(s.means, s.quats, s.log_scales, s.camera);
+  const auto k = ProjectKernel(s);
   const auto r = splat_reference::Project(s.means, s.quats, s.log_scales, s.camera);
   EXPECT_TRUE(torch::equal(k.radii, r.radii));
   EXPECT_GT((k.radii > 0).sum().item<int64_t>(), 40);
@@ -96,8 +96,8 @@ INSTANTIATE_TEST_SUITE_P(Channels, SplatChannels, ::testing::Values(3, 32));
 
 TEST(SplatIntersect, EveryGaussianListedOnItsTilesNearToFar) {
   const Scene s = RandomScene(200, 3, 6, 70, 50);
-  const auto p = ProjectGaussians(s.means, s.quats, s.log_scales, s.camera);
-  const auto t = IntersectTiles(p.means2d, p.radii, p.depths, 70, 50);
+  const auto p = ProjectKernel(s);
+  const auto t = IntersectKernel(p, 70, 50);
   ASSERT_EQ(t.tiles_x, 5);
   ASSERT_EQ(t.tiles_y, 4);
   const auto offsets = t.tile_offsets.accessor<int32_t, 1>();
@@ -148,7 +148,7 @@ TEST(SplatOps, BadInputsGiveClearErrors) {
   SplatOptions bad;
   bad.near_plane = -1;
   EXPECT_THROW(ProjectGaussians(s.means, s.quats, s.log_scales, s.camera, bad), c10::Error);
-  const auto p = ProjectGaussians(s.means, s.quats, s.log_scales, s.camera);
+  const auto p = ProjectKernel(s);
   const auto t = IntersectTiles(p.means2d, p.radii, p.depths, 40, 36);
   EXPECT_THROW(RasterizeGaussians(p.means2d, p.conics, s.features, s.opacities, s.background, t,
                                   80, 36),

@@ -1,4 +1,8 @@
-// Scenes and checks shared by the rasterizer tests.
+// Scenes and checks shared by the rasterizer tests. Scenes are made and
+// checked on the CPU; the kernels under test run on KernelDevice(): the CPU,
+// or the GPU in avatar_cuda_test (built from the same tests with
+// HEADFORGE_SPLAT_TEST_CUDA), where inputs are copied over differentiably
+// and outputs copied back.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -23,6 +27,14 @@ struct Scene {
   }
   Scene To(torch::Dtype dtype) const;
 };
+
+inline torch::Device KernelDevice() {
+#ifdef HEADFORGE_SPLAT_TEST_CUDA
+  return torch::Device(torch::kCUDA, 0);
+#else
+  return torch::kCPU;
+#endif
+}
 
 inline const char* kInputNames[] = {"means", "quats", "log_scales", "opacities", "features",
                                     "background"};
@@ -72,12 +84,45 @@ struct Rendered {
   torch::Tensor image, alpha, depth;
 };
 
-inline Rendered RenderKernel(const Scene& s, bool depth = false) {
+// The scene's tensors on `device`; gradients flow back to the originals.
+inline Scene OnDevice(const Scene& s, torch::Device device) {
+  Scene d = s;
+  for (auto* t : {&d.means, &d.quats, &d.log_scales, &d.opacities, &d.features, &d.background}) {
+    *t = t->to(device);
+  }
+  return d;
+}
+
+inline torch::Tensor ToCpu(const torch::Tensor& t) { return t.defined() ? t.cpu() : t; }
+
+inline Rendered RenderOn(torch::Device device, const Scene& scene, bool depth = false) {
+  const Scene s = OnDevice(scene, device);
   SplatRenderOptions options;
   options.depth = depth;
   const auto r = RenderGaussians(s.means, s.quats, s.log_scales, s.opacities, s.features,
                                  s.background, s.camera, options);
-  return {r.image, r.alpha, r.depth};
+  return {ToCpu(r.image), ToCpu(r.alpha), ToCpu(r.depth)};
+}
+
+inline Rendered RenderKernel(const Scene& s, bool depth = false) {
+  return RenderOn(KernelDevice(), s, depth);
+}
+
+// ProjectGaussians on KernelDevice(), results on the CPU.
+inline ProjectResult ProjectKernel(const Scene& scene, const SplatOptions& options = {}) {
+  const Scene s = OnDevice(scene, KernelDevice());
+  const ProjectResult p = ProjectGaussians(s.means, s.quats, s.log_scales, s.camera, options);
+  return {ToCpu(p.means2d), ToCpu(p.conics), ToCpu(p.depths), ToCpu(p.radii)};
+}
+
+// IntersectTiles on KernelDevice(), lists on the CPU.
+inline TileIntersections IntersectKernel(const ProjectResult& p, int width, int height) {
+  const torch::Device device = KernelDevice();
+  TileIntersections t = IntersectTiles(p.means2d.to(device), p.radii.to(device),
+                                       p.depths.to(device), width, height);
+  t.tile_offsets = t.tile_offsets.cpu();
+  t.gaussian_ids = t.gaussian_ids.cpu();
+  return t;
 }
 
 inline Rendered RenderReference(const Scene& s, bool depth = false) {

@@ -6,26 +6,46 @@
 //   build/bench/headforge_splat_bench                       (all sizes)
 //   build/bench/headforge_splat_bench --benchmark_filter='N:100000/side:512/'
 //   build/bench/headforge_splat_bench --markdown   (also prints README's table)
-// "peak_MiB" is the growth of the process's peak resident memory over one
-// iteration (VmHWM, reset through /proc/self/clear_refs before it), with
-// blocks over 256 KiB mapped and unmapped directly so freed memory leaves.
+//   build/bench/headforge_splat_bench --device=cuda   (the CUDA kernels, in
+//                                                       a build with CUDA)
+// On the CPU "peak_MiB" is the growth of the process's peak resident memory
+// over one iteration (VmHWM, reset through /proc/self/clear_refs before it),
+// with blocks over 256 KiB mapped and unmapped directly so freed memory
+// leaves. On a GPU it is the growth of LibTorch's peak allocated device
+// memory over one iteration. GPU timings wait for the device each iteration.
 #include <benchmark/benchmark.h>
 #include <torch/torch.h>
 
 #include <malloc.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <map>
 #include <regex>
 #include <string>
+#include <thread>
+
+#ifdef HEADFORGE_WITH_CUDA
+#include <c10/cuda/CUDACachingAllocator.h>
+#endif
 
 #include "avatar/splat_ops.h"
 #include "avatar/torch_runtime.h"
-#include "core/parallel.h"
 
 namespace headforge {
 namespace {
+
+// Where the benchmarks run (--device).
+torch::Device g_device = torch::kCPU;
+
+int HardwareThreads() { return std::max(1, int(std::thread::hardware_concurrency())); }
+
+// Waits for the device's queued work (a no-op on the CPU).
+void Sync() {
+  if (g_device.is_cuda()) torch::cuda::synchronize();
+}
 
 struct BenchScene {
   torch::Tensor means, quats, log_scales, opacities, features;
@@ -47,6 +67,9 @@ BenchScene MakeScene(int64_t n, int side, int64_t channels) {
   s.camera.width = s.camera.height = side;
   s.camera.fx = s.camera.fy = 0.5 * side / std::tan(30.0 * M_PI / 180.0);
   s.camera.cx = s.camera.cy = 0.5 * side - 0.5;
+  for (auto* t : {&s.means, &s.quats, &s.log_scales, &s.opacities, &s.features}) {
+    *t = t->to(g_device);
+  }
   return s;
 }
 
@@ -67,7 +90,39 @@ int64_t StatusKiB(const std::string& field) {
 }
 int64_t PeakRssKiB() { return StatusKiB("VmHWM:"); }
 int64_t CurrentRssKiB() { return StatusKiB("VmRSS:"); }
-void ResetPeakRss() { std::ofstream("/proc/self/clear_refs") << "5"; }
+
+#ifdef HEADFORGE_WITH_CUDA
+// LibTorch's allocated device memory, all pools together (entry 0,
+// StatType::AGGREGATE).
+auto Allocated() {
+  return c10::cuda::CUDACachingAllocator::getDeviceStats(g_device.index()).allocated_bytes[0];
+}
+#endif
+
+// The peak memory of one iteration: start before it, read after it.
+class PeakMemory {
+ public:
+  void Start() {
+#ifdef HEADFORGE_WITH_CUDA
+    if (g_device.is_cuda()) {
+      c10::cuda::CUDACachingAllocator::resetPeakStats(g_device.index());
+      before_ = Allocated().current;
+      return;
+    }
+#endif
+    std::ofstream("/proc/self/clear_refs") << "5";
+    before_ = CurrentRssKiB() * 1024;
+  }
+  double GrowthMiB() const {
+#ifdef HEADFORGE_WITH_CUDA
+    if (g_device.is_cuda()) return double(Allocated().peak - before_) / (1 << 20);
+#endif
+    return double(PeakRssKiB() * 1024 - before_) / (1 << 20);
+  }
+
+ private:
+  int64_t before_ = 0;
+};
 
 void SetCounters(benchmark::State& state, const BenchScene& s, double peak_mib) {
   state.counters["peak_MiB"] = peak_mib;
@@ -93,12 +148,13 @@ void BM_SplatForward(benchmark::State& state) {
   const BenchScene s = MakeScene(state.range(0), int(state.range(1)), state.range(2));
   const Leaves leaves(s);
   double peak = 0;
+  PeakMemory memory;
   for (auto _ : state) {
-    ResetPeakRss();
-    const int64_t before = CurrentRssKiB();
+    memory.Start();
     auto out = leaves.Render(s.camera);
     benchmark::DoNotOptimize(out.image.data_ptr());
-    peak = std::max(peak, (PeakRssKiB() - before) / 1024.0);
+    Sync();
+    peak = std::max(peak, memory.GrowthMiB());
   }
   SetCounters(state, s, peak);
 }
@@ -108,16 +164,19 @@ void BM_SplatBackward(benchmark::State& state) {
   const BenchScene s = MakeScene(state.range(0), int(state.range(1)), state.range(2));
   const Leaves leaves(s);
   auto gen = at::detail::createCPUGenerator(1);
-  const auto v_image = torch::randn({s.features.size(1), s.camera.height, s.camera.width}, gen);
+  const auto v_image =
+      torch::randn({s.features.size(1), s.camera.height, s.camera.width}, gen).to(g_device);
   double peak = 0;
+  PeakMemory memory;
   for (auto _ : state) {
     state.PauseTiming();
     auto out = leaves.Render(s.camera);
-    ResetPeakRss();
-    const int64_t before = CurrentRssKiB();
+    Sync();
+    memory.Start();
     state.ResumeTiming();
     out.image.backward(v_image);
-    peak = std::max(peak, (PeakRssKiB() - before) / 1024.0);
+    Sync();
+    peak = std::max(peak, memory.GrowthMiB());
     state.PauseTiming();
     for (auto* t : {&leaves.means, &leaves.quats, &leaves.log_scales, &leaves.opacities,
                     &leaves.features}) {
@@ -133,14 +192,16 @@ void BM_SplatForwardBackward(benchmark::State& state) {
   const BenchScene s = MakeScene(state.range(0), int(state.range(1)), state.range(2));
   const Leaves leaves(s);
   auto gen = at::detail::createCPUGenerator(1);
-  const auto v_image = torch::randn({s.features.size(1), s.camera.height, s.camera.width}, gen);
+  const auto v_image =
+      torch::randn({s.features.size(1), s.camera.height, s.camera.width}, gen).to(g_device);
   double peak = 0;
+  PeakMemory memory;
   for (auto _ : state) {
-    ResetPeakRss();
-    const int64_t before = CurrentRssKiB();
+    memory.Start();
     auto out = leaves.Render(s.camera);
     out.image.backward(v_image);
-    peak = std::max(peak, (PeakRssKiB() - before) / 1024.0);
+    Sync();
+    peak = std::max(peak, memory.GrowthMiB());
     for (auto* t : {&leaves.means, &leaves.quats, &leaves.log_scales, &leaves.opacities,
                     &leaves.features}) {
       t->mutable_grad().reset();
@@ -222,18 +283,37 @@ int main(int argc, char** argv) {
   mallopt(M_TRIM_THRESHOLD, 256 * 1024);
   headforge::ConfigureTorchThreads(headforge::HardwareThreads());
   bool markdown = false;
-  for (int i = 1; i < argc; ++i) {
-    if (std::string(argv[i]) == "--markdown") {
+  for (int i = 1; i < argc;) {
+    const std::string arg = argv[i];
+    if (arg == "--markdown") {
       markdown = true;
-      for (int j = i; j + 1 < argc; ++j) argv[j] = argv[j + 1];
-      --argc;
-      break;
+    } else if (arg.rfind("--device=", 0) == 0) {
+      try {
+        headforge::g_device = torch::Device(arg.substr(9));
+      } catch (const c10::Error&) {
+        std::fprintf(stderr, "--device: not a device: %s (try cpu or cuda)\n", arg.c_str() + 9);
+        return 1;
+      }
+      if (headforge::g_device.is_cuda() && !torch::cuda::is_available()) {
+        std::fprintf(stderr, "--device=%s: no CUDA device is visible to LibTorch\n",
+                     arg.c_str() + 9);
+        return 1;
+      }
+      if (headforge::g_device.is_cuda() && !headforge::g_device.has_index()) {
+        headforge::g_device.set_index(0);
+      }
+    } else {
+      ++i;
+      continue;
     }
+    for (int j = i; j + 1 < argc; ++j) argv[j] = argv[j + 1];
+    --argc;
   }
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   benchmark::AddCustomContext("torch", headforge::TorchDescription());
   benchmark::AddCustomContext("threads", std::to_string(headforge::HardwareThreads()));
+  benchmark::AddCustomContext("device", headforge::g_device.str());
   if (markdown) {
     headforge::MarkdownReporter reporter;
     benchmark::RunSpecifiedBenchmarks(&reporter);

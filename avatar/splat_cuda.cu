@@ -318,6 +318,30 @@ __global__ void EmitTileEntriesKernel(const T* __restrict__ means2d,
 __device__ inline float Exp(float x) { return expf(x); }
 __device__ inline double Exp(double x) { return exp(x); }
 
+// Copies `count` list entries' Gaussians into shared memory, the block's
+// threads together: geometry (mean x, y relative to the tile's corner at
+// (x0, y0); conic a, b, c; opacity) and channels [ch0, ch0 + K), zero past C.
+template <typename T, int K>
+__device__ void LoadEntries(const int32_t* __restrict__ entry_ids, int count,
+                            const T* __restrict__ means2d, const T* __restrict__ conics,
+                            const T* __restrict__ opacities, const T* __restrict__ features,
+                            int channels, int ch0, int x0, int y0, T (*geo)[6], T (*feat)[K]) {
+  for (int i = threadIdx.x; i < count; i += kThreads) {
+    const int32_t g = entry_ids[i];
+    geo[i][0] = means2d[2 * g] - T(x0);
+    geo[i][1] = means2d[2 * g + 1] - T(y0);
+    geo[i][2] = conics[3 * g];
+    geo[i][3] = conics[3 * g + 1];
+    geo[i][4] = conics[3 * g + 2];
+    geo[i][5] = opacities[g];
+  }
+  const int kc = min(K, channels - ch0);
+  for (int i = threadIdx.x; i < count * K; i += kThreads) {
+    const int e = i / K, c = i % K;
+    feat[e][c] = c < kc ? features[int64_t(entry_ids[e]) * channels + ch0 + c] : T(0);
+  }
+}
+
 // Gaussians loaded into shared memory per step: about 1 KiB of geometry.
 template <typename T>
 __host__ __device__ constexpr int ForwardBatch() {
@@ -353,19 +377,8 @@ __global__ void __launch_bounds__(kThreads)
     // Also the barrier before the shared arrays are overwritten.
     if (__syncthreads_count(!done) == 0) break;
     const int nb = min(B, end - base);
-    for (int i = threadIdx.x; i < nb; i += kThreads) {
-      const int32_t g = ids[base + i];
-      s_geo[i][0] = means2d[2 * g] - T(x0);
-      s_geo[i][1] = means2d[2 * g + 1] - T(y0);
-      s_geo[i][2] = conics[3 * g];
-      s_geo[i][3] = conics[3 * g + 1];
-      s_geo[i][4] = conics[3 * g + 2];
-      s_geo[i][5] = opacities[g];
-    }
-    for (int i = threadIdx.x; i < nb * K; i += kThreads) {
-      const int e = i / K, c = i % K;
-      s_feat[e][c] = c < kc ? features[int64_t(ids[base + e]) * channels + ch0 + c] : T(0);
-    }
+    LoadEntries<T, K>(ids + base, nb, means2d, conics, opacities, features, channels, ch0, x0, y0,
+                      s_geo, s_feat);
     __syncthreads();
     if (done) continue;
     for (int e = 0; e < nb; ++e) {
@@ -465,19 +478,8 @@ __global__ void __launch_bounds__(kThreads)
     const int32_t lo = max(0, hi - B);
     const int nb = hi - lo;
     __syncthreads();  // the previous step's shared arrays are read
-    for (int i = threadIdx.x; i < nb; i += kThreads) {
-      const int32_t g = ids[begin + lo + i];
-      s_geo[i][0] = means2d[2 * g] - T(x0);
-      s_geo[i][1] = means2d[2 * g + 1] - T(y0);
-      s_geo[i][2] = conics[3 * g];
-      s_geo[i][3] = conics[3 * g + 1];
-      s_geo[i][4] = conics[3 * g + 2];
-      s_geo[i][5] = opacities[g];
-    }
-    for (int i = threadIdx.x; i < nb * K; i += kThreads) {
-      const int e = i / K, c = i % K;
-      s_feat[e][c] = c < kc ? features[int64_t(ids[begin + lo + e]) * channels + ch0 + c] : T(0);
-    }
+    LoadEntries<T, K>(ids + begin + lo, nb, means2d, conics, opacities, features, channels, ch0,
+                      x0, y0, s_geo, s_feat);
     __syncthreads();
     for (int e = nb - 1; e >= 0; --e) {
       const int32_t index = lo + e;

@@ -17,15 +17,16 @@ class DefaultDensify : public DensifyStrategy {
                      int height) override {
     torch::NoGradGuard no_grad;
     const int64_t n = radii.size(0);
+    const auto opts = means2d_grad.options().dtype(torch::kFloat64);  // on the Gaussians' device
     if (!grad_sum_.defined() || grad_sum_.size(0) != n) {
-      grad_sum_ = torch::zeros({n}, torch::kFloat64);
-      seen_ = torch::zeros({n}, torch::kFloat64);
+      grad_sum_ = torch::zeros({n}, opts);
+      seen_ = torch::zeros({n}, opts);
     }
     // In units of half the image, as normalised device coordinates would be.
     const torch::Tensor g = means2d_grad.detach().to(torch::kFloat64) *
-                            torch::tensor({0.5 * width, 0.5 * height}, torch::kFloat64);
+                            torch::tensor({0.5 * width, 0.5 * height}, opts);
     const torch::Tensor visible = radii > 0;
-    grad_sum_ += torch::where(visible, g.norm(2, 1), torch::zeros({1}, torch::kFloat64));
+    grad_sum_ += torch::where(visible, g.norm(2, 1), torch::zeros({1}, opts));
     seen_ += visible.to(torch::kFloat64);
   }
 
@@ -51,7 +52,8 @@ class DefaultDensify : public DensifyStrategy {
     const torch::Tensor max_scale = std::get<0>(scales.max(1));
     const torch::Tensor opacity = torch::sigmoid(p.opacity_logits.detach());
     const bool room = n < options_.max_gaussians;
-    const torch::Tensor hot = (mean_grad > options_.grad_threshold) & torch::tensor(room);
+    const torch::Tensor hot = room ? mean_grad > options_.grad_threshold
+                                   : torch::zeros_like(mean_grad, torch::kBool);
     const torch::Tensor small = max_scale <= options_.split_scale * options_.scene_extent;
     const torch::Tensor clone = hot & small;
     const torch::Tensor split = hot & ~small;
@@ -80,8 +82,7 @@ class DefaultDensify : public DensifyStrategy {
                        1)
               .view({-1, 3, 3});
       const torch::Tensor offset =
-          torch::matmul(rot, (torch::randn(s.sizes(), generator_, s.options()) * s).unsqueeze(2))
-              .squeeze(2);
+          torch::matmul(rot, (Normal(s.sizes(), s.options()) * s).unsqueeze(2)).squeeze(2);
       const torch::Tensor means = p.means.detach().index_select(0, split_idx).repeat({2, 1}) + offset;
       add.means = torch::cat({add.means, means});
       add.quats = torch::cat({add.quats, q});
@@ -100,6 +101,12 @@ class DefaultDensify : public DensifyStrategy {
     plan->summary = line.str();
     grad_sum_ = torch::Tensor();
     seen_ = torch::Tensor();
+  }
+
+  // Standard normal draws from the CPU generator (the same numbers on every
+  // device), on the device of `options`.
+  torch::Tensor Normal(at::IntArrayRef sizes, const torch::TensorOptions& options) {
+    return torch::randn(sizes, generator_, options.device(torch::kCPU)).to(options.device());
   }
 
   DefaultDensifyOptions options_;

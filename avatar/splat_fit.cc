@@ -87,6 +87,7 @@ struct Evaluation {
   std::vector<torch::Tensor> renders;
 };
 
+// Renders come back on the CPU.
 Evaluation Evaluate(const GaussianParams& params, const std::vector<PosedImage>& views,
                     const SplatOptions& splat) {
   Evaluation e;
@@ -96,9 +97,45 @@ Evaluation Evaluate(const GaussianParams& params, const std::vector<PosedImage>&
     e.view_psnr.push_back(psnr);
     e.psnr += psnr / views.size();
     e.ssim += Ssim(render, v.image).item<double>() / views.size();
-    e.renders.push_back(render);
+    e.renders.push_back(render.cpu());
   }
   return e;
+}
+
+}  // namespace
+
+Status ParseSplatFitDevice(const std::string& name, torch::Device* device) {
+  try {
+    *device = torch::Device(name);
+  } catch (const c10::Error&) {
+    return Status::InvalidArgument("splat-fit: '" + name + "' is not a device (try cpu or cuda)");
+  }
+  if (device->is_cpu()) return Status::Ok();
+  if (!device->is_cuda()) {
+    return Status::InvalidArgument("splat-fit: no kernels for device " + name + " (cpu or cuda)");
+  }
+  if (!torch::cuda::is_available()) {
+    return Status::InvalidArgument(
+        "splat-fit: device " + name +
+        ": LibTorch sees no CUDA device (this build's LibTorch may be CPU-only; `headforge info` "
+        "says which); use --device cpu");
+  }
+  if (!device->has_index()) device->set_index(0);
+  if (device->index() >= int(torch::cuda::device_count())) {
+    return Status::InvalidArgument("splat-fit: device " + name + ": only " +
+                                   std::to_string(torch::cuda::device_count()) +
+                                   " CUDA device(s) are visible");
+  }
+  return Status::Ok();
+}
+
+namespace {
+
+// The views with their images on `device`.
+std::vector<PosedImage> OnDevice(const std::vector<PosedImage>& views, torch::Device device) {
+  std::vector<PosedImage> out = views;
+  for (PosedImage& v : out) v.image = v.image.to(device);
+  return out;
 }
 
 }  // namespace
@@ -148,12 +185,16 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
   if (!init.positions.defined() || init.positions.size(0) == 0) {
     return Status::InvalidArgument("splat-fit: no initial points");
   }
+  torch::Device device = torch::kCPU;
+  HF_RETURN_IF_ERROR(ParseSplatFitDevice(options.device, &device));
+  const std::vector<PosedImage> train_views = OnDevice(train, device);
+  const std::vector<PosedImage> test_views = OnDevice(test, device);
   const auto t0 = std::chrono::steady_clock::now();
   GaussianParams& p = result->params;
   {
     torch::NoGradGuard no_grad;
     const int64_t n = init.positions.size(0);
-    const auto opts = torch::TensorOptions().dtype(torch::kFloat32);
+    const auto opts = torch::TensorOptions().dtype(torch::kFloat32).device(device);
     p.means = init.positions.to(opts).clone();
     p.quats = torch::zeros({n, 4}, opts);
     p.quats.select(1, 0).fill_(1.0);
@@ -182,7 +223,7 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
   for (step = 1; step <= options.iterations; ++step) {
     const int64_t slot = (step - 1) % int64_t(train.size());
     if (slot == 0) order = torch::randperm(int64_t(train.size()), gen);
-    const PosedImage& view = train[order[slot].item<int64_t>()];
+    const PosedImage& view = train_views[order[slot].item<int64_t>()];
     adam.SetLr(0, options.lr_means * extent * std::pow(0.01, double(step) / options.iterations));
 
     const auto out = RenderGaussians(p.means, p.quats, p.log_scales, torch::sigmoid(p.opacity_logits),
@@ -234,7 +275,7 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
       loss_count = 0;
     }
     if (!last && options.eval_every > 0 && step % options.eval_every == 0 && !test.empty()) {
-      const Evaluation e = Evaluate(p, test, options.splat);
+      const Evaluation e = Evaluate(p, test_views, options.splat);
       stats(nlohmann::json{{"step", step}, {"test_psnr", e.psnr}, {"test_ssim", e.ssim},
                            {"gaussians", p.size()}, {"seconds", Seconds(t0)}}
                 .dump());
@@ -252,7 +293,7 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
   progress->Finish(std::to_string(result->steps) + " steps, " + std::to_string(p.size()) +
                    " Gaussians");
   if (!test.empty()) {
-    Evaluation e = Evaluate(p, test, options.splat);
+    Evaluation e = Evaluate(p, test_views, options.splat);
     result->test_psnr = e.psnr;
     result->test_ssim = e.ssim;
     result->view_psnr = e.view_psnr;
@@ -261,6 +302,7 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
                          {"gaussians", p.size()}, {"seconds", result->train_seconds}, {"final", true}}
               .dump());
   }
+  for (torch::Tensor* t : p.All()) *t = t->detach().cpu();
   return Status::Ok();
 }
 

@@ -32,13 +32,17 @@ struct InitPoints {
 
 
 struct SplatFitResult {
-  GaussianParams params;
+  GaussianParams params;  // on the CPU
   int steps = 0;
   double train_seconds = 0;
   double test_psnr = 0, test_ssim = 0;  // means over the held-out views
   std::vector<double> view_psnr;        // per held-out view
   std::vector<torch::Tensor> test_renders;  // [3, H, W] per held-out view
 };
+
+// Parses `name` ("cpu", "cuda", "cuda:N") into a device that can run a fit
+// here, or says why it cannot.
+Status ParseSplatFitDevice(const std::string& name, torch::Device* device);
 
 // `stats` receives one JSON object per line (loss curve, evaluations).
 Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& train,

@@ -57,6 +57,11 @@ std::vector<float> Flat(const torch::Tensor& t) {
 
 }  // namespace
 
+Status CheckSplatFitDevice(const std::string& device) {
+  torch::Device parsed = torch::kCPU;
+  return ParseSplatFitDevice(device, &parsed);
+}
+
 Status RunSplatFit(const SplatFitOptions& options, const std::vector<SplatFitView>& train,
                    const std::vector<SplatFitView>& test, const SplatFitPoints& init,
                    const std::function<void(const std::string&)>& stats, Progress* progress,

@@ -44,6 +44,10 @@ struct SplatFitOutput {
   std::vector<float> rotations;       // [N, 4] unit (w, x, y, z)
 };
 
+// Whether `device` ("cpu", "cuda", "cuda:N") can run a fit here; a clear error
+// if not (unknown name, no CUDA in this build's LibTorch, no such GPU).
+Status CheckSplatFitDevice(const std::string& device);
+
 // `stats` receives one JSON object per line (stats.jsonl).
 Status RunSplatFit(const SplatFitOptions& options, const std::vector<SplatFitView>& train,
                    const std::vector<SplatFitView>& test, const SplatFitPoints& init,

@@ -40,6 +40,9 @@ struct SplatFitOptions {
   int log_every = 100;    // steps between stats lines
   int eval_every = 2000;  // steps between held-out evaluations (0: only at the end)
   uint64_t seed = 0;
+  // Where the fit runs: "cpu", or "cuda" / "cuda:N" in a build whose LibTorch
+  // has CUDA. Results come back on the CPU either way.
+  std::string device = "cpu";
   SplatOptions splat;
   DefaultDensifyOptions densify;
 

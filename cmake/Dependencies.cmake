@@ -2,12 +2,12 @@
 # installs them). Each layer links only what it uses; LibTorch only in avatar/.
 
 find_package(Eigen3 3.3 REQUIRED NO_MODULE)
+find_package(nlohmann_json 3 REQUIRED)
 
 if(NOT HEADFORGE_SPLAT_ONLY)
   # COLMAP runs as a subprocess; its path is compiled in as the default.
   find_program(COLMAP_EXECUTABLE colmap REQUIRED)
 
-  find_package(nlohmann_json 3 REQUIRED)
   find_package(Boost 1.74 REQUIRED COMPONENTS program_options)
   find_package(OpenCV 4 REQUIRED COMPONENTS
     core imgproc imgcodecs videoio video dnn calib3d features2d quality)

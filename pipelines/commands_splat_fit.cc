@@ -98,6 +98,9 @@ int SplatFitCommand(const std::vector<std::string>& args) {
   options.Add("splat_fit.log_every", &fit.log_every, "Steps between lines of stats.jsonl.", "log-every");
   options.Add("splat_fit.eval_every", &fit.eval_every, "Steps between held-out evaluations (0: only at the end).", "eval-every");
   int seed = 0;
+  options.Add("splat_fit.device", &fit.device,
+              "Where the fit runs: cpu, or cuda (cuda:N) in a build against a LibTorch with CUDA.",
+              "device");
   options.Add("splat_fit.seed", &seed, "Seed for the view order, starting points and splits.", "seed");
   options.Add("splat_fit.face_model", &face_model, "Face model; default DATA/ict_facekit/ict_face_model.h5.", "face-model",
               OptionSet::Effect::kRuntime);
@@ -113,6 +116,8 @@ int SplatFitCommand(const std::vector<std::string>& args) {
   if (init_points < 1 || init_views < 0) {
     return ReportFailure(Status::InvalidArgument("--init-points must be positive and --init-views >= 0"));
   }
+  // Before the scene is rendered: a device that cannot run the fit fails now.
+  if (Status s = CheckSplatFitDevice(fit.device); !s.ok()) return ReportFailure(s);
   if (face_model.empty()) face_model = (fs::path(common.data_dir) / "ict_facekit" / "ict_face_model.h5").string();
   ApplyCommonOptions(common);
   fit.seed = static_cast<uint64_t>(seed);
@@ -204,6 +209,7 @@ int SplatFitCommand(const std::vector<std::string>& args) {
                                  {"gaussians", result.size},
                                  {"fit_seconds", result.seconds},
                                  {"threads", threads},
+                                 {"device", fit.device},
                                  {"test_psnr", result.test_psnr},
                                  {"test_ssim", result.test_ssim},
                                  {"views", views}};

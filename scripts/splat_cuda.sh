@@ -2,12 +2,13 @@
 # The Gaussian rasterizer alone, with its CUDA kernels, on a machine with an
 # NVIDIA GPU and PyTorch (whose package holds LibTorch with CUDA) or a CUDA
 # LibTorch: configures build-cuda/ with HEADFORGE_SPLAT_ONLY (LibTorch, Eigen,
-# GoogleTest and Google Benchmark are all it needs), builds, runs the tests
-# (avatar_test on the CPU kernels, avatar_cuda_test on the GPU), then with
-# "bench" the benchmark on the GPU (README's GPU table).
+# nlohmann-json, GoogleTest and Google Benchmark are all it needs), builds,
+# runs the tests (avatar_test on the CPU kernels, avatar_cuda_test on the
+# GPU), then with "bench" the benchmark on the GPU (README's GPU table).
 #   scripts/splat_cuda.sh [bench] [--benchmark_* arguments...]
 # LibTorch is found from python3's torch unless Torch_DIR is set; more
-# prefixes (GoogleTest, Google Benchmark, Eigen) come from CMAKE_PREFIX_PATH.
+# prefixes (GoogleTest, Google Benchmark, Eigen, nlohmann-json) come from
+# CMAKE_PREFIX_PATH.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${HEADFORGE_CUDA_BUILD_DIR:-$root/build-cuda}"

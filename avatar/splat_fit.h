@@ -32,7 +32,7 @@ struct InitPoints {
 
 
 struct SplatFitResult {
-  GaussianParams params;  // on the CPU
+  GaussianParams params;  // on the CPU (after a fit that succeeded)
   int steps = 0;
   double train_seconds = 0;
   double test_psnr = 0, test_ssim = 0;  // means over the held-out views

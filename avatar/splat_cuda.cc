@@ -125,7 +125,7 @@ torch::Tensor RasterizeBackward(const torch::Tensor& means2d, const torch::Tenso
   const int64_t n = means2d.size(0);
   const int64_t entries = gaussian_ids.numel();
   const int channels = static_cast<int>(features.size(1));
-  const int stride = 6 + channels;
+  const int stride = kGradFeatures + channels;
   auto entry_grads = torch::zeros({entries, stride}, means2d.options());
   auto total = torch::empty({n, stride}, means2d.options());
   // Each Gaussian's entries, in list order: its rows are summed in that order.

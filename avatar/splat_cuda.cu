@@ -436,7 +436,7 @@ __global__ void __launch_bounds__(kThreads)
                             const int32_t* __restrict__ last, const T* __restrict__ v_image,
                             const T* __restrict__ v_alpha, T* entry_grads) {
   constexpr int B = BackwardBatch<T>();
-  constexpr int V = 6 + K;  // values per entry: mean x, y; conic a, b, c; opacity; K features
+  constexpr int V = kGradFeatures + K;  // values per entry (GradientColumn), K features
   __shared__ T s_geo[B][6];
   __shared__ T s_feat[B][K];
   __shared__ T s_part[B][kWarps][V];
@@ -448,7 +448,7 @@ __global__ void __launch_bounds__(kThreads)
   const bool inside = px < width && py < height;
   const int kc = min(K, channels - ch0);
   const int warp = threadIdx.x / 32, lane = threadIdx.x % 32;
-  const int stride = 6 + channels;
+  const int stride = kGradFeatures + channels;
   const int32_t begin = offsets[tile];
   const T min_alpha = T(kMinAlpha), max_alpha = T(kMaxAlpha);
   const int64_t plane = int64_t(width) * height;
@@ -501,19 +501,19 @@ __global__ void __launch_bounds__(kThreads)
         T v_alpha_pix = v_alpha_final * inv;
         for (int ch = 0; ch < K; ++ch) {
           const T f = s_feat[e][ch];
-          g[6 + ch] = w * v_pix[ch];
+          g[kGradFeatures + ch] = w * v_pix[ch];
           v_alpha_pix += v_pix[ch] * (f * t_i - behind[ch] * inv);
           behind[ch] += f * w;
         }
         // Only unclamped alphas pass a gradient to opacity and sigma.
         const T v_o = raw < max_alpha ? v_alpha_pix * vis : T(0);
         const T v_sigma = -o * v_o;
-        g[0] = v_sigma * (a * dx + b * dy);
-        g[1] = v_sigma * (b * dx + c * dy);
-        g[2] = v_sigma * (T(0.5) * dx * dx);
-        g[3] = v_sigma * (dx * dy);
-        g[4] = v_sigma * (T(0.5) * dy * dy);
-        g[5] = v_o;
+        g[kGradMx] = v_sigma * (a * dx + b * dy);
+        g[kGradMy] = v_sigma * (b * dx + c * dy);
+        g[kGradA] = v_sigma * (T(0.5) * dx * dx);
+        g[kGradB] = v_sigma * (dx * dy);
+        g[kGradC] = v_sigma * (T(0.5) * dy * dy);
+        g[kGradO] = v_o;
       }
       if (__any_sync(0xffffffffu, use)) {
         for (int v = 0; v < V; ++v) g[v] = WarpSum(g[v]);
@@ -529,10 +529,10 @@ __global__ void __launch_bounds__(kThreads)
       T sum = T(0);
       for (int w = 0; w < kWarps; ++w) sum += s_part[e][w][v];
       T* row = entry_grads + int64_t(begin + lo + e) * stride;
-      if (v < 6) {
+      if (v < kGradFeatures) {
         row[v] = ch0 == 0 ? sum : row[v] + sum;
-      } else if (v - 6 < kc) {
-        row[6 + ch0 + v - 6] = sum;
+      } else if (v - kGradFeatures < kc) {
+        row[ch0 + v] = sum;
       }
     }
   }

@@ -44,8 +44,8 @@ cudaError_t RasterizeForward(const T* means2d, const T* conics, const T* feature
                              const int32_t* gaussian_ids, int channels, int width, int height,
                              T* image, T* transmittance, int32_t* last, cudaStream_t stream);
 
-// Gradients per list entry: entry_grads [M, 6 + C] (mean x, mean y, conic a,
-// b, c, opacity, features), zeroed by the caller; entries a tile never
+// Gradients per list entry: entry_grads [M, kGradFeatures + C], columns as
+// GradientColumn (splat_params.h), zeroed by the caller; entries a tile never
 // reached stay zero. Each entry is written by one block, in a fixed order.
 template <typename T>
 cudaError_t RasterizeBackward(const T* means2d, const T* conics, const T* features,

@@ -102,6 +102,13 @@ Evaluation Evaluate(const GaussianParams& params, const std::vector<PosedImage>&
   return e;
 }
 
+// The views with their images on `device`.
+std::vector<PosedImage> OnDevice(const std::vector<PosedImage>& views, torch::Device device) {
+  std::vector<PosedImage> out = views;
+  for (PosedImage& v : out) v.image = v.image.to(device);
+  return out;
+}
+
 }  // namespace
 
 Status ParseSplatFitDevice(const std::string& name, torch::Device* device) {
@@ -128,17 +135,6 @@ Status ParseSplatFitDevice(const std::string& name, torch::Device* device) {
   }
   return Status::Ok();
 }
-
-namespace {
-
-// The views with their images on `device`.
-std::vector<PosedImage> OnDevice(const std::vector<PosedImage>& views, torch::Device device) {
-  std::vector<PosedImage> out = views;
-  for (PosedImage& v : out) v.image = v.image.to(device);
-  return out;
-}
-
-}  // namespace
 
 bool SplatFitOptions::Check(std::string* why) const {
   if (iterations < 1) {

@@ -168,14 +168,14 @@ class RasterizeFunction : public torch::autograd::Function<RasterizeFunction> {
                                : torch::zeros({s[2].size(1), height, width}, s[2].options());
     const Tensor v_alpha =
         grads[1].defined() ? grads[1].contiguous() : torch::zeros_like(transmittance);
-    // [N, 6 + C]: mean x, y; conic a, b, c; opacity; features.
+    // [N, kGradFeatures + C], columns as GradientColumn.
     const Tensor total = BackendFor(s[0], "RasterizeGaussians")
                              .rasterize_backward(s[0], s[1], s[2], s[3], s[4], s[5], s[6], width,
                                                  height, transmittance, s[8], v_image, v_alpha);
-    const Tensor v_means2d = total.slice(1, 0, 2).contiguous();
-    const Tensor v_conics = total.slice(1, 2, 5).contiguous();
-    const Tensor v_opacities = total.select(1, 5).contiguous();
-    const Tensor v_features = total.slice(1, 6).contiguous();
+    const Tensor v_means2d = total.slice(1, kGradMx, kGradMy + 1).contiguous();
+    const Tensor v_conics = total.slice(1, kGradA, kGradC + 1).contiguous();
+    const Tensor v_opacities = total.select(1, kGradO).contiguous();
+    const Tensor v_features = total.slice(1, kGradFeatures).contiguous();
     const Tensor v_background = (v_image * transmittance.unsqueeze(0)).sum({1, 2});
     return {v_means2d, v_conics, v_features, v_opacities, v_background,
             Tensor(),  Tensor(), Tensor(),   Tensor()};

@@ -24,4 +24,9 @@ constexpr double kMinAlpha = 1.0 / 255.0;
 constexpr double kMaxAlpha = 0.999;
 constexpr double kMinTransmittance = 1e-4;
 
+// Columns of the rasterize backward's per-Gaussian gradient rows (every
+// backend's, and of the CUDA kernels' per-entry rows): mean x, y; conic a, b,
+// c; opacity; then the C features from kGradFeatures on.
+enum GradientColumn : int { kGradMx, kGradMy, kGradA, kGradB, kGradC, kGradO, kGradFeatures };
+
 }  // namespace headforge::splat

@@ -12,9 +12,6 @@
 namespace headforge::splat::cpu {
 namespace {
 
-// Layout of one Gaussian's row in a slot's gradient buffer (and of the result).
-enum : int { kGradMx, kGradMy, kGradA, kGradB, kGradC, kGradO, kGradFeatures };
-
 template <typename T>
 struct TileScratch {
   using V = typename Lanes<T>::Vec;
@@ -28,7 +25,7 @@ void BackwardTile(int64_t tile, int tiles_x, int width, int height, int channels
                   const T* means2d, const T* conics, const T* features, const T* opacities,
                   const T* background, const int32_t* offsets, const int32_t* ids,
                   const T* transmittance, const int32_t* last, const T* v_image, const T* v_alpha,
-                  TileScratch<T>& scratch, T* grads /* [N][6 + C] */) {
+                  TileScratch<T>& scratch, T* grads /* [N][kGradFeatures + C] */) {
   using V = typename Lanes<T>::Vec;
   using M = typename Lanes<T>::Mask;
   const int x0 = static_cast<int>(tile % tiles_x) * kTile;

@@ -69,6 +69,11 @@ Mesh MakeQuad(const Eigen::Vector3f& origin, const Eigen::Vector3f& du, const Ei
 // Area-weighted vertex normals.
 Eigen::Matrix3Xf VertexNormals(const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& triangles);
 
+// Barycentric coordinates of the point of triangle (a, b, c) closest to p
+// (the region tests of Ericson, Real-Time Collision Detection, 5.1.5).
+Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                   const Eigen::Vector3d& c);
+
 struct Lighting {
   bool enabled = false;
   Eigen::Vector3f direction = Eigen::Vector3f(0, 0, 1);  // toward the light, world frame

@@ -8,6 +8,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "calibration/face_points.h"
 #include "calibration/landmark_embedding.h"
 #include "calibration/pnp.h"
 #include "calibration/reprojection_cost.h"
@@ -31,7 +32,7 @@ Status AlignOptions::Check() const {
   if (!(refine_robust_px > 0)) return Status::InvalidArgument("--align-refine-robust must be positive");
   if (!(max_residual_mm > 0)) return Status::InvalidArgument("--max-align-residual must be positive");
   if (surface != "points" && surface != "off") return Status::InvalidArgument("--align-surface must be points or off");
-  if (!(surface_prior_mm2 > 0)) return Status::InvalidArgument("--align-surface-prior must be positive");
+  if (!(surface_noise_mm > 0)) return Status::InvalidArgument("--align-surface-noise must be positive");
   return Status::Ok();
 }
 
@@ -64,14 +65,14 @@ void AddAlignOptions(OptionSet* o, AlignOptions* a) {
   o->Add("align.refine_robust_px", &a->refine_robust_px, "Huber scale of the reprojection refinement, pixels.",
          "align-refine-robust");
   o->Add("align.surface", &a->surface,
-         "points: with one camera moving round a still head, turn the head frame in yaw (and move it) so that the "
-         "face model's surface, with a fitted identity, passes through COLMAP's 3D points on the face (pitch, roll "
-         "and scale stay the landmarks'); off: keep the landmarks' rotation.",
+         "points: with one camera moving round a still head, fit the face model's surface, with the subject's "
+         "identity, to thousands of points triangulated on the face from the frames, and take the head frame's "
+         "rotation, translation and scale from it; off: keep the landmarks' head frame.",
          "align-surface");
-  o->Add("align.surface_prior_mm2", &a->surface_prior_mm2,
-         "Surface fit: squared point-to-surface distance (mm^2) one standard deviation of an identity coefficient "
-         "costs.",
-         "align-surface-prior");
+  o->Add("align.surface_noise_mm", &a->surface_noise_mm,
+         "Surface fit: the points' noise (mm), against which one standard deviation of an identity coefficient "
+         "weighs.",
+         "align-surface-noise");
   o->Add("align.max_residual_mm", &a->max_residual_mm,
          "Fail when the triangulated landmarks miss the face model by more than this median (mm): the cameras do not "
          "see one consistent head.",
@@ -301,7 +302,7 @@ bool RefineByReprojection(const std::vector<std::vector<Observation>>& per_landm
 }  // namespace
 
 Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
-                const FaceModel& model, const std::vector<Eigen::Vector3d>& world_points, AlignResult* result) {
+                const FaceModel& model, AlignResult* result) {
   HF_RETURN_IF_ERROR(options.Check());
   if (model.landmarks_ibug68().size() != 68) return Status::InvalidArgument("the face model has no iBUG-68 landmarks");
   const bool head_frame = cameras.frame == "head";
@@ -545,33 +546,39 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       rescore();
     }
   }
-  // The landmarks' rotation is off where the detector reads the head as
-  // nearly frontal; the skin's reconstructed points are not. Only for a still
-  // head: with several cameras watching a moving head, the points come from
-  // whichever instants COLMAP was given.
+  // Landmarks leave the head frame a degree or more off and take its scale
+  // from the mean face; thousands of points on the skin pin both. Only for a
+  // still head seen by one moving camera: with several cameras watching a
+  // moving head, the face's points would mix instants.
   best.landmarks_head_from_world = best.head_from_world;
-  if (options.surface == "points") {
+  if (options.surface == "points" && !head_frame) {
     if (per_frame) {
       best.surface_note = "surface fit: not for several cameras (the head moves between instants)";
-    } else if (world_points.empty()) {
-      best.surface_note = "surface fit: no reconstructed points given";
     } else {
+      std::vector<Eigen::Vector3d> face_points;
+      FacePointStats stats;
       SurfaceFitOptions fit;
-      fit.identity_prior_mm2 = options.surface_prior_mm2;
+      fit.noise_mm = options.surface_noise_mm;
       SurfaceFitResult surface;
       Sim3 refined = best.head_from_world;
-      const Status fitted = FitFaceSurface(model, world_points, fit, &refined, &surface);
+      Status fitted =
+          TriangulateFacePoints(capture, cameras, capture.cameras[0].name, FacePointOptions(), &face_points, &stats);
+      best.face_points = stats.points;
+      if (fitted.ok()) fitted = FitFaceSurface(model, face_points, fit, &refined, &surface);
       if (fitted.ok()) {
         best.head_from_world = refined;
         best.method += "+surface";
         best.surface_points = surface.points;
         best.surface_median_mm = surface.median_mm;
-        best.surface_yaw_deg = surface.yaw_deg;
+        best.surface_turn_deg = surface.turn_deg;
+        best.surface_scale_change = surface.scale_change;
         rescore();
-        HF_LOG(Info) << "align: surface fit on " << surface.points << " points on the face: turned "
-                     << surface.yaw_deg << " deg in yaw; median distance " << surface.median_mm << " mm";
+        HF_LOG(Info) << "align: surface fit on " << surface.points << " of " << stats.points
+                     << " points triangulated on the face: turned the head frame " << surface.turn_deg
+                     << " deg and scaled it by " << 100 * surface.scale_change << "%; median distance "
+                     << surface.median_mm << " mm";
       } else {
-        best.surface_note = fitted.message() + "; the landmarks' rotation is kept";
+        best.surface_note = fitted.message() + "; the landmarks' head frame is kept";
         HF_LOG(Warning) << "align: " << best.surface_note;
       }
     }
@@ -616,8 +623,9 @@ Status WriteAlignment(const AlignResult& r, const fs::path& path) {
       {"reference_frame", r.reference_frame},
       {"views_used", r.views_used},
       {"reprojection_median_px", r.reprojection_median_px},
-      {"surface", {{"points", r.surface_points}, {"median_mm", r.surface_median_mm}, {"yaw_deg", r.surface_yaw_deg},
-                   {"note", r.surface_note}}},
+      {"surface",
+       {{"face_points", r.face_points}, {"points", r.surface_points}, {"median_mm", r.surface_median_mm},
+        {"turn_deg", r.surface_turn_deg}, {"scale_change", r.surface_scale_change}, {"note", r.surface_note}}},
       {"rms_mm", r.rms_mm},
       {"median_mm", r.median_mm},
       {"residuals", residuals},

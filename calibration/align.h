@@ -38,12 +38,12 @@ struct AlignOptions {
   // keep the fit to the triangulated landmarks.
   std::string refine = "reprojection";
   double refine_robust_px = 2.0;  // Huber scale of that refinement
-  // "points": one camera moving round a still head, with the reconstruction's
-  // 3D points given: then turn the head frame in yaw (and move it) so that the
-  // face model's surface, with a fitted identity, passes through the points on
-  // the face (surface_fit.h); "off": keep the landmarks' rotation.
+  // "points": one camera moving round a still head: fit the face model's
+  // surface, with the subject's identity, to the points triangulated on the
+  // face from the frames (face_points.h), and take the head frame's rotation,
+  // translation and scale from it (surface_fit.h); "off": keep the landmarks'.
   std::string surface = "points";
-  double surface_prior_mm2 = 3.0;  // identity prior of that fit (SurfaceFitOptions)
+  double surface_noise_mm = 1.0;  // the points' noise in that fit (SurfaceFitOptions)
   // World-frame cameras: fail when the triangulated landmarks miss the model by
   // more than this median (mm), a sign of a broken reconstruction.
   double max_residual_mm = 40.0;
@@ -63,10 +63,11 @@ struct AlignResult {
   int reference_frame = -1;            // several cameras: the frame whose head pose defines the head frame
   int views_used = 0;                  // views whose head poses gave the rotation (method views)
   double reprojection_median_px = 0.0;  // landmark reprojection after the refinement (0: not refined)
-  Sim3 landmarks_head_from_world;  // before the surface fit (head_from_world when it did not turn it)
+  Sim3 landmarks_head_from_world;  // before the surface fit (head_from_world when it did not run)
   // The surface fit (surface_points 0: not run; surface_note says why).
-  int surface_points = 0;
-  double surface_median_mm = 0, surface_yaw_deg = 0;
+  int face_points = 0;     // points triangulated on the face
+  int surface_points = 0;  // of those, paired with the surface in the fit's last round
+  double surface_median_mm = 0, surface_turn_deg = 0, surface_scale_change = 0;
   std::string surface_note;
   CameraSet cameras;                   // the views re-expressed in the head frame
   std::string message;
@@ -74,10 +75,9 @@ struct AlignResult {
 
 // Aligns `cameras` (frame "world"). For head-pose cameras (frame "head") the
 // transform is the identity and the residuals of the triangulated landmarks
-// against the model are still reported. `world_points`: the reconstruction's
-// 3D points (COLMAP's), for the surface fit; may be empty.
+// against the model are still reported. The surface fit reads the frames.
 Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
-                const FaceModel& model, const std::vector<Eigen::Vector3d>& world_points, AlignResult* result);
+                const FaceModel& model, AlignResult* result);
 
 // Re-expresses cameras through a similarity: cam_from_head = cam_from_world * world_from_head,
 // with the translation rescaled so that the head frame stays metric.

@@ -156,16 +156,6 @@ Status ReadColmapPoints(const fs::path& dir, std::map<long, Eigen::Vector3d>* po
   return Status::Ok();
 }
 
-Status ReadCalibratePoints(const fs::path& calibrate_dir, std::vector<Eigen::Vector3d>* points) {
-  points->clear();
-  const fs::path dir = calibrate_dir / "colmap" / "model";
-  if (!fs::exists(dir / "points3D.txt")) return Status::Ok();
-  std::map<long, Eigen::Vector3d> by_id;
-  HF_RETURN_IF_ERROR(ReadColmapPoints(dir, &by_id));
-  for (const auto& [id, p] : by_id) points->push_back(p);
-  return Status::Ok();
-}
-
 std::vector<std::pair<std::string, std::string>> FindRevisitPairs(const ColmapTextModel& model,
                                                                   const std::map<long, Eigen::Vector3d>& points,
                                                                   const std::vector<std::string>& order,

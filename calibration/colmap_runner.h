@@ -113,9 +113,6 @@ std::vector<std::pair<std::string, std::string>> FindRevisitPairs(const ColmapTe
                                                                   int per_image);
 // points3D.txt of a text model: id -> position.
 Status ReadColmapPoints(const fs::path& dir, std::map<long, Eigen::Vector3d>* points);
-// The 3D points of the model calibrate kept in `calibrate_dir` (colmap/model,
-// world frame); empty, and Ok, when calibrate ran no COLMAP there.
-Status ReadCalibratePoints(const fs::path& calibrate_dir, std::vector<Eigen::Vector3d>* points);
 
 // Reads a COLMAP text model (cameras.txt, images.txt, points3D.txt). Image
 // names "<camera>/<index>.png" map to views.

@@ -126,10 +126,8 @@ Status RunAlignStage(Workspace* workspace, const AlignOptions& align, const std:
         HF_RETURN_IF_ERROR(CameraSet::Read(workspace->Path("cameras.json"), &cameras));
         FaceModel model;
         HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
-        std::vector<Eigen::Vector3d> points;  // COLMAP's, for the surface fit
-        HF_RETURN_IF_ERROR(ReadCalibratePoints(workspace->root(), &points));
         AlignResult aligned;
-        HF_RETURN_IF_ERROR(RunAlign(align, capture, cameras, model, points, &aligned));
+        HF_RETURN_IF_ERROR(RunAlign(align, capture, cameras, model, &aligned));
         HF_RETURN_IF_ERROR(WriteAlignment(aligned, staging / "alignment.json"));
         HF_RETURN_IF_ERROR(aligned.cameras.Write(staging / "cameras_head.json"));
         result->outputs = {"alignment.json", "cameras_head.json"};
@@ -140,8 +138,8 @@ Status RunAlignStage(Workspace* workspace, const AlignOptions& align, const std:
         if (aligned.views_used > 0) std::snprintf(views, sizeof(views), ", rotation from %d views", aligned.views_used);
         if (aligned.surface_points > 0)
           std::snprintf(views + std::strlen(views), sizeof(views) - std::strlen(views),
-                        ", turned %.2f deg in yaw by %d points on the face", aligned.surface_yaw_deg,
-                        aligned.surface_points);
+                        ", surface fit on %d points on the face (turned %.2f deg, scaled %+.1f%%)",
+                        aligned.surface_points, aligned.surface_turn_deg, 100 * aligned.surface_scale_change);
         char text[400];
         std::snprintf(text, sizeof(text), "scale %.4g, %zu landmarks, median residual %.1f mm, rms %.1f mm%s%s%s",
                       aligned.head_from_world.scale, aligned.landmarks_used.size(), aligned.median_mm,

@@ -554,6 +554,8 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   if (options.surface == "points" && !head_frame) {
     if (per_frame) {
       best.surface_note = "surface fit: not for several cameras (the head moves between instants)";
+    } else if (capture.cameras.empty()) {
+      best.surface_note = "surface fit: the capture has no camera";
     } else {
       std::vector<Eigen::Vector3d> face_points;
       FacePointStats stats;

@@ -204,13 +204,14 @@ TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   }
   EXPECT_TRUE(fs::exists(dir / "out" / "colmap" / "revisit_pairs.txt") || summary.sequential_registered >= 0);
   // Align's surface fit: some 2000 points triangulated on this small face
-  // (320 pixels, one ring at eye level), 1400-1550 paired. Over four runs:
-  // aligned rotation 0.70-0.95 deg, scale 0.5-3.5% off (the landmarks alone,
-  // in the last: 3.4 deg and 6.0%, the mean face's size for a face 4.4%
-  // smaller, from the few near-frontal views of this short orbit).
+  // (320 pixels, one ring at eye level), 1400-1550 paired. Over six runs:
+  // aligned rotation 0.70-1.23 deg, scale 0.5-3.5% off (the landmarks alone:
+  // 3.4 deg and 5.9-6.0%, the mean face's size for a face 4.4% smaller, from
+  // the few near-frontal views of this short orbit). One ring at eye level
+  // pins pitch less than orbit_360's three (README).
   EXPECT_EQ(aligned.method, "views+reprojection+surface");
   EXPECT_GT(aligned.surface_points, 1000);
-  EXPECT_LT(head.median_rotation_deg, 1.5);
+  EXPECT_LT(head.median_rotation_deg, 2.0);
   EXPECT_LT(head.median_rotation_deg, landmarks_head.median_rotation_deg);
   EXPECT_LT(errors.scale_error, 0.05);
   EXPECT_LT(errors.scale_error, landmarks_world.scale_error);

@@ -186,8 +186,9 @@ Status FitFaceSurface(const FaceModel& model, const std::vector<Eigen::Vector3d>
     // The first rounds may pair fewer points while the fit pulls the face
     // onto them (the prior keeps the identity determined); the last one must
     // pair min_points.
+    constexpr int kFewestEarly = 3 * 7;  // three times the frame's unknowns
     const bool last = round + 1 == options.rounds;
-    if (static_cast<int>(distances.size()) < (last ? options.min_points : 3 * 7))
+    if (static_cast<int>(distances.size()) < (last ? options.min_points : kFewestEarly))
       return Status::DataError("surface fit: " + std::to_string(distances.size()) +
                                " reconstructed points lie on the face (need " + std::to_string(options.min_points) +
                                ")");

@@ -233,24 +233,13 @@ TEST(FacePoints, LieOnTheTrueFace) {
   nlohmann::json truth;
   SimulateAndIngest(kSmallOrbit, dir, &capture, &truth);
   CameraSet cameras;
-  const nlohmann::json& lens = truth["cameras"][0];
-  CameraIntrinsics intrinsics;
-  intrinsics.name = "cam0";
-  intrinsics.model = "PINHOLE";
-  intrinsics.width = lens["width"].get<int>();
-  intrinsics.height = lens["height"].get<int>();
-  intrinsics.fx = lens["fx"].get<double>();
-  intrinsics.fy = lens["fy"].get<double>();
-  intrinsics.cx = lens["cx"].get<double>();
-  intrinsics.cy = lens["cy"].get<double>();
-  cameras.cameras = {intrinsics};
+  cameras.cameras = {CameraIntrinsics::FromJson(truth["cameras"][0])};  // cam0, no distortion
   for (const auto& frame : truth["frames"]) {
     CameraView view;
     view.camera = "cam0";
     view.frame = frame["index"].get<int>();
     view.registered = true;
-    for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) view.cam_from_world.matrix()(r, c) = frame["views"]["cam0"]["cam_from_world"][r][c];
+    view.cam_from_world = PoseFromJson(frame["views"]["cam0"]["cam_from_world"]);
     cameras.views.push_back(view);  // the head stays at the world's origin: world = head frame
   }
   std::vector<Eigen::Vector3d> points;

@@ -4,7 +4,7 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include "avatar/splat_fit.h"
+#include "avatar/train/splat_fit.h"
 
 namespace headforge {
 namespace {
@@ -63,9 +63,8 @@ Status CheckSplatFitDevice(const std::string& device) {
 }
 
 Status RunSplatFit(const SplatFitOptions& options, const std::vector<SplatFitView>& train,
-                   const std::vector<SplatFitView>& test, const SplatFitPoints& init,
-                   const std::function<void(const std::string&)>& stats, Progress* progress,
-                   SplatFitOutput* output) {
+                   const std::vector<SplatFitView>& test, const SplatFitPoints& init, StatsLog* stats,
+                   Progress* progress, SplatFitOutput* output) {
   const int64_t n = int64_t(init.sizes.size());
   if (init.positions.size() != size_t(3 * n) || init.colours.size() != size_t(3 * n)) {
     return Status::InvalidArgument("splat-fit: starting points, colours and sizes differ in count");
@@ -79,6 +78,7 @@ Status RunSplatFit(const SplatFitOptions& options, const std::vector<SplatFitVie
   torch::NoGradGuard no_grad;
   const GaussianParams& p = result.params;
   output->steps = result.steps;
+  output->resumed_from = result.resumed_from;
   output->seconds = result.train_seconds;
   output->test_psnr = result.test_psnr;
   output->test_ssim = result.test_ssim;

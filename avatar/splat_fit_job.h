@@ -9,9 +9,10 @@
 #include <string>
 #include <vector>
 
-#include "avatar/splat_fit_options.h"
+#include "avatar/train/splat_fit_options.h"
 #include "core/mesh_renderer.h"
 #include "core/progress.h"
+#include "core/stats_log.h"
 #include "core/status.h"
 
 namespace headforge {
@@ -31,6 +32,7 @@ struct SplatFitPoints {
 
 struct SplatFitOutput {
   int steps = 0;
+  int resumed_from = 0;  // the checkpoint's step the fit continued from (0: started afresh)
   double seconds = 0;
   double test_psnr = 0, test_ssim = 0;
   std::vector<double> view_psnr;        // per held-out view
@@ -48,10 +50,10 @@ struct SplatFitOutput {
 // if not (unknown name, no CUDA in this build's LibTorch, no such GPU).
 Status CheckSplatFitDevice(const std::string& device);
 
-// `stats` receives one JSON object per line (stats.jsonl).
+// `stats` receives one JSON object per line (stats.jsonl). Checkpoints and
+// resuming as FitSplats (train/splat_fit.h) does them.
 Status RunSplatFit(const SplatFitOptions& options, const std::vector<SplatFitView>& train,
-                   const std::vector<SplatFitView>& test, const SplatFitPoints& init,
-                   const std::function<void(const std::string&)>& stats, Progress* progress,
-                   SplatFitOutput* output);
+                   const std::vector<SplatFitView>& test, const SplatFitPoints& init, StatsLog* stats,
+                   Progress* progress, SplatFitOutput* output);
 
 }  // namespace headforge

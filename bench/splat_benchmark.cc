@@ -31,7 +31,7 @@
 #include <c10/cuda/CUDACachingAllocator.h>
 #endif
 
-#include "avatar/splat_ops.h"
+#include "avatar/splat/splat_ops.h"
 #include "avatar/torch_runtime.h"
 
 namespace headforge {

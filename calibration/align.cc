@@ -616,7 +616,7 @@ Status WriteAlignment(const AlignResult& r, const fs::path& path) {
   const Eigen::Matrix4d m = r.head_from_world.Matrix();
   for (int i = 0; i < 4; ++i) matrix.push_back({m(i, 0), m(i, 1), m(i, 2), m(i, 3)});
   const nlohmann::json j = {
-      {"version", 1},
+      {"version", kAlignmentVersion},
       {"head_from_world", {{"scale", r.head_from_world.scale}, {"rotation", rotation},
                            {"translation", {r.head_from_world.translation.x(), r.head_from_world.translation.y(), r.head_from_world.translation.z()}},
                            {"matrix", matrix}}},
@@ -634,6 +634,53 @@ Status WriteAlignment(const AlignResult& r, const fs::path& path) {
       {"cameras", "cameras_head.json"},
       {"message", r.message}};
   return WriteJsonAtomic(path, j, 1);
+}
+
+Status ReadAlignment(const fs::path& path, AlignResult* result) {
+  nlohmann::json j;
+  HF_RETURN_IF_ERROR(ReadArtefact(path, kAlignmentVersion, "align", &j));
+  AlignResult r;
+  try {
+    const auto& h = j.at("head_from_world");
+    r.head_from_world.scale = h.at("scale").get<double>();
+    for (int i = 0; i < 3; ++i) {
+      for (int k = 0; k < 3; ++k) r.head_from_world.rotation(i, k) = h.at("rotation").at(i).at(k).get<double>();
+      r.head_from_world.translation[i] = h.at("translation").at(i).get<double>();
+    }
+    const std::string quality = j.at("quality").get<std::string>();
+    bool known = false;
+    for (SimilarityQuality q : {SimilarityQuality::kGood, SimilarityQuality::kPlanar, SimilarityQuality::kReflection,
+                                SimilarityQuality::kDegenerate}) {
+      if (quality == SimilarityQualityName(q)) {
+        r.quality = q;
+        known = true;
+      }
+    }
+    if (!known) return Status::DataError(path.string() + ": unknown quality '" + quality + "'; run headforge align again");
+    r.method = j.at("method").get<std::string>();
+    r.reference_frame = j.at("reference_frame").get<int>();
+    r.views_used = j.at("views_used").get<int>();
+    r.reprojection_median_px = j.at("reprojection_median_px").get<double>();
+    const auto& surface = j.at("surface");
+    r.face_points = surface.at("face_points").get<int>();
+    r.surface_points = surface.at("points").get<int>();
+    r.surface_median_mm = surface.at("median_mm").get<double>();
+    r.surface_turn_deg = surface.at("turn_deg").get<double>();
+    r.surface_scale_change = surface.at("scale_change").get<double>();
+    r.surface_note = surface.at("note").get<std::string>();
+    r.rms_mm = j.at("rms_mm").get<double>();
+    r.median_mm = j.at("median_mm").get<double>();
+    for (const auto& residual : j.at("residuals")) {
+      r.landmarks_used.push_back(residual.at("landmark").get<int>());
+      r.residuals_mm.push_back(residual.at("residual_mm").get<double>());
+      r.inlier.push_back(residual.at("inlier").get<bool>());
+    }
+    r.message = j.at("message").get<std::string>();
+  } catch (const nlohmann::json::exception& e) {
+    return Status::DataError(path.string() + " is damaged (" + e.what() + "); run headforge align again");
+  }
+  *result = std::move(r);
+  return Status::Ok();
 }
 
 }  // namespace headforge

@@ -7,7 +7,7 @@
 
 #include <vector>
 
-#include "calibration/camera_set.h"
+#include "core/camera_set.h"
 #include "calibration/landmark_embedding.h"
 #include "calibration/similarity.h"
 #include "capture/capture_io.h"
@@ -83,6 +83,11 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
 // with the translation rescaled so that the head frame stays metric.
 CameraSet ToHeadFrame(const CameraSet& cameras, const Sim3& head_from_world);
 
+// alignment.json: everything above but the per-landmark points, the
+// landmarks' own frame and the cameras (which are cameras_head.json).
+constexpr int kAlignmentVersion = 1;
 Status WriteAlignment(const AlignResult& result, const fs::path& path);
+// Reads what WriteAlignment wrote (checking its version) into `result`.
+Status ReadAlignment(const fs::path& path, AlignResult* result);
 
 }  // namespace headforge

@@ -9,7 +9,7 @@
 
 #include <string>
 
-#include "calibration/camera_set.h"
+#include "core/camera_set.h"
 #include "calibration/landmark_embedding.h"
 #include "calibration/colmap_runner.h"
 #include "calibration/head_pose.h"

@@ -8,7 +8,7 @@
 #include <string>
 #include <utility>
 
-#include "calibration/camera_set.h"
+#include "core/camera_set.h"
 #include "capture/capture_io.h"
 #include "core/fs.h"
 #include "core/status.h"

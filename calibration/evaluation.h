@@ -4,7 +4,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "calibration/camera_set.h"
+#include "core/camera_set.h"
 #include "calibration/similarity.h"
 #include "capture/capture_io.h"
 

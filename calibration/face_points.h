@@ -11,7 +11,7 @@
 
 #include <Eigen/Core>
 
-#include "calibration/camera_set.h"
+#include "core/camera_set.h"
 #include "capture/capture_io.h"
 #include "core/status.h"
 

@@ -24,9 +24,6 @@
 
 namespace headforge {
 
-// Bumped when the stage's outputs change for the same inputs and options.
-constexpr const char* kIngestVersion = "ingest-2";
-
 Status IngestOptions::Check() const {
   if (inputs.empty())
     return Status::InvalidArgument("no input: give one video file or image folder per camera with --video");
@@ -123,12 +120,8 @@ void ResolveIngestDefaults(const std::string& data_dir, IngestOptions* in) {
   if (in->landmark_model.empty()) in->landmark_model = DefaultLandmarkModel();
 }
 
-const char* IngestVersion() { return kIngestVersion; }
-
-Status IngestFingerprint(const IngestOptions& options, const std::string& options_ini,
-                         std::string* fingerprint) {
-  Hasher h;
-  h.Add(std::string(kIngestVersion)).Add(options_ini);
+Status AddIngestInputs(const IngestOptions& options, Hasher* hasher) {
+  Hasher& h = *hasher;
   for (const auto& input : options.inputs) {
     std::error_code ec;
     if (fs::is_directory(input, ec)) {
@@ -143,7 +136,6 @@ Status IngestFingerprint(const IngestOptions& options, const std::string& option
   const std::string detector_model = options.detector.UltraFaceModelPath();
   if (!detector_model.empty() && fs::exists(detector_model))
     HF_RETURN_IF_ERROR(h.AddFileStamp(detector_model));
-  *fingerprint = h.Hex();
   return Status::Ok();
 }
 
@@ -318,18 +310,6 @@ std::vector<const FaceCandidate*> SelectFaces(const std::vector<const FrameAnaly
   return chosen;
 }
 
-nlohmann::json PointsJson(const Landmarks68& points) {
-  nlohmann::json array = nlohmann::json::array();
-  for (const auto& p : points)
-    array.push_back({std::round(p.x * 100.0f) / 100.0f, std::round(p.y * 100.0f) / 100.0f});
-  return array;
-}
-
-nlohmann::json CropJson(const CropWindow& c) {
-  return {{"x0", c.x0}, {"y0", c.y0}, {"width", c.width}, {"height", c.height},
-          {"scale", c.scale}, {"output", {c.output.width, c.output.height}}};
-}
-
 Status LoadUserMasks(const IngestOptions& options, const std::string& camera, int cameras,
                      std::vector<fs::path>* files) {
   fs::path dir = options.masks;
@@ -346,32 +326,33 @@ Status LoadUserMasks(const IngestOptions& options, const std::string& camera, in
   return Status::Ok();
 }
 
-}  // namespace
+// Per camera: the face chosen in each kept frame, the crops, the user's masks.
+struct CameraPlan {
+  std::vector<const FaceCandidate*> faces;  // per kept frame; nullptr where lost
+  std::vector<FaceFrame> face_frames;       // per kept frame; lost frames borrow the nearest face
+  std::vector<CropWindow> crops;
+  std::vector<fs::path> user_masks;
+};
 
-Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int threads,
-                 Progress* progress, IngestSummary* summary) {
-  HF_RETURN_IF_ERROR(options.Check());
-  threads = std::max(1, threads);
-  *summary = IngestSummary();
-
-  // Open every input first so a bad one fails before any work.
-  std::vector<Camera> cameras(options.inputs.size());
+// Opens every input first, so that a bad one fails before any work.
+Status OpenCameras(const IngestOptions& options, std::vector<Camera>* cameras) {
+  cameras->resize(options.inputs.size());
   for (size_t c = 0; c < options.inputs.size(); ++c) {
-    cameras[c].name = CameraName(static_cast<int>(c));
-    cameras[c].offset = options.offsets.empty() ? 0 : options.offsets[c];
-    HF_RETURN_IF_ERROR(FrameSource::Open(options.inputs[c], options.folder_fps, &cameras[c].source));
-    if (c > 0 && std::abs(cameras[c].source->fps() - cameras[0].source->fps()) >
-                     0.01 * cameras[0].source->fps())
-      HF_LOG(Warning) << cameras[c].source->path() << " runs at " << cameras[c].source->fps()
-                      << " fps, the first input at " << cameras[0].source->fps()
-                      << " fps; cameras are paired by frame index (plus --offsets)";
+    Camera& cam = (*cameras)[c];
+    cam.name = CameraName(static_cast<int>(c));
+    cam.offset = options.offsets.empty() ? 0 : options.offsets[c];
+    HF_RETURN_IF_ERROR(FrameSource::Open(options.inputs[c], options.folder_fps, &cam.source));
+    const double first_fps = (*cameras)[0].source->fps();
+    if (c > 0 && std::abs(cam.source->fps() - first_fps) > 0.01 * first_fps)
+      HF_LOG(Warning) << cam.source->path() << " runs at " << cam.source->fps() << " fps, the first input at "
+                      << first_fps << " fps; cameras are paired by frame index (plus --offsets)";
   }
-  const double source_fps = cameras[0].source->fps();
-  if (options.fps > source_fps * 1.001)
-    HF_LOG(Warning) << "--fps " << options.fps << " exceeds the source's " << source_fps
-                    << " fps; every source frame is used";
-  const SamplePlan plan(options, source_fps);
+  return Status::Ok();
+}
 
+// Pass 1: sharpness, faces and landmarks of every sampled frame of every camera.
+Status AnalyseCameras(const IngestOptions& options, const SamplePlan& plan, int threads, Progress* progress,
+                      std::vector<Camera>* cameras) {
   Analysers analysers;
   HF_RETURN_IF_ERROR(LandmarkPredictor::Load(options.landmark_model, &analysers.landmarks));
   for (int w = 0; w < threads; ++w) {
@@ -379,7 +360,6 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
     HF_RETURN_IF_ERROR(FaceDetector::Create(options.detector, &detector));
     analysers.detectors.push_back(std::move(detector));
   }
-
   // OpenCV's own threads would compete with ours.
   const int opencv_threads = cv::getNumThreads();
   cv::setNumThreads(1);
@@ -388,8 +368,7 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
     ~RestoreThreads() { cv::setNumThreads(n); }
   } restore{opencv_threads};
 
-  // Pass 1: sharpness, faces and landmarks of every sampled frame.
-  for (auto& cam : cameras) {
+  for (auto& cam : *cameras) {
     int64_t expected = 0;
     const int64_t hint = cam.source->frame_count_hint();
     for (int k = 0; k < plan.max_frames(); ++k) {
@@ -398,33 +377,34 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
       ++expected;
     }
     progress->Start("ingest: analysing " + cam.name, expected);
-    HF_RETURN_IF_ERROR(AnalyseCamera(&cam, plan, threads, &analysers, progress)
-                           .WithContext(cam.source->path()));
+    HF_RETURN_IF_ERROR(AnalyseCamera(&cam, plan, threads, &analysers, progress).WithContext(cam.source->path()));
     progress->Finish(std::to_string(cam.analysis.size()) + " frames");
     if (cam.analysis.empty()) {
       const double length = hint > 0 ? hint / cam.source->fps() : 0.0;
       return Status::DataError("the time range holds no frame of " + cam.source->path() +
-                               (length > 0 ? " (about " + std::to_string(length).substr(0, 5) +
-                                                 " s long)"
+                               (length > 0 ? " (about " + std::to_string(length).substr(0, 5) + " s long)"
                                            : std::string()) +
                                "; check --start, --end and --offsets");
     }
   }
+  return Status::Ok();
+}
 
-  // Synchronise: a sample is kept when every camera has it and none is blurred.
+// Synchronises the cameras: a sample is kept when every camera has it and
+// none is blurred; the others are recorded in `dropped` with the reason.
+Status KeepSamples(const IngestOptions& options, std::vector<Camera>* cameras, std::vector<int>* kept,
+                   std::vector<DroppedSample>* dropped, IngestSummary* summary) {
   std::set<int> all_samples;
-  for (const auto& cam : cameras)
+  for (const auto& cam : *cameras)
     for (const auto& [k, a] : cam.analysis) all_samples.insert(k);
-  for (auto& cam : cameras) {
+  for (auto& cam : *cameras) {
     std::vector<double> values;
     for (const auto& [k, a] : cam.analysis) values.push_back(a.sharpness);
     BlurredFrames(values, 0.0, &cam.median_sharpness);
   }
-  nlohmann::json dropped = nlohmann::json::array();
-  std::vector<int> kept;
   for (int k : all_samples) {
     std::string reason, detail;
-    for (const auto& cam : cameras) {
+    for (const auto& cam : *cameras) {
       const auto it = cam.analysis.find(k);
       if (it == cam.analysis.end()) {
         reason = "missing";
@@ -441,44 +421,43 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
       }
     }
     if (reason.empty()) {
-      kept.push_back(k);
+      kept->push_back(k);
       continue;
     }
-    nlohmann::json sources = nlohmann::json::object();
-    for (const auto& cam : cameras) {
+    DroppedSample d{k, {}, reason, detail};
+    for (const auto& cam : *cameras) {
       const auto it = cam.analysis.find(k);
-      if (it != cam.analysis.end()) sources[cam.name] = it->second.source_index;
+      if (it != cam.analysis.end()) d.source_frames[cam.name] = it->second.source_index;
     }
-    dropped.push_back({{"sample", k}, {"source_frames", sources}, {"reason", reason}, {"detail", detail}});
+    dropped->push_back(d);
     (reason == "blur" ? summary->dropped_blur : summary->dropped_missing)++;
   }
   summary->sampled = static_cast<int>(all_samples.size());
-  summary->kept = static_cast<int>(kept.size());
-  summary->cameras = static_cast<int>(cameras.size());
-  if (kept.empty())
-    return Status::DataError("all " + std::to_string(all_samples.size()) +
-                             " sampled frames were dropped (" + std::to_string(summary->dropped_blur) +
-                             " blurred, " + std::to_string(summary->dropped_missing) +
+  summary->kept = static_cast<int>(kept->size());
+  summary->cameras = static_cast<int>(cameras->size());
+  if (kept->empty())
+    return Status::DataError("all " + std::to_string(all_samples.size()) + " sampled frames were dropped (" +
+                             std::to_string(summary->dropped_blur) + " blurred, " +
+                             std::to_string(summary->dropped_missing) +
                              " missing in a camera); try --blur-ratio 0 or check --offsets");
-  HF_LOG(Info) << "ingest: " << kept.size() << " of " << all_samples.size() << " frames kept, "
+  HF_LOG(Info) << "ingest: " << kept->size() << " of " << all_samples.size() << " frames kept, "
                << summary->dropped_blur << " dropped as blurred, " << summary->dropped_missing
                << " missing in a camera";
+  return Status::Ok();
+}
 
-  // Faces per camera over the kept frames; lost frames borrow the nearest face for cropping.
-  struct CameraPlan {
-    std::vector<const FaceCandidate*> faces;
-    std::vector<FaceFrame> face_frames;
-    std::vector<CropWindow> crops;
-    std::vector<fs::path> user_masks;
-  };
-  std::vector<CameraPlan> plans(cameras.size());
+// Faces per camera over the kept frames; lost frames borrow the nearest face for cropping.
+Status PlanFaces(const IngestOptions& options, const std::vector<Camera>& cameras, const std::vector<int>& kept,
+                 std::vector<CameraPlan>* plans, IngestSummary* summary) {
+  plans->assign(cameras.size(), CameraPlan());
   for (size_t c = 0; c < cameras.size(); ++c) {
-    auto& cam = cameras[c];
+    const Camera& cam = cameras[c];
+    CameraPlan& plan = (*plans)[c];
     std::vector<const FrameAnalysis*> frames;
     for (int k : kept) frames.push_back(&cam.analysis.at(k));
-    plans[c].faces = SelectFaces(frames);
+    plan.faces = SelectFaces(frames);
     const int found = static_cast<int>(
-        std::count_if(plans[c].faces.begin(), plans[c].faces.end(), [](auto* f) { return f != nullptr; }));
+        std::count_if(plan.faces.begin(), plan.faces.end(), [](auto* f) { return f != nullptr; }));
     if (found == 0)
       return Status::DataError(
           "no face found in " + cam.source->path() + " (" + std::to_string(kept.size()) +
@@ -490,191 +469,208 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
     if (found < options.min_face_fraction * kept.size())
       HF_LOG(Warning) << "face found in only " << found << " of " << kept.size() << " frames of "
                       << cam.source->path() << "; the others are kept and marked lost";
-
-    plans[c].face_frames.resize(kept.size());
+    plan.face_frames.resize(kept.size());
     for (size_t i = 0; i < kept.size(); ++i) {
       // Nearest frame with a face, earlier on ties.
       int best = -1;
       for (int d = 0; best < 0; ++d) {
-        if (static_cast<int>(i) - d >= 0 && plans[c].faces[i - d]) best = static_cast<int>(i) - d;
-        else if (i + d < kept.size() && plans[c].faces[i + d]) best = static_cast<int>(i + d);
+        if (static_cast<int>(i) - d >= 0 && plan.faces[i - d]) best = static_cast<int>(i) - d;
+        else if (i + d < kept.size() && plan.faces[i + d]) best = static_cast<int>(i + d);
       }
-      plans[c].face_frames[i] = FaceFrameOf(plans[c].faces[best]->landmarks);
+      plan.face_frames[i] = FaceFrameOf(plan.faces[best]->landmarks);
     }
     if (!options.masks.empty())
-      HF_RETURN_IF_ERROR(LoadUserMasks(options, cam.name, static_cast<int>(cameras.size()),
-                                       &plans[c].user_masks));
+      HF_RETURN_IF_ERROR(LoadUserMasks(options, cam.name, static_cast<int>(cameras.size()), &plan.user_masks));
   }
+  return Status::Ok();
+}
 
-  // Crops, pass 2 and the JSON files, for one crop mode.
-  auto write_outputs = [&](const std::string& crop_mode) -> Status {
-    for (size_t c = 0; c < cameras.size(); ++c) {
-      const std::vector<FaceFrame>& face_frames = plans[c].face_frames;
-      if (crop_mode == "sequence") {
-        plans[c].crops.assign(kept.size(), SequenceCrop(face_frames, options.crop_scale, options.resolution));
-      } else if (crop_mode == "frame") {
-        plans[c].crops = FollowingCrops(face_frames, options.crop_scale, options.resolution);
-      } else {
-        plans[c].crops.assign(kept.size(), FullFrameCrop(cameras[c].source->size(), options.resolution));
-      }
-    }
-
-    // Pass 2: decode again, crop, mask and write.
-    nlohmann::json landmarks_json = {{"format", "ibug68"},
-                                     {"coordinates", "pixels of frames/<camera>/<index>.png, "
-                                                     "pixel centres at integers"},
-                                     {"cameras", nlohmann::json::object()}};
-    nlohmann::json cameras_json = nlohmann::json::array();
-    for (size_t c = 0; c < cameras.size(); ++c) {
-      auto& cam = cameras[c];
-      const auto& plan_c = plans[c];
-      std::unique_ptr<FrameSource> source;
-      HF_RETURN_IF_ERROR(FrameSource::Open(options.inputs[c], options.folder_fps, &source));
-      const fs::path frame_dir = out_dir / "frames" / cam.name;
-      const fs::path mask_dir = out_dir / "masks" / cam.name;
-      HF_RETURN_IF_ERROR(EnsureDirectory(frame_dir));
-      HF_RETURN_IF_ERROR(EnsureDirectory(mask_dir));
-      std::map<int64_t, int> wanted;  // source frame -> output index
-      for (size_t i = 0; i < kept.size(); ++i) wanted[cam.analysis.at(kept[i]).source_index] = static_cast<int>(i);
-
-      progress->Start("ingest: writing " + cam.name, static_cast<int64_t>(kept.size()));
-      std::vector<std::pair<int, cv::Mat>> batch;
-      Status batch_status;
-      auto flush = [&]() {
-        std::vector<Status> statuses(batch.size());
-        ParallelFor(static_cast<int>(batch.size()), threads, [&](int b, int) {
-          const int i = batch[b].first;
-          const CropWindow& crop = plan_c.crops[i];
-          const cv::Mat frame = crop.Apply(batch[b].second, cv::INTER_LINEAR);
-          cv::Mat mask;
-          if (!plan_c.user_masks.empty()) {
-            const int64_t source_index = cam.analysis.at(kept[i]).source_index;
-            if (source_index >= static_cast<int64_t>(plan_c.user_masks.size())) {
-              statuses[b] = Status::DataError("no mask for source frame " + std::to_string(source_index) +
-                                              " of " + cam.name + " in " + options.masks);
-              return;
-            }
-            cv::Mat user;
-            statuses[b] = ReadImage(plan_c.user_masks[source_index], &user, cv::IMREAD_GRAYSCALE);
-            if (!statuses[b].ok()) return;
-            if (user.size() != batch[b].second.size()) {
-              statuses[b] = Status::DataError("mask " + plan_c.user_masks[source_index].string() +
-                                              " is not the size of its frame");
-              return;
-            }
-            mask = crop.Apply(user, cv::INTER_LINEAR) > 127;
-          } else {
-            // Lost frames borrow the nearest face, mapped into this crop.
-            const FaceCandidate* face = plan_c.faces[i];
-            for (int d = 1; !face; ++d) {
-              if (i - d >= 0 && plan_c.faces[i - d]) face = plan_c.faces[i - d];
-              else if (i + d < static_cast<int>(kept.size()) && plan_c.faces[i + d]) face = plan_c.faces[i + d];
-            }
-            Landmarks68 mapped;
-            for (int p = 0; p < 68; ++p) mapped[p] = crop.Map(face->landmarks[p]);
-            mask = HeadMask(frame, mapped, options.mask,
-                            static_cast<uint64_t>(options.seed) * 1000003ULL + i + 1);
-          }
-          statuses[b] = WriteImageAtomic(frame_dir / FrameFile(i), frame);
-          if (statuses[b].ok()) statuses[b] = WriteImageAtomic(mask_dir / FrameFile(i), mask);
-        });
-        for (const auto& st : statuses)
-          if (!st.ok() && batch_status.ok()) batch_status = st;
-        progress->Advance(static_cast<int64_t>(batch.size()));
-        batch.clear();
-      };
-      const int64_t last = wanted.rbegin()->first;
-      for (int64_t j = 0; j <= last && batch_status.ok(); ++j) {
-        const auto it = wanted.find(j);
-        if (it == wanted.end()) {
-          if (!source->Skip()) break;
-          continue;
-        }
-        cv::Mat frame;
-        bool end = false;
-        HF_RETURN_IF_ERROR(source->Read(&frame, &end));
-        if (end) break;
-        batch.emplace_back(it->second, frame);
-        if (static_cast<int>(batch.size()) >= 16) flush();
-      }
-      if (!batch.empty()) flush();
-      HF_RETURN_IF_ERROR(batch_status);
-      if (ListFiles(frame_dir).size() != kept.size())
-        return Status::DataError(cam.source->path() + " yielded fewer frames on the second read "
-                                 "than on the first (damaged stream?)");
-      progress->Finish();
-
-      nlohmann::json lm_frames = nlohmann::json::array();
-      nlohmann::json cam_frames = nlohmann::json::array();
-      for (size_t i = 0; i < kept.size(); ++i) {
-        const FrameAnalysis& a = cam.analysis.at(kept[i]);
-        const FaceCandidate* face = plan_c.faces[i];
-        const CropWindow& crop = plan_c.crops[i];
-        nlohmann::json entry = {{"index", i}, {"found", face != nullptr}};
-        if (face) {
-          Landmarks68 mapped;
-          for (int p = 0; p < 68; ++p) mapped[p] = crop.Map(face->landmarks[p]);
-          const cv::Point2f tl = crop.Map(face->detection.box.tl());
-          const cv::Point2f br = crop.Map(face->detection.box.br());
-          entry["score"] = std::round(face->detection.score * 1000.0f) / 1000.0f;
-          entry["detector"] = face->detection.from_fallback ? "dlib-hog (fallback)" : options.detector.detector;
-          entry["box"] = {tl.x, tl.y, br.x - tl.x, br.y - tl.y};
-          entry["points"] = PointsJson(mapped);
-        }
-        lm_frames.push_back(entry);
-        nlohmann::json frame_json = {{"index", i},
-                                     {"source_frame", a.source_index},
-                                     {"time_s", a.source_index / cam.source->fps()},
-                                     {"sharpness", std::round(a.sharpness * 10.0) / 10.0},
-                                     {"face", face ? "found" : "lost"}};
-        if (source->is_folder()) frame_json["source_file"] = source->FrameName(a.source_index);
-        if (crop_mode == "frame") frame_json["crop"] = CropJson(crop);
-        cam_frames.push_back(frame_json);
-      }
-      landmarks_json["cameras"][cam.name] = lm_frames;
-      nlohmann::json cam_json = {{"name", cam.name},
-                                 {"source", AbsolutePath(cam.source->path()).string()},
-                                 {"source_fps", cam.source->fps()},
-                                 {"source_size", {cam.source->size().width, cam.source->size().height}},
-                                 {"offset", cam.offset},
-                                 {"median_sharpness", cam.median_sharpness},
-                                 {"masks", options.masks.empty() ? "grabcut" : "user"},
-                                 {"frames", cam_frames}};
-      if (crop_mode != "frame") cam_json["crop"] = CropJson(plan_c.crops[0]);
-      cameras_json.push_back(cam_json);
-    }
-
-    nlohmann::json frames_json = nlohmann::json::array();
-    for (size_t i = 0; i < kept.size(); ++i)
-      frames_json.push_back({{"index", i},
-                             {"sample", kept[i]},
-                             {"time_s", cameras[0].analysis.at(kept[i]).source_index / source_fps}});
-    const nlohmann::json capture = {
-        {"version", 1},
-        {"crop_mode", crop_mode},
-        {"crop_mapping", "u_out = (u_src + 0.5 - x0) * scale - 0.5, pixel centres at integers"},
-        {"fps", options.fps > 0.0 ? std::min(options.fps, source_fps) : source_fps},
-        {"resolution", options.resolution},
-        {"frames", frames_json},
-        {"cameras", cameras_json},
-        {"dropped", dropped},
-        {"report",
-         {{"sampled", summary->sampled},
-          {"kept", summary->kept},
-          {"dropped_blur", summary->dropped_blur},
-          {"dropped_missing", summary->dropped_missing},
-          {"face_lost", summary->face_lost},
-          {"with_landmarks", summary->with_landmarks}}}};
-    HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "landmarks.json", landmarks_json, -1));
-    HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "capture.json", capture, 1));
+// The mask of kept frame `i` of a camera: the user's, cropped alike, or a
+// head mask seeded from the landmarks (lost frames borrow the nearest face).
+Status MakeMask(const IngestOptions& options, const Camera& cam, const CameraPlan& plan, const std::vector<int>& kept,
+                int i, const cv::Mat& source_frame, const cv::Mat& frame, cv::Mat* mask) {
+  const CropWindow& crop = plan.crops[i];
+  if (!plan.user_masks.empty()) {
+    const int64_t source_index = cam.analysis.at(kept[i]).source_index;
+    if (source_index >= static_cast<int64_t>(plan.user_masks.size()))
+      return Status::DataError("no mask for source frame " + std::to_string(source_index) + " of " + cam.name +
+                               " in " + options.masks);
+    cv::Mat user;
+    HF_RETURN_IF_ERROR(ReadImage(plan.user_masks[source_index], &user, cv::IMREAD_GRAYSCALE));
+    if (user.size() != source_frame.size())
+      return Status::DataError("mask " + plan.user_masks[source_index].string() + " is not the size of its frame");
+    *mask = crop.Apply(user, cv::INTER_LINEAR) > 127;
     return Status::Ok();
+  }
+  const FaceCandidate* face = plan.faces[i];
+  for (int d = 1; !face; ++d) {
+    if (i - d >= 0 && plan.faces[i - d]) face = plan.faces[i - d];
+    else if (i + d < static_cast<int>(kept.size()) && plan.faces[i + d]) face = plan.faces[i + d];
+  }
+  Landmarks68 mapped;
+  for (int p = 0; p < 68; ++p) mapped[p] = crop.Map(face->landmarks[p]);
+  *mask = HeadMask(frame, mapped, options.mask, static_cast<uint64_t>(options.seed) * 1000003ULL + i + 1);
+  return Status::Ok();
+}
+
+// Pass 2 for one camera: decodes again, crops, masks and writes its frames.
+Status WriteCameraFrames(const IngestOptions& options, int camera_index, const Camera& cam, const CameraPlan& plan,
+                         const std::vector<int>& kept, const fs::path& out_dir, int threads, Progress* progress) {
+  std::unique_ptr<FrameSource> source;
+  HF_RETURN_IF_ERROR(FrameSource::Open(options.inputs[camera_index], options.folder_fps, &source));
+  const fs::path frame_dir = out_dir / "frames" / cam.name;
+  const fs::path mask_dir = out_dir / "masks" / cam.name;
+  HF_RETURN_IF_ERROR(EnsureDirectory(frame_dir));
+  HF_RETURN_IF_ERROR(EnsureDirectory(mask_dir));
+  std::map<int64_t, int> wanted;  // source frame -> output index
+  for (size_t i = 0; i < kept.size(); ++i) wanted[cam.analysis.at(kept[i]).source_index] = static_cast<int>(i);
+
+  progress->Start("ingest: writing " + cam.name, static_cast<int64_t>(kept.size()));
+  std::vector<std::pair<int, cv::Mat>> batch;
+  Status batch_status;
+  auto flush = [&]() {
+    std::vector<Status> statuses(batch.size());
+    ParallelFor(static_cast<int>(batch.size()), threads, [&](int b, int) {
+      const int i = batch[b].first;
+      const cv::Mat frame = plan.crops[i].Apply(batch[b].second, cv::INTER_LINEAR);
+      cv::Mat mask;
+      statuses[b] = MakeMask(options, cam, plan, kept, i, batch[b].second, frame, &mask);
+      if (statuses[b].ok()) statuses[b] = WriteImageAtomic(frame_dir / FrameFile(i), frame);
+      if (statuses[b].ok()) statuses[b] = WriteImageAtomic(mask_dir / FrameFile(i), mask);
+    });
+    for (const auto& st : statuses)
+      if (!st.ok() && batch_status.ok()) batch_status = st;
+    progress->Advance(static_cast<int64_t>(batch.size()));
+    batch.clear();
   };
+  const int64_t last = wanted.rbegin()->first;
+  for (int64_t j = 0; j <= last && batch_status.ok(); ++j) {
+    const auto it = wanted.find(j);
+    if (it == wanted.end()) {
+      if (!source->Skip()) break;
+      continue;
+    }
+    cv::Mat frame;
+    bool end = false;
+    HF_RETURN_IF_ERROR(source->Read(&frame, &end));
+    if (end) break;
+    batch.emplace_back(it->second, frame);
+    if (static_cast<int>(batch.size()) >= 16) flush();
+  }
+  if (!batch.empty()) flush();
+  HF_RETURN_IF_ERROR(batch_status);
+  if (ListFiles(frame_dir).size() != kept.size())
+    return Status::DataError(cam.source->path() + " yielded fewer frames on the second read than on the first "
+                             "(damaged stream?)");
+  progress->Finish();
+  return Status::Ok();
+}
+
+// The record of one camera's kept frames, as capture.json and landmarks.json hold it.
+IngestedCamera CameraRecord(const IngestOptions& options, const std::string& crop_mode, const Camera& cam,
+                            const CameraPlan& plan, const std::vector<int>& kept) {
+  IngestedCamera record;
+  record.name = cam.name;
+  record.source = AbsolutePath(cam.source->path()).string();
+  record.source_fps = cam.source->fps();
+  record.source_width = cam.source->size().width;
+  record.source_height = cam.source->size().height;
+  record.offset = cam.offset;
+  record.median_sharpness = cam.median_sharpness;
+  record.masks = options.masks.empty() ? "grabcut" : "user";
+  record.fixed_crop = crop_mode != "frame";
+  const CropWindow& first = plan.crops[0];
+  record.crop_x0 = first.x0;
+  record.crop_y0 = first.y0;
+  record.crop_width = first.width;
+  record.crop_height = first.height;
+  record.crop_scale = first.scale;
+  record.width = first.output.width;
+  record.height = first.output.height;
+  for (size_t i = 0; i < kept.size(); ++i) {
+    const FrameAnalysis& a = cam.analysis.at(kept[i]);
+    const CropWindow& crop = plan.crops[i];
+    IngestedFrame f;
+    f.index = static_cast<int>(i);
+    f.source_frame = static_cast<int>(a.source_index);
+    f.time_s = a.source_index / cam.source->fps();
+    f.sharpness = std::round(a.sharpness * 10.0) / 10.0;
+    if (cam.source->is_folder()) f.source_file = cam.source->FrameName(a.source_index);
+    if (crop_mode == "frame") f.crop = crop;
+    if (const FaceCandidate* face = plan.faces[i]) {
+      Landmarks68 mapped;
+      for (int p = 0; p < 68; ++p) {
+        const cv::Point2f m = crop.Map(face->landmarks[p]);
+        mapped[p] = cv::Point2f(std::round(m.x * 100.0f) / 100.0f, std::round(m.y * 100.0f) / 100.0f);
+      }
+      f.landmarks = mapped;
+      const cv::Point2f tl = crop.Map(face->detection.box.tl());
+      const cv::Point2f br = crop.Map(face->detection.box.br());
+      f.score = std::round(face->detection.score * 1000.0f) / 1000.0f;
+      f.detector = face->detection.from_fallback ? "dlib-hog (fallback)" : options.detector.detector;
+      f.box = cv::Rect2f(tl.x, tl.y, br.x - tl.x, br.y - tl.y);
+    }
+    record.frames.push_back(f);
+  }
+  return record;
+}
+
+// Crops for `crop_mode`, pass 2, and capture.json / landmarks.json.
+Status WriteOutputs(const IngestOptions& options, const std::string& crop_mode, const std::vector<Camera>& cameras,
+                    std::vector<CameraPlan>* plans, const std::vector<int>& kept,
+                    const std::vector<DroppedSample>& dropped, const IngestSummary& summary, const fs::path& out_dir,
+                    int threads, Progress* progress) {
+  IngestedCapture capture;
+  const double source_fps = cameras[0].source->fps();
+  capture.fps = options.fps > 0.0 ? std::min(options.fps, source_fps) : source_fps;
+  capture.resolution = options.resolution;
+  capture.crop_mode = crop_mode;
+  capture.samples = kept;
+  capture.dropped = dropped;
+  capture.counts = {summary.sampled,   summary.kept,      summary.dropped_blur,
+                    summary.dropped_missing, summary.face_lost, summary.with_landmarks};
+  for (size_t c = 0; c < cameras.size(); ++c) {
+    CameraPlan& plan = (*plans)[c];
+    if (crop_mode == "sequence") {
+      plan.crops.assign(kept.size(), SequenceCrop(plan.face_frames, options.crop_scale, options.resolution));
+    } else if (crop_mode == "frame") {
+      plan.crops = FollowingCrops(plan.face_frames, options.crop_scale, options.resolution);
+    } else {
+      plan.crops.assign(kept.size(), FullFrameCrop(cameras[c].source->size(), options.resolution));
+    }
+    HF_RETURN_IF_ERROR(WriteCameraFrames(options, int(c), cameras[c], plan, kept, out_dir, threads, progress));
+    capture.cameras.push_back(CameraRecord(options, crop_mode, cameras[c], plan, kept));
+  }
+  return WriteIngestedCapture(capture, out_dir);
+}
+
+}  // namespace
+
+Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int threads,
+                 Progress* progress, IngestSummary* summary) {
+  HF_RETURN_IF_ERROR(options.Check());
+  threads = std::max(1, threads);
+  *summary = IngestSummary();
+  std::vector<Camera> cameras;
+  HF_RETURN_IF_ERROR(OpenCameras(options, &cameras));
+  const double source_fps = cameras[0].source->fps();
+  if (options.fps > source_fps * 1.001)
+    HF_LOG(Warning) << "--fps " << options.fps << " exceeds the source's " << source_fps
+                    << " fps; every source frame is used";
+  const SamplePlan plan(options, source_fps);
+  HF_RETURN_IF_ERROR(AnalyseCameras(options, plan, threads, progress, &cameras));
+  std::vector<int> kept;
+  std::vector<DroppedSample> dropped;
+  HF_RETURN_IF_ERROR(KeepSamples(options, &cameras, &kept, &dropped, summary));
+  std::vector<CameraPlan> plans;
+  HF_RETURN_IF_ERROR(PlanFaces(options, cameras, kept, &plans, summary));
 
   std::string crop_mode = options.crop != "auto" ? options.crop : cameras.size() > 1 ? "none" : "sequence";
   std::string why = options.crop != "auto"    ? "as asked"
                     : cameras.size() > 1 ? "auto: several cameras keep the whole frame, whose background COLMAP needs"
                                          : "auto: one camera";
-  HF_RETURN_IF_ERROR(write_outputs(crop_mode));
+  HF_RETURN_IF_ERROR(
+      WriteOutputs(options, crop_mode, cameras, &plans, kept, dropped, *summary, out_dir, threads, progress));
   if (options.crop == "auto" && cameras.size() == 1) {
     // A moving camera goes to COLMAP, which needs the background the crop
     // around the head leaves out: measure the motion on what was written, and
@@ -690,7 +686,8 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
       std::error_code ec;
       fs::remove_all(out_dir / "frames", ec);
       fs::remove_all(out_dir / "masks", ec);
-      HF_RETURN_IF_ERROR(write_outputs(crop_mode));
+      HF_RETURN_IF_ERROR(
+          WriteOutputs(options, crop_mode, cameras, &plans, kept, dropped, *summary, out_dir, threads, progress));
     } else {
       why = "auto: one fixed camera; " + motion.Describe();
     }

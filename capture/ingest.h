@@ -13,6 +13,7 @@
 #include "capture/face_detector.h"
 #include "capture/face_mask.h"
 #include "core/fs.h"
+#include "core/hash.h"
 #include "core/options.h"
 #include "core/progress.h"
 #include "core/status.h"
@@ -67,14 +68,9 @@ void AddIngestOptions(OptionSet* options, IngestOptions* ingest);
 // Applies the shared data folder to options whose defaults live there.
 void ResolveIngestDefaults(const std::string& data_dir, IngestOptions* ingest);
 
-// The marker of ingest's outputs: it changes whenever the same inputs and
-// options would give other frames, landmarks or masks.
-const char* IngestVersion();
-
-// The fingerprint of the stage: its options (semantic INI text), the contents
-// of every input and mask, and the model files.
-Status IngestFingerprint(const IngestOptions& options, const std::string& options_ini,
-                         std::string* fingerprint);
+// What decides ingest's outputs besides its options (and the stage's
+// version): the contents of every input and mask, and the model files' stamps.
+Status AddIngestInputs(const IngestOptions& options, Hasher* hasher);
 
 struct IngestSummary {
   int sampled = 0;           // synchronised frames sampled

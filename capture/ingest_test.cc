@@ -9,6 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "capture/capture_io.h"
 #include "capture/test_util.h"
 #include "core/json_io.h"
 #include "core/paths.h"
@@ -49,6 +50,23 @@ void ExpectFailure(const Status& status, Status::Code code, const std::vector<st
   ASSERT_FALSE(status.ok());
   EXPECT_EQ(status.code(), code) << status.message();
   for (const auto& w : words) EXPECT_NE(status.message().find(w), std::string::npos) << status.message();
+}
+
+// capture.json and landmarks.json read into their record and written again
+// give the same bytes: the reader keeps everything ingest wrote.
+void ExpectRewritesIdentically(const fs::path& out) {
+  IngestedCapture capture;
+  const Status read = ReadIngestedCapture(out, &capture);
+  ASSERT_TRUE(read.ok()) << read.message();
+  const fs::path again = out.parent_path() / (out.filename().string() + "_rewritten");
+  fs::create_directories(again);
+  ASSERT_TRUE(WriteIngestedCapture(capture, again).ok());
+  for (const char* name : {"capture.json", "landmarks.json"}) {
+    std::string first, second;
+    ASSERT_TRUE(ReadFileToString(out / name, &first).ok());
+    ASSERT_TRUE(ReadFileToString(again / name, &second).ok());
+    EXPECT_EQ(first, second) << name;
+  }
 }
 
 TEST(Ingest, GridClipSampledAndCropped) {
@@ -99,6 +117,7 @@ TEST(Ingest, DropsTheFrameBlurredOnPurposeAndSaysWhy) {
   EXPECT_NE(capture["dropped"][0]["detail"].get<std::string>().find("median"), std::string::npos);
   // Frame 8 of the source became output frame 7.
   EXPECT_EQ(capture["cameras"][0]["frames"][7]["source_frame"], 8);
+  ExpectRewritesIdentically(dir / "out");
 }
 
 TEST(Ingest, FramesWithoutAFaceAreKeptMarkedAndCounted) {
@@ -124,6 +143,32 @@ TEST(Ingest, FramesWithoutAFaceAreKeptMarkedAndCounted) {
   }
   EXPECT_EQ(capture["report"]["face_lost"], 3);
   EXPECT_TRUE(fs::exists(dir / "out" / "masks" / "cam0" / "000004.png"));
+  ExpectRewritesIdentically(dir / "out");
+}
+
+TEST(Ingest, FollowingCropsAreRecordedPerFrame) {
+  const fs::path dir = ScratchDir();
+  IngestOptions options = Defaults({WriteFolder(dir / "in", GridFrames("bbaf2n", 6)).string()});
+  options.crop = "frame";
+  options.resolution = 96;
+  ASSERT_TRUE(Ingest(options, dir / "out").ok());
+  IngestedCapture capture;
+  ASSERT_TRUE(ReadIngestedCapture(dir / "out", &capture).ok());
+  ASSERT_EQ(capture.num_frames(), 6);
+  EXPECT_FALSE(capture.cameras[0].fixed_crop);
+  for (const IngestedFrame& f : capture.cameras[0].frames) {
+    ASSERT_TRUE(f.crop.has_value());
+    EXPECT_EQ(f.crop->output, cv::Size(96, 96));
+    EXPECT_FALSE(f.source_file.empty());
+  }
+  ExpectRewritesIdentically(dir / "out");
+  // A capture.json of another version is refused, naming the stage to rerun.
+  nlohmann::json json;
+  ASSERT_TRUE(ReadJson(dir / "out" / "capture.json", &json).ok());
+  json["version"] = 1;
+  ASSERT_TRUE(WriteJsonAtomic(dir / "out" / "capture.json", json).ok());
+  ExpectFailure(ReadIngestedCapture(dir / "out", &capture), Status::Code::kDataError,
+                {"capture.json", "version 1", "run headforge ingest again"});
 }
 
 TEST(Ingest, SynchronisesCamerasByOffsets) {
@@ -152,6 +197,7 @@ TEST(Ingest, SynchronisesCamerasByOffsets) {
     ASSERT_FALSE(f0.empty());
     EXPECT_EQ(cv::norm(f0, f1, cv::NORM_INF), 0.0) << "frame " << i;
   }
+  ExpectRewritesIdentically(dir / "out");
 }
 
 TEST(Ingest, UsesTheUsersMasks) {
@@ -271,7 +317,7 @@ TEST(IngestBadInput, NonPositiveResolutionAndOtherBadOptions) {
   ExpectFailure(options.Check(), Status::Code::kInvalidArgument, {"--offsets"});
 }
 
-TEST(IngestFingerprint, ChangesWithOptionsAndInputsOnly) {
+TEST(IngestInputs, FingerprintChangesWithOptionsAndInputsOnly) {
   const fs::path dir = ScratchDir();
   fs::copy_file(GridClip("bbaf2n"), dir / "clip.mpg");
   IngestOptions options = Defaults({(dir / "clip.mpg").string()});
@@ -279,9 +325,10 @@ TEST(IngestFingerprint, ChangesWithOptionsAndInputsOnly) {
     OptionSet set;
     IngestOptions bound = o;
     AddIngestOptions(&set, &bound);
-    std::string f;
-    EXPECT_TRUE(IngestFingerprint(bound, set.ToIni("ingest", true), &f).ok());
-    return f;
+    Hasher h;
+    h.Add(set.ToIni("ingest", true));
+    EXPECT_TRUE(AddIngestInputs(bound, &h).ok());
+    return h.Hex();
   };
   const std::string base = fingerprint(options);
   EXPECT_EQ(fingerprint(options), base);

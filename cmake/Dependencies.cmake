@@ -14,10 +14,7 @@ if(NOT HEADFORGE_SPLAT_ONLY)
   find_package(dlib REQUIRED)
   find_package(HDF5 REQUIRED COMPONENTS C CXX)
   find_package(Ceres 2 REQUIRED)
-  find_package(CGAL REQUIRED)
-  # CGAL ships a FindOpenMesh module that would shadow OpenMesh's own config.
   find_package(OpenMesh REQUIRED CONFIG)
-  find_package(TinyGLTF REQUIRED CONFIG)
   find_package(tomlplusplus REQUIRED CONFIG)
 endif()
 

@@ -17,6 +17,25 @@ Status WriteJsonAtomic(const fs::path& path, const nlohmann::json& json, int ind
   return WriteFileAtomic(path, json.dump(indent) + "\n");
 }
 
+Status ReadArtefact(const fs::path& path, int version, const std::string& stage, nlohmann::json* json) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) {
+    return Status::NotFound("no " + path.filename().string() + " in " + path.parent_path().string() +
+                            " (run headforge " + stage + " first)");
+  }
+  HF_RETURN_IF_ERROR(ReadJson(path, json));
+  const auto it = json->find("version");
+  if (it == json->end() || !it->is_number_integer() || it->get<int>() != version) {
+    const std::string found = it == json->end() || !it->is_number_integer() ? "no version" : "version " + it->dump();
+    const bool newer = it != json->end() && it->is_number_integer() && it->get<int>() > version;
+    return Status::DataError(path.string() + " has " + found + ", and this HeadForge reads version " +
+                             std::to_string(version) + (newer ? " (it was written by a newer HeadForge)" : "") +
+                             "; run headforge " + stage + " again to rewrite it (headforge run redoes " + stage +
+                             " and the stages after it)");
+  }
+  return Status::Ok();
+}
+
 nlohmann::json PoseToJson(const Eigen::Isometry3d& pose) {
   nlohmann::json rows = nlohmann::json::array();
   for (int r = 0; r < 4; ++r)

@@ -16,6 +16,7 @@ class Status {
     kNotFound,         // a named file or folder does not exist
     kDataError,        // the input exists but cannot be used (corrupt, no face, ...)
     kIoError,          // reading or writing failed (permissions, full disk)
+    kInterrupted,      // stopped on request (SIGINT, SIGTERM) after saving what resumes it
     kInternal,         // anything else
   };
 
@@ -25,6 +26,7 @@ class Status {
   static Status NotFound(std::string m) { return Status(Code::kNotFound, std::move(m)); }
   static Status DataError(std::string m) { return Status(Code::kDataError, std::move(m)); }
   static Status IoError(std::string m) { return Status(Code::kIoError, std::move(m)); }
+  static Status Interrupted(std::string m) { return Status(Code::kInterrupted, std::move(m)); }
   static Status Internal(std::string m) { return Status(Code::kInternal, std::move(m)); }
 
   bool ok() const { return code_ == Code::kOk; }

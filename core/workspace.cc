@@ -24,6 +24,7 @@ StageStatus ParseStatus(const std::string& text) {
   if (text == "running") return StageStatus::kRunning;
   if (text == "done") return StageStatus::kDone;
   if (text == "failed") return StageStatus::kFailed;
+  if (text == "interrupted") return StageStatus::kInterrupted;
   return StageStatus::kPending;
 }
 
@@ -35,14 +36,9 @@ const char* StageStatusName(StageStatus status) {
     case StageStatus::kRunning: return "running";
     case StageStatus::kDone: return "done";
     case StageStatus::kFailed: return "failed";
+    case StageStatus::kInterrupted: return "interrupted";
   }
   return "pending";
-}
-
-const std::vector<std::string>& KnownStages() {
-  static const std::vector<std::string> stages = {"ingest", "calibrate", "align",
-                                                  "track",  "train",     "export"};
-  return stages;
 }
 
 std::string NowIso8601() {
@@ -132,9 +128,9 @@ Status Workspace::Save() const {
   return WriteFileAtomic(root_ / kManifest, manifest.dump(2) + "\n");
 }
 
-std::vector<StageRecord> Workspace::Stages() const {
+std::vector<StageRecord> Workspace::Stages(const std::vector<std::string>& order) const {
   std::vector<StageRecord> ordered;
-  for (const auto& name : KnownStages()) {
+  for (const auto& name : order) {
     if (const StageRecord* r = Find(name)) {
       ordered.push_back(*r);
     } else {
@@ -144,8 +140,7 @@ std::vector<StageRecord> Workspace::Stages() const {
     }
   }
   for (const auto& r : records_) {
-    const auto& known = KnownStages();
-    if (std::find(known.begin(), known.end(), r.name) == known.end()) ordered.push_back(r);
+    if (std::find(order.begin(), order.end(), r.name) == order.end()) ordered.push_back(r);
   }
   return ordered;
 }
@@ -185,11 +180,17 @@ bool Workspace::WasInterrupted(const std::string& stage) const {
   return free;
 }
 
-Status Workspace::BeginStage(const std::string& stage, const std::string& fingerprint,
-                             fs::path* staging) {
+Status Workspace::BeginStage(const std::string& stage, const std::string& fingerprint, bool resumable,
+                             fs::path* staging, bool* resumed) {
   HF_CHECK(mode_ == Mode::kReadWrite);
   *staging = root_ / kStagingDir / stage;
-  HF_RETURN_IF_ERROR(RemoveAll(*staging));  // leftovers of an interrupted attempt
+  // We hold the lock, so a record that says running belongs to a run that died.
+  const StageRecord* last = Find(stage);
+  std::error_code ec;
+  *resumed = resumable && last != nullptr && last->fingerprint == fingerprint &&
+             (last->status == StageStatus::kRunning || last->status == StageStatus::kInterrupted) &&
+             fs::is_directory(*staging, ec);
+  if (!*resumed) HF_RETURN_IF_ERROR(RemoveAll(*staging));  // leftovers of an interrupted attempt
   HF_RETURN_IF_ERROR(RemoveAll(root_ / kFailedDir / stage));  // an earlier failure's files
   HF_RETURN_IF_ERROR(EnsureDirectory(*staging));
   StageRecord* r = Mutable(stage);
@@ -245,32 +246,51 @@ Status Workspace::FailStage(const std::string& stage, std::string* message, doub
   return Save();
 }
 
-Status RunStage(Workspace* workspace, const std::string& stage, const std::string& fingerprint,
-                const std::string& options_ini,
-                const std::function<Status(const fs::path& staging, StageResult* result)>& body,
-                bool* skipped) {
-  if (workspace->IsUpToDate(stage, fingerprint)) {
+Status Workspace::InterruptStage(const std::string& stage, const std::string& message, double wall_time_s) {
+  HF_CHECK(mode_ == Mode::kReadWrite);
+  StageRecord* r = Mutable(stage);
+  r->status = StageStatus::kInterrupted;
+  r->wall_time_s = wall_time_s;
+  r->finished_at = NowIso8601();
+  r->message = message;
+  return Save();
+}
+
+Status RunStage(Workspace* workspace, const StageRun& run, const StageBody& body, bool* skipped) {
+  const std::string& stage = run.name;
+  if (!run.force && workspace->IsUpToDate(stage, run.fingerprint)) {
     HF_LOG(Info) << stage << ": up to date (inputs and options unchanged), skipped";
     *skipped = true;
     return Status::Ok();
   }
   *skipped = false;
-  if (workspace->WasInterrupted(stage))
+  const bool cut_short = workspace->WasInterrupted(stage) ||
+                         (workspace->Find(stage) && workspace->Find(stage)->status == StageStatus::kInterrupted);
+  StageContext context;
+  HF_RETURN_IF_ERROR(
+      workspace->BeginStage(stage, run.fingerprint, run.resumable && !run.force, &context.staging, &context.resumed));
+  if (context.resumed) {
+    HF_LOG(Info) << stage << ": an earlier run was interrupted; resuming from its checkpoint";
+  } else if (cut_short) {
     HF_LOG(Info) << stage << ": an earlier run was interrupted; redoing the stage";
-  fs::path staging;
-  HF_RETURN_IF_ERROR(workspace->BeginStage(stage, fingerprint, &staging));
+  }
+  const fs::path& staging = context.staging;
   const auto start = std::chrono::steady_clock::now();
   auto seconds = [&] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   };
   StageResult result;
-  Status status = WriteFileAtomic(staging / (stage + ".ini"), options_ini);
+  Status status = WriteFileAtomic(staging / (stage + ".ini"), run.options_ini);
   if (status.ok()) {
     try {
-      status = body(staging, &result);
+      status = body(context, &result);
     } catch (const std::exception& e) {
       status = Status::Internal(e.what());
     }
+  }
+  if (status.code() == Status::Code::kInterrupted) {
+    workspace->InterruptStage(stage, status.message(), seconds());
+    return status.WithContext(stage);
   }
   if (!status.ok()) {
     std::string message = status.message();

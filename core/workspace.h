@@ -5,7 +5,10 @@
 // A stage writes its outputs into a private staging folder; only when it has
 // finished are they moved into the workspace and the stage marked done. So a
 // stage that fails or is killed leaves the outputs of earlier runs (and of
-// earlier stages) as they were, and is simply redone on the next run.
+// earlier stages) as they were, and is simply redone on the next run. A
+// resumable stage (training) also keeps checkpoints in its staging folder: a
+// later run with the same fingerprint is handed that folder back and goes on
+// from the last checkpoint instead of starting again.
 #pragma once
 
 #include <functional>
@@ -18,11 +21,10 @@
 
 namespace headforge {
 
-enum class StageStatus { kPending, kRunning, kDone, kFailed };
+// kInterrupted: stopped on a signal after saving a checkpoint (a stage killed
+// outright stays kRunning with nobody holding the lock).
+enum class StageStatus { kPending, kRunning, kDone, kFailed, kInterrupted };
 const char* StageStatusName(StageStatus status);
-
-// The pipeline's stages in order; `status` lists them in this order.
-const std::vector<std::string>& KnownStages();
 
 struct StageRecord {
   std::string name;
@@ -47,8 +49,9 @@ class Workspace {
   const fs::path& root() const { return root_; }
   fs::path Path(const std::string& relative) const { return root_ / relative; }
 
-  // Records in KnownStages() order, then any other stage, pending ones included.
-  std::vector<StageRecord> Stages() const;
+  // Records of the stages named in `order` (pending ones for those never
+  // started), then of any other stage recorded.
+  std::vector<StageRecord> Stages(const std::vector<std::string>& order) const;
   // nullptr when the stage has never started.
   const StageRecord* Find(const std::string& stage) const;
   // Done with this fingerprint, and every recorded output still present.
@@ -57,9 +60,13 @@ class Workspace {
   // that started it was interrupted.
   bool WasInterrupted(const std::string& stage) const;
 
-  // Marks the stage running and returns an empty staging folder for its outputs;
-  // an earlier failure's kept files (failed/<stage>/) are removed.
-  Status BeginStage(const std::string& stage, const std::string& fingerprint, fs::path* staging);
+  // Marks the stage running and returns its staging folder: empty, or, for a
+  // `resumable` stage whose last attempt was interrupted (killed, or stopped
+  // on a signal) with the same fingerprint, that attempt's folder with its
+  // checkpoints (`*resumed` true). An earlier failure's kept files
+  // (failed/<stage>/) are removed.
+  Status BeginStage(const std::string& stage, const std::string& fingerprint, bool resumable, fs::path* staging,
+                    bool* resumed);
   // Moves each output (relative to the staging folder) into the workspace root,
   // replacing what was there, then marks the stage done.
   Status CommitStage(const std::string& stage, const std::vector<std::string>& outputs,
@@ -69,6 +76,9 @@ class Workspace {
   // failed/<stage>/, replacing an older failure's, and `message` is rewritten
   // to point there (paths into the staging folder, or a note at the end).
   Status FailStage(const std::string& stage, std::string* message, double wall_time_s);
+  // Marks the stage interrupted on request; its staging folder stays for the
+  // next run to resume.
+  Status InterruptStage(const std::string& stage, const std::string& message, double wall_time_s);
 
  private:
   Workspace() = default;
@@ -82,22 +92,37 @@ class Workspace {
   std::vector<StageRecord> records_;
 };
 
+// One attempt at a stage, as RunStage makes it.
+struct StageRun {
+  std::string name;
+  std::string fingerprint;  // hash of the stage's inputs and options
+  std::string options_ini;  // the effective options, written beside the outputs as <name>.ini
+  bool resumable = false;   // keeps checkpoints in its staging folder (Workspace::BeginStage)
+  bool force = false;       // run even when up to date, from a clean staging folder
+};
+
+// What the body of a stage is handed.
+struct StageContext {
+  fs::path staging;      // where it writes its outputs (and checkpoints)
+  bool resumed = false;  // staging holds an interrupted attempt's checkpoints
+};
+
 // What a stage body reports back to RunStage.
 struct StageResult {
   std::vector<std::string> outputs;  // relative to the staging folder
   std::string message;               // one-line summary for `status`
 };
 
-// Runs `body` as `stage` unless it is up to date with `fingerprint`. The body
-// writes into `staging`; RunStage writes `options_ini` there as <stage>.ini,
-// commits, and records the wall time. `*skipped` tells whether the body ran.
-// When the body fails, what it wrote is kept in failed/<stage>/ and the error
-// names that folder (paths into the staging folder in the message are
-// rewritten to point there).
-Status RunStage(Workspace* workspace, const std::string& stage, const std::string& fingerprint,
-                const std::string& options_ini,
-                const std::function<Status(const fs::path& staging, StageResult* result)>& body,
-                bool* skipped);
+using StageBody = std::function<Status(const StageContext& context, StageResult* result)>;
+
+// Runs `body` as `run.name` unless it is up to date with `run.fingerprint`.
+// The body writes into the staging folder; RunStage writes the options there
+// as <name>.ini, commits, and records the wall time. `*skipped` tells whether
+// the body ran. When the body fails, what it wrote is kept in failed/<stage>/
+// and the error names that folder (paths into the staging folder in the
+// message are rewritten to point there). A body that returns
+// Status::Interrupted leaves its staging folder for the next run to resume.
+Status RunStage(Workspace* workspace, const StageRun& run, const StageBody& body, bool* skipped);
 
 // Current UTC time as ISO 8601 text.
 std::string NowIso8601();

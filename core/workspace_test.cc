@@ -16,6 +16,11 @@ class WorkspaceTest : public ::testing::Test {
   fs::path root_;
 };
 
+// Adapts a body that needs only the staging folder.
+StageBody Body(std::function<Status(const fs::path&, StageResult*)> body) {
+  return [body](const StageContext& context, StageResult* result) { return body(context.staging, result); };
+}
+
 Status WriteOutput(const fs::path& staging, StageResult* result, const std::string& text) {
   HF_RETURN_IF_ERROR(WriteFileAtomic(staging / "out" / "a.txt", text));
   result->outputs = {"out"};
@@ -32,12 +37,12 @@ TEST_F(WorkspaceTest, RunsOnceThenSkipsUntilFingerprintChanges) {
     return WriteOutput(staging, result, "v" + std::to_string(runs));
   };
   bool skipped = true;
-  ASSERT_TRUE(RunStage(ws.get(), "ingest", "f1", "[ingest]\n", body, &skipped).ok());
+  ASSERT_TRUE(RunStage(ws.get(), {"ingest", "f1", "[ingest]\n"}, Body(body), &skipped).ok());
   EXPECT_FALSE(skipped);
-  ASSERT_TRUE(RunStage(ws.get(), "ingest", "f1", "[ingest]\n", body, &skipped).ok());
+  ASSERT_TRUE(RunStage(ws.get(), {"ingest", "f1", "[ingest]\n"}, Body(body), &skipped).ok());
   EXPECT_TRUE(skipped);
   EXPECT_EQ(runs, 1);
-  ASSERT_TRUE(RunStage(ws.get(), "ingest", "f2", "[ingest]\n", body, &skipped).ok());
+  ASSERT_TRUE(RunStage(ws.get(), {"ingest", "f2", "[ingest]\n"}, Body(body), &skipped).ok());
   EXPECT_FALSE(skipped);
   EXPECT_EQ(runs, 2);
   const StageRecord* r = ws->Find("ingest");
@@ -58,9 +63,9 @@ TEST_F(WorkspaceTest, MissingOutputForcesRerun) {
     return WriteOutput(staging, result, "x");
   };
   bool skipped;
-  ASSERT_TRUE(RunStage(ws.get(), "ingest", "f", "", body, &skipped).ok());
+  ASSERT_TRUE(RunStage(ws.get(), {"ingest", "f", ""}, Body(body), &skipped).ok());
   fs::remove_all(root_ / "out");
-  ASSERT_TRUE(RunStage(ws.get(), "ingest", "f", "", body, &skipped).ok());
+  ASSERT_TRUE(RunStage(ws.get(), {"ingest", "f", ""}, Body(body), &skipped).ok());
   EXPECT_FALSE(skipped);
   EXPECT_EQ(runs, 2);
 }
@@ -69,16 +74,14 @@ TEST_F(WorkspaceTest, FailureKeepsEarlierOutputsAndIsRecorded) {
   std::unique_ptr<Workspace> ws;
   ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
   bool skipped;
-  ASSERT_TRUE(RunStage(ws.get(), "ingest", "f1", "",
-                       [](const fs::path& s, StageResult* r) { return WriteOutput(s, r, "good"); },
+  ASSERT_TRUE(RunStage(ws.get(), {"ingest", "f1", ""}, Body([](const fs::path& s, StageResult* r) { return WriteOutput(s, r, "good"); }),
                        &skipped)
                   .ok());
   const Status status = RunStage(
-      ws.get(), "ingest", "f2", "",
-      [](const fs::path& staging, StageResult* result) {
+      ws.get(), {"ingest", "f2", ""}, Body([](const fs::path& staging, StageResult* result) {
         WriteOutput(staging, result, "half").ok();
         return Status::DataError("no face found");
-      },
+      }),
       &skipped);
   ASSERT_FALSE(status.ok());
   EXPECT_NE(status.message().find("no face found"), std::string::npos);
@@ -93,11 +96,10 @@ TEST_F(WorkspaceTest, FailedAttemptsFilesAreKeptAndNamedInTheError) {
   ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
   bool skipped;
   const Status status = RunStage(
-      ws.get(), "calibrate", "f1", "x = 1\n",
-      [](const fs::path& staging, StageResult*) {
+      ws.get(), {"calibrate", "f1", "x = 1\n"}, Body([](const fs::path& staging, StageResult*) {
         EXPECT_TRUE(WriteFileAtomic(staging / "colmap" / "colmap.log", "mapper: no good initial pair").ok());
         return Status::DataError("COLMAP failed; see " + (staging / "colmap" / "colmap.log").string());
-      },
+      }),
       &skipped);
   ASSERT_FALSE(status.ok());
   EXPECT_EQ(status.code(), Status::Code::kDataError);
@@ -112,11 +114,10 @@ TEST_F(WorkspaceTest, FailedAttemptsFilesAreKeptAndNamedInTheError) {
 
   // A failure that names no path gets the folder appended.
   const Status second = RunStage(
-      ws.get(), "calibrate", "f2", "",
-      [](const fs::path& staging, StageResult*) {
+      ws.get(), {"calibrate", "f2", ""}, Body([](const fs::path& staging, StageResult*) {
         EXPECT_TRUE(WriteFileAtomic(staging / "partial.txt", "half").ok());
         return Status::DataError("no face found");
-      },
+      }),
       &skipped);
   ASSERT_FALSE(second.ok());
   EXPECT_NE(second.message().find("kept in " + (root_ / "failed" / "calibrate").string()), std::string::npos)
@@ -126,13 +127,11 @@ TEST_F(WorkspaceTest, FailedAttemptsFilesAreKeptAndNamedInTheError) {
 
   // A failure that wrote nothing keeps nothing and says nothing about it; a
   // success clears the last failure's folder.
-  const Status third = RunStage(ws.get(), "track", "f", "",
-                                [](const fs::path&, StageResult*) { return Status::DataError("no landmarks"); },
+  const Status third = RunStage(ws.get(), {"track", "f", ""}, Body([](const fs::path&, StageResult*) { return Status::DataError("no landmarks"); }),
                                 &skipped);
   EXPECT_EQ(third.message(), "track: no landmarks");
   EXPECT_FALSE(fs::exists(root_ / "failed" / "track"));
-  ASSERT_TRUE(RunStage(ws.get(), "calibrate", "f3", "",
-                       [](const fs::path& s, StageResult* r) { return WriteOutput(s, r, "good"); }, &skipped)
+  ASSERT_TRUE(RunStage(ws.get(), {"calibrate", "f3", ""}, Body([](const fs::path& s, StageResult* r) { return WriteOutput(s, r, "good"); }), &skipped)
                   .ok());
   EXPECT_FALSE(fs::exists(root_ / "failed" / "calibrate"));
 }
@@ -142,7 +141,9 @@ TEST_F(WorkspaceTest, ManifestPersistsAndInterruptedRunIsDetected) {
     std::unique_ptr<Workspace> ws;
     ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
     fs::path staging;
-    ASSERT_TRUE(ws->BeginStage("ingest", "f", &staging).ok());
+    bool resumed = true;
+    ASSERT_TRUE(ws->BeginStage("ingest", "f", false, &staging, &resumed).ok());
+    EXPECT_FALSE(resumed);
     // The process "dies" here: the lock is released with the object.
   }
   std::unique_ptr<Workspace> reader;
@@ -150,10 +151,92 @@ TEST_F(WorkspaceTest, ManifestPersistsAndInterruptedRunIsDetected) {
   EXPECT_EQ(reader->Find("ingest")->status, StageStatus::kRunning);
   EXPECT_TRUE(reader->WasInterrupted("ingest"));
   EXPECT_FALSE(reader->IsUpToDate("ingest", "f"));
-  const auto stages = reader->Stages();
+  const auto stages = reader->Stages({"ingest", "calibrate", "align", "track", "train", "export"});
   ASSERT_GE(stages.size(), 6u);
   EXPECT_EQ(stages[0].name, "ingest");
   EXPECT_EQ(stages[1].status, StageStatus::kPending);
+}
+
+// A resumable stage whose run died is handed its staging folder back, with the
+// checkpoint it wrote, when the fingerprint is unchanged; a changed
+// fingerprint, or a stage that is not resumable, starts from an empty folder.
+TEST_F(WorkspaceTest, ResumableStageGetsItsCheckpointBackAfterAKill) {
+  {
+    std::unique_ptr<Workspace> ws;
+    ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
+    fs::path staging;
+    bool resumed = true;
+    ASSERT_TRUE(ws->BeginStage("train", "f", true, &staging, &resumed).ok());
+    EXPECT_FALSE(resumed);
+    ASSERT_TRUE(WriteFileAtomic(staging / "checkpoint.txt", "step 40").ok());
+    // Killed here: the record says running and nobody holds the lock.
+  }
+  std::unique_ptr<Workspace> ws;
+  ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
+  std::string seen;
+  bool was_resumed = false, skipped = true;
+  const StageBody body = [&](const StageContext& context, StageResult* result) {
+    was_resumed = context.resumed;
+    seen.clear();
+    ReadFileToString(context.staging / "checkpoint.txt", &seen).ok();
+    return WriteOutput(context.staging, result, "trained");
+  };
+  ASSERT_TRUE(RunStage(ws.get(), {"train", "f", "", /*resumable=*/true}, body, &skipped).ok());
+  EXPECT_TRUE(was_resumed);
+  EXPECT_EQ(seen, "step 40");
+  EXPECT_EQ(ws->Find("train")->status, StageStatus::kDone);
+
+  // Killed again, then rerun with other options: a clean start.
+  fs::path staging;
+  bool resumed = false;
+  ASSERT_TRUE(ws->BeginStage("train", "g", true, &staging, &resumed).ok());
+  ASSERT_TRUE(WriteFileAtomic(staging / "checkpoint.txt", "step 7").ok());
+  ws.reset();
+  ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
+  ASSERT_TRUE(RunStage(ws.get(), {"train", "h", "", true}, body, &skipped).ok());
+  EXPECT_FALSE(was_resumed);
+  EXPECT_EQ(seen, "");
+}
+
+TEST_F(WorkspaceTest, InterruptedStageKeepsItsFolderAndIsNotResumedUnlessResumable) {
+  std::unique_ptr<Workspace> ws;
+  ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
+  bool skipped = false;
+  const Status stopped = RunStage(
+      ws.get(), {"train", "f", "", true},
+      [](const StageContext& context, StageResult*) {
+        EXPECT_TRUE(WriteFileAtomic(context.staging / "checkpoint.txt", "step 3").ok());
+        return Status::Interrupted("stopped at step 3");
+      },
+      &skipped);
+  EXPECT_EQ(stopped.code(), Status::Code::kInterrupted);
+  EXPECT_EQ(ws->Find("train")->status, StageStatus::kInterrupted);
+  EXPECT_TRUE(fs::exists(root_ / ".staging" / "train" / "checkpoint.txt"));
+  EXPECT_FALSE(fs::exists(root_ / "failed" / "train"));
+
+  bool resumed = false;
+  const StageBody look = [&](const StageContext& context, StageResult* result) {
+    resumed = context.resumed && fs::exists(context.staging / "checkpoint.txt");
+    return WriteOutput(context.staging, result, "x");
+  };
+  ASSERT_TRUE(RunStage(ws.get(), {"train", "f", "", true}, look, &skipped).ok());
+  EXPECT_TRUE(resumed);
+
+  // A stage that keeps no checkpoints is redone from an empty folder.
+  RunStage(ws.get(), {"track", "f", ""},
+           [](const StageContext& context, StageResult*) {
+             EXPECT_TRUE(WriteFileAtomic(context.staging / "half.txt", "half").ok());
+             return Status::Interrupted("stopped");
+           },
+           &skipped);
+  ASSERT_TRUE(RunStage(ws.get(), {"track", "f", ""},
+                       [&](const StageContext& context, StageResult* result) {
+                         EXPECT_FALSE(context.resumed);
+                         EXPECT_FALSE(fs::exists(context.staging / "half.txt"));
+                         return WriteOutput(context.staging, result, "y");
+                       },
+                       &skipped)
+                  .ok());
 }
 
 TEST_F(WorkspaceTest, SecondWriterIsRefused) {

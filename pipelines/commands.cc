@@ -11,18 +11,19 @@
 #include "core/log.h"
 #include "core/parallel.h"
 #include "core/paths.h"
+#include "pipelines/stage_table.h"
 
 namespace headforge {
 
 const std::vector<Command>& Commands() {
-  static const std::vector<Command> commands = {
-      {"run", "Run every available stage on a video, resuming where an earlier run stopped.",
-       RunCommand},
-      {"ingest", "Turn videos or image folders into frames, landmarks and masks.", IngestCommand},
-      {"calibrate", "Estimate cameras: COLMAP, head pose (fixed camera) or a rig file.", CalibrateCommand},
-      {"align", "Align the cameras to the face model's metric head frame (Procrustes).", AlignCommand},
-      {"track", "Fit the face model (identity, head motion, 53 expressions) to the landmarks.",
-       TrackCommand},
+  static const std::vector<Command> commands = [] {
+    std::vector<Command> list = {
+        {"run", "Run every available stage on a video, resuming where an earlier run stopped.", RunCommand}};
+    for (const StageEntry& stage : StageTable()) {
+      list.push_back({stage.name, stage.summary + (stage.unavailable.empty() ? "" : " (not available yet)"),
+                      [&stage](const std::vector<std::string>& args) { return StageCommand(stage, args); }});
+    }
+    const std::vector<Command> tools = {
       {"simulate", "Render a synthetic head capture with ground truth from a scene file.",
        SimulateCommand},
       {"status", "Show the stages of a workspace: status, wall time, summary.", StatusCommand},
@@ -34,7 +35,10 @@ const std::vector<Command>& Commands() {
        SplatFitCommand},
       {"bench", "Measure accuracy against time: bench calibrate.", BenchCommand},
       {"version", "Print the version and the libraries it was built with.", VersionCommand},
-  };
+    };
+    list.insert(list.end(), tools.begin(), tools.end());
+    return list;
+  }();
   return commands;
 }
 
@@ -46,6 +50,15 @@ Status CommonOptions::Check(bool needs_workspace) const {
       log_level != "error" && log_level != "silent")
     return Status::InvalidArgument("--log-level must be debug, info, warning, error or silent");
   return Status::Ok();
+}
+
+StageSettings CommonOptions::Settings() const {
+  StageSettings settings;
+  settings.data_dir = data_dir;
+  settings.face_model =
+      face_model.empty() ? (fs::path(data_dir) / "ict_facekit" / "ict_face_model.h5").string() : face_model;
+  settings.threads = threads > 0 ? threads : HardwareThreads();
+  return settings;
 }
 
 void AddCommonOptions(OptionSet* o, CommonOptions* common, bool with_workspace) {
@@ -60,6 +73,8 @@ void AddCommonOptions(OptionSet* o, CommonOptions* common, bool with_workspace) 
          "Shared data folder (face model, detectors); $HEADFORGE_DATA overrides the built-in "
          "default.",
          "", kRuntime);
+  o->Add("face_model", &common->face_model,
+         "Face model (Basel-layout HDF5); default DATA/ict_facekit/ict_face_model.h5.", "face-model", kRuntime);
   o->Add("log_level", &common->log_level, "debug, info, warning, error or silent.", "log-level",
          kRuntime);
 }
@@ -107,8 +122,8 @@ void PrintMainHelp() {
       "       headforge --version\n\nCommands:\n",
       HeadForgeVersion().c_str());
   int width = 0;
-  for (const auto& c : Commands()) width = std::max(width, static_cast<int>(std::strlen(c.name)));
-  for (const auto& c : Commands()) std::printf("  %-*s  %s\n", width, c.name, c.summary);
+  for (const auto& c : Commands()) width = std::max(width, static_cast<int>(c.name.size()));
+  for (const auto& c : Commands()) std::printf("  %-*s  %s\n", width, c.name.c_str(), c.summary.c_str());
   std::printf(
       "\nEvery stage reads and writes one workspace folder; a stage whose inputs and options\n"
       "are unchanged is skipped, and an interrupted run resumes. Exit codes: 0 done,\n"
@@ -129,7 +144,7 @@ int HeadForgeMain(int argc, char** argv) {
     try {
       return c.run(std::vector<std::string>(args.begin() + 1, args.end()));
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "headforge: %s: unexpected error: %s\n", c.name, e.what());
+      std::fprintf(stderr, "headforge: %s: unexpected error: %s\n", c.name.c_str(), e.what());
       return kExitFailure;
     }
   }

@@ -3,10 +3,12 @@
 //   0 done, 1 failure (one-line reason on stderr), 2 usage error.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "core/options.h"
+#include "core/stage.h"
 #include "core/status.h"
 
 namespace headforge {
@@ -16,12 +18,13 @@ constexpr int kExitFailure = 1;
 constexpr int kExitUsage = 2;
 
 struct Command {
-  const char* name;
-  const char* summary;
-  int (*run)(const std::vector<std::string>& args);
+  std::string name;
+  std::string summary;
+  std::function<int(const std::vector<std::string>& args)> run;
 };
 
-// Every command, in the order `headforge --help` lists them.
+// Every command, in the order `headforge --help` lists them: run, one per
+// stage of the stage table, then the tools.
 const std::vector<Command>& Commands();
 
 // The whole program: dispatches argv[1] to its command.
@@ -32,9 +35,13 @@ struct CommonOptions {
   std::string workspace;  // the workspace folder
   int threads = 0;        // worker threads; 0 = all hardware threads
   std::string data_dir;   // the shared data folder
+  std::string face_model;  // empty: DATA/ict_facekit/ict_face_model.h5
   std::string log_level = "info";
 
   Status Check(bool needs_workspace) const;
+  // The data folder, face model and thread count resolved once for every
+  // stage and command.
+  StageSettings Settings() const;
 };
 void AddCommonOptions(OptionSet* options, CommonOptions* common, bool with_workspace);
 // Applies threads and logging to the process (OpenCV, LibTorch, our logger).
@@ -47,12 +54,7 @@ int ParseOrExit(OptionSet* options, const std::vector<std::string>& args, const 
 // Prints "headforge: <message>" on stderr and returns the exit code for `status`.
 int ReportFailure(const Status& status);
 
-// Command entry points.
-int RunCommand(const std::vector<std::string>& args);
-int IngestCommand(const std::vector<std::string>& args);
-int CalibrateCommand(const std::vector<std::string>& args);
-int AlignCommand(const std::vector<std::string>& args);
-int TrackCommand(const std::vector<std::string>& args);
+// Command entry points (the stages' own are in stage_table.h).
 int SimulateCommand(const std::vector<std::string>& args);
 int EmbedLandmarksCommand(const std::vector<std::string>& args);
 int FaceModelCommand(const std::vector<std::string>& args);

@@ -24,7 +24,7 @@
 #include "core/rotation.h"
 #include "core/statistics.h"
 #include "pipelines/commands.h"
-#include "pipelines/stages.h"
+#include "pipelines/stage_table.h"
 #include "reconstruction/track_evaluation.h"
 #include "reconstruction/track_stage.h"
 
@@ -68,7 +68,7 @@ Status PrepareScene(const fs::path& scene_file, const fs::path& dir, const FaceM
     text = std::regex_replace(text, seed_line, "identity_seed = " + std::to_string(identity_seed));
   }
   // Simulation and ingest are redone when the scene, the crop or ingest's outputs change.
-  const std::string stamp = Hasher().Add(text).Add(crop).Add(std::string(IngestVersion())).Hex();
+  const std::string stamp = Hasher().Add(text).Add(crop).Add(int64_t(FindStage("ingest")->version)).Hex();
   std::string previous;
   if (!ReadFileToString(dir / "stamp", &previous).ok() || previous != stamp) {
     RemoveAll(dir);
@@ -263,9 +263,10 @@ int BenchCalibrate(const std::vector<std::string>& args) {
   if (repeat < 1) return ReportFailure(Status::InvalidArgument("--repeat must be at least 1"));
   ApplyCommonOptions(common);
   if (json) SetLogLevel(LogLevel::kWarning);
-  const int threads = common.threads > 0 ? common.threads : HardwareThreads();
+  const StageSettings settings = common.Settings();
+  const int threads = settings.threads;
   FaceModel model;
-  if (Status s = FaceModel::Load(common.data_dir + "/ict_facekit/ict_face_model.h5", &model); !s.ok()) return ReportFailure(s);
+  if (Status s = FaceModel::Load(settings.face_model, &model); !s.ok()) return ReportFailure(s);
   const fs::path scene_dir = fs::path(HEADFORGE_SOURCE_DIR) / "scenes";
   if (!json) {
     std::printf("| scene | setting | wall time | registered | rotation error median / max (deg) | centre error median / "
@@ -406,9 +407,10 @@ int BenchTrack(const std::vector<std::string>& args) {
   if (seeds.empty()) return ReportFailure(Status::InvalidArgument("--seeds names no subject"));
   ApplyCommonOptions(common);
   if (json) SetLogLevel(LogLevel::kWarning);
-  const int threads = common.threads > 0 ? common.threads : HardwareThreads();
+  const StageSettings settings = common.Settings();
+  const int threads = settings.threads;
   FaceModel model;
-  if (Status s = FaceModel::Load(common.data_dir + "/ict_facekit/ict_face_model.h5", &model); !s.ok()) return ReportFailure(s);
+  if (Status s = FaceModel::Load(settings.face_model, &model); !s.ok()) return ReportFailure(s);
   const fs::path scene_file = fs::path(HEADFORGE_SOURCE_DIR) / "scenes" / "talking_static.toml";
   const std::vector<std::pair<std::string, std::string>> embeddings = {{"plain", DefaultLandmarkEmbedding()},
                                                                        {"identity columns", IdentityLandmarkEmbedding()}};
@@ -446,8 +448,8 @@ int BenchTrack(const std::vector<std::string>& args) {
       Status s = EnsureDirectory(track_dir);
       if (s.ok()) s = RunTrack(track, capture, cameras, model, track_dir, &progress, &summary);
       const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      nlohmann::json tracking;
-      if (s.ok()) s = ReadJson(track_dir / "tracking.json", &tracking);
+      TrackingFile tracking;
+      if (s.ok()) s = ReadTracking(track_dir / "tracking.json", &tracking);
       if (s.ok()) s = EvaluateTracking(tracking, cameras, capture, truth, kScoredBlendshapes, &score);
       nlohmann::json row = {{"subject", subject}, {"points", label}, {"ok", s.ok()}, {"error", s.message()},
                             {"seconds", seconds}};

@@ -63,11 +63,8 @@ int InspectCommand(const std::vector<std::string>& args) {
   OptionSet options;
   CommonOptions common;
   AddCommonOptions(&options, &common, /*with_workspace=*/false);
-  std::string face_model;
   int modes = 20;
   std::vector<std::string> point_sets = {"landmarks", "face"};
-  options.Add("face_model.path", &face_model, "Face model file; default DATA/ict_facekit/ict_face_model.h5.",
-              "face-model");
   options.Add("face_model.modes", &modes, "Identity modes that imitate the motions (the tracker fits 20).", "modes");
   options.Add("face_model.points", &point_sets,
               "Points the motions move: landmarks (the iBUG-68 vertices), all, or a region's name.", "points");
@@ -82,7 +79,7 @@ int InspectCommand(const std::vector<std::string>& args) {
   if (parsed >= 0) return parsed;
   if (Status s = common.Check(false); !s.ok()) return ReportFailure(s);
   ApplyCommonOptions(common);
-  if (face_model.empty()) face_model = (fs::path(common.data_dir) / "ict_facekit" / "ict_face_model.h5").string();
+  const std::string face_model = common.Settings().face_model;
   const bool defaults = point_sets == std::vector<std::string>{"landmarks", "face"};
   if (modes < 1) return ReportFailure(Status::InvalidArgument("--modes must be at least 1"));
   FaceModel model;

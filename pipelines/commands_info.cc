@@ -8,6 +8,7 @@
 #include "core/paths.h"
 #include "core/workspace.h"
 #include "pipelines/commands.h"
+#include "pipelines/stage_table.h"
 
 namespace headforge {
 
@@ -24,7 +25,7 @@ int StatusCommand(const std::vector<std::string>& args) {
     return ReportFailure(s);
   std::printf("workspace %s\n", workspace->root().c_str());
   std::printf("%-10s %-12s %10s  %-20s  %s\n", "stage", "status", "wall time", "finished", "summary");
-  for (const auto& r : workspace->Stages()) {
+  for (const auto& r : workspace->Stages(StageNames())) {
     std::string status = StageStatusName(r.status);
     if (workspace->WasInterrupted(r.name)) status = "interrupted";
     char wall[32] = "";

@@ -15,16 +15,13 @@ int SimulateCommand(const std::vector<std::string>& args) {
   OptionSet options;
   CommonOptions common;
   AddCommonOptions(&options, &common, /*with_workspace=*/false);
-  std::string scene_path, out_dir, face_model;
+  std::string scene_path, out_dir;
   int frames = 0;
   options.Add("simulate.scene", &scene_path, "Scene file (TOML); see scenes/ and docs/simulator.md.", "scene");
   options.Add("simulate.out", &out_dir, "Output folder: one image folder (or video) per camera, masks/, ground_truth.json.",
               "out");
   options.Add("simulate.frames", &frames, "Render only the first N frames; 0 renders the scene's whole duration.",
               "frames");
-  options.Add("simulate.face_model", &face_model,
-              "Face model (Basel-layout HDF5 with UVs and landmarks); default DATA/ict_facekit/ict_face_model.h5.",
-              "face-model", OptionSet::Effect::kRuntime);
   const std::string usage = "headforge simulate --scene FILE --out DIR [--frames N]";
   const int parsed = ParseOrExit(&options, args, usage,
                                  "Renders a synthetic head capture with ground truth (cameras, head pose, expressions,\n"
@@ -34,7 +31,7 @@ int SimulateCommand(const std::vector<std::string>& args) {
   if (scene_path.empty()) return ReportFailure(Status::InvalidArgument("give the scene file with --scene"));
   if (out_dir.empty()) return ReportFailure(Status::InvalidArgument("give the output folder with --out"));
   if (frames < 0) return ReportFailure(Status::InvalidArgument("--frames must be >= 0"));
-  if (face_model.empty()) face_model = (fs::path(common.data_dir) / "ict_facekit" / "ict_face_model.h5").string();
+  const StageSettings settings = common.Settings();
   ApplyCommonOptions(common);
 
   std::string text;
@@ -42,9 +39,9 @@ int SimulateCommand(const std::vector<std::string>& args) {
   Scene scene;
   if (Status s = ParseScene(text, scene_path, &scene); !s.ok()) return ReportFailure(s);
   FaceModel model;
-  if (Status s = FaceModel::Load(face_model, &model); !s.ok()) return ReportFailure(s);
+  if (Status s = FaceModel::Load(settings.face_model, &model); !s.ok()) return ReportFailure(s);
   std::unique_ptr<Simulator> simulator;
-  const int threads = common.threads > 0 ? common.threads : HardwareThreads();
+  const int threads = settings.threads;
   if (Status s = Simulator::Create(scene, model, threads, &simulator); !s.ok()) return ReportFailure(s);
   HF_LOG(Info) << "simulate: " << scene.name << ", " << simulator->num_cameras() << " camera(s) x "
                << (frames > 0 ? std::min(frames, simulator->num_frames()) : simulator->num_frames())
@@ -64,13 +61,12 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   OptionSet options;
   CommonOptions common;
   AddCommonOptions(&options, &common, /*with_workspace=*/false);
-  std::string out, face_model;
+  std::string out;
   options.Add("embed.out", &out,
               "Where to write the embedding (JSON); default: the shipped file for what is measured, "
               "data/ict_dlib68_landmark_embedding.json or, with --views or --identity, ..._views.json or "
               "..._identity.json.",
               "out");
-  options.Add("embed.face_model", &face_model, "Face model; default DATA/ict_facekit/ict_face_model.h5.", "face-model");
   bool views = false;
   options.Add("embed.views", &views,
               "Also measure the points from each direction of the camera (yaw -60..60, pitch -20..20 degrees), "
@@ -88,13 +84,13 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
                                  "Measures where the landmark detector's 68 points sit on the face model, from\n"
                                  "simulator renders of the mean face (calibration/landmark_embedding.h).");
   if (parsed >= 0) return parsed;
-  if (face_model.empty()) face_model = (fs::path(common.data_dir) / "ict_facekit" / "ict_face_model.h5").string();
+  const StageSettings settings = common.Settings();
   ApplyCommonOptions(common);
   FaceModel model;
-  if (Status s = FaceModel::Load(face_model, &model); !s.ok()) return ReportFailure(s);
+  if (Status s = FaceModel::Load(settings.face_model, &model); !s.ok()) return ReportFailure(s);
   FaceDetectorOptions detector;
   detector.ultraface_dir = (fs::path(common.data_dir) / "models" / "ultraface").string();
-  const int threads = common.threads > 0 ? common.threads : HardwareThreads();
+  const int threads = settings.threads;
   if (views && identity)
     return ReportFailure(
         Status::InvalidArgument("embed-landmarks: --views and --identity measure different files; give one"));

@@ -1,5 +1,6 @@
 #include "reconstruction/track_evaluation.h"
 
+#include <algorithm>
 #include <cmath>
 #include <exception>
 
@@ -11,24 +12,27 @@
 
 namespace headforge {
 
-Status EvaluateTracking(const nlohmann::json& tracking, const CameraSet& cameras, const IngestedCapture& capture,
+Status EvaluateTracking(const TrackingFile& tracking, const CameraSet& cameras, const IngestedCapture& capture,
                         const nlohmann::json& truth, const std::vector<std::string>& blendshapes,
                         TrackingErrors* errors) {
   TrackingErrors e;
   try {
     if (capture.cameras.empty()) return Status::DataError("the capture has no camera to score");
     const IngestedCamera& first = capture.cameras.front();
-    const auto& frames = tracking.at("frames");
+    const std::vector<TrackedFrame>& frames = tracking.frames;
     const auto& truth_frames = truth.at("frames");
-    e.residual_px = tracking.at("median_residual_px").get<double>() / first.crop_scale;
-    e.dropped_views = tracking.value("dropped_views", 0);
-    e.contour_weight = tracking.value("contour_weight", 0.0);
+    e.residual_px = tracking.median_residual_px / first.crop_scale;
+    e.dropped_views = tracking.dropped_views;
+    e.contour_weight = tracking.contour_weight;
     for (const std::string& name : blendshapes) {
+      const auto named = std::find(tracking.expression_names.begin(), tracking.expression_names.end(), name);
+      if (named == tracking.expression_names.end())
+        return Status::DataError("the tracking has no blendshape named " + name);
+      const Eigen::Index k = named - tracking.expression_names.begin();
       double sum = 0;
-      for (const auto& f : frames) {
-        const int source = first.frames.at(f.at("frame").get<int>()).source_frame;
-        sum += std::abs(f.at("expression").at(name).get<double>() -
-                        truth_frames.at(source).at("expression").at(name).get<double>());
+      for (const TrackedFrame& f : frames) {
+        const int source = first.frames.at(size_t(f.frame)).source_frame;
+        sum += std::abs(f.expression[k] - truth_frames.at(source).at("expression").at(name).get<double>());
       }
       e.mae[name] = frames.empty() ? 0.0 : sum / static_cast<double>(frames.size());
     }
@@ -41,7 +45,9 @@ Status EvaluateTracking(const nlohmann::json& tracking, const CameraSet& cameras
         if (c.name == v.camera) cam = &c;
       if (!cam) return Status::DataError("cameras name a camera the capture does not have: " + v.camera);
       const int source = cam->frames.at(v.frame).source_frame;
-      const Eigen::Isometry3d motion = PoseFromJson(frames.at(v.frame).at("head_motion"));
+      const TrackedFrame* tracked = tracking.Find(v.frame);
+      if (!tracked) return Status::DataError("the tracking has no frame " + std::to_string(v.frame));
+      const Eigen::Isometry3d motion = tracked->head_motion;
       const auto& tf = truth_frames.at(source);
       estimated.push_back(v.cam_from_world.linear() * motion.linear());
       real.push_back(

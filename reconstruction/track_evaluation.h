@@ -9,8 +9,9 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
-#include "calibration/camera_set.h"
+#include "core/camera_set.h"
 #include "capture/capture_io.h"
+#include "reconstruction/tracking_io.h"
 
 namespace headforge {
 
@@ -32,7 +33,7 @@ struct TrackingErrors {
 // `capture` against the simulator's `truth`. Every camera's registered views
 // count toward the rotation; the blendshapes are scored on the first camera's
 // frames.
-Status EvaluateTracking(const nlohmann::json& tracking, const CameraSet& cameras, const IngestedCapture& capture,
+Status EvaluateTracking(const TrackingFile& tracking, const CameraSet& cameras, const IngestedCapture& capture,
                         const nlohmann::json& truth, const std::vector<std::string>& blendshapes,
                         TrackingErrors* errors);
 

@@ -1,6 +1,5 @@
 #include "reconstruction/track_stage.h"
 
-#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
@@ -10,9 +9,10 @@
 #include <numeric>
 
 #include "calibration/landmark_embedding.h"
-#include "core/json_io.h"
 #include "core/log.h"
 #include "core/mesh_renderer.h"
+#include "core/parallel.h"
+#include "reconstruction/tracking_io.h"
 
 namespace headforge {
 namespace {
@@ -245,38 +245,26 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   }
   progress->Finish(result.solver_report);
 
-  // tracking.json
-  nlohmann::json frames = nlohmann::json::array();
+  TrackingFile tracking;
+  tracking.face_model = model.path();
+  tracking.identity_modes = options.fit.identity_modes;
+  tracking.identity = result.identity;
+  tracking.expression_names = model.expression_names();
+  tracking.head_held_by_cameras = fit.fixed_head;
+  tracking.median_residual_px = result.median_residual_px;
+  tracking.dropped_views = result.dropped_views;
+  tracking.landmark_embedding = embedding;
+  tracking.view_dependent_landmarks = !bases.nodes.empty();
+  tracking.contour_weight = fit.contour_weight;
+  tracking.solver = result.solver_report;
+  tracking.seconds = result.seconds;
+  tracking.frames = result.frames;
   int interpolated = 0, low = 0;
   for (const TrackedFrame& f : result.frames) {
-    nlohmann::json weights = nlohmann::json::object();
-    for (int j = 0; j < f.expression.size(); ++j) weights[model.expression_names()[j]] = f.expression[j];
-    frames.push_back({{"frame", f.frame},
-                      {"head_motion", PoseToJson(f.head_motion)},
-                      {"expression", weights},
-                      {"residual_px", f.residual_px},
-                      {"landmarks", f.landmarks},
-                      {"interpolated", f.interpolated},
-                      {"low_confidence", f.low_confidence},
-                      {"why", f.why}});
     interpolated += f.interpolated;
     low += f.low_confidence;
   }
-  const nlohmann::json json = {
-      {"face_model", model.path()},
-      {"identity_modes", options.fit.identity_modes},
-      {"identity", std::vector<double>(result.identity.data(), result.identity.data() + result.identity.size())},
-      {"expression_names", model.expression_names()},
-      {"head_held_by_cameras", fit.fixed_head},
-      {"median_residual_px", result.median_residual_px},
-      {"dropped_views", result.dropped_views},
-      {"landmark_embedding", embedding},
-      {"view_dependent_landmarks", !bases.nodes.empty()},
-      {"contour_weight", fit.contour_weight},
-      {"solver", result.solver_report},
-      {"seconds", result.seconds},
-      {"frames", frames}};
-  HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "tracking.json", json));
+  HF_RETURN_IF_ERROR(WriteTracking(tracking, out_dir / "tracking.json"));
   summary->outputs = {"tracking.json"};
 
   const Eigen::VectorXf alpha = result.identity.cast<float>();
@@ -414,6 +402,35 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
   }
   out.focal_after = in.fx;
   *result = out;
+  return Status::Ok();
+}
+
+Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCapture& capture, const FaceModel& model,
+                          int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary,
+                          bool* applied) {
+  if (applied) *applied = false;
+  if (summary->mode != "head-pose" || calibrate.head_pose.refine != "face-model" || calibrate.head_pose.focal > 0)
+    return Status::Ok();
+  TrackOptions fit;
+  fit.threads = threads > 0 ? threads : HardwareThreads();
+  progress->Start("calibrate: refining with the face model", 0);
+  HeadPoseRefinement refined;
+  HF_RETURN_IF_ERROR(RefineHeadPoseCameras(model, capture, fit, calibrate.landmark_embedding,
+                                           calibrate.head_pose.refine_rounds, 0.01, cameras, &refined));
+  progress->Finish();
+  if (!refined.settled)
+    HF_LOG(Warning) << "calibrate: the focal length was still moving after " << refined.rounds
+                    << " rounds of the face-model refinement (--head-pose-refine-rounds)";
+  HF_LOG(Info) << "calibrate: the face model's identity and expressions move the focal length from "
+               << refined.focal_before << " to " << refined.focal_after << " px in " << refined.rounds
+               << " round(s) (landmark residual " << refined.median_residual_px << " px, " << refined.seconds << " s)";
+  summary->focal = refined.focal_after;
+  summary->reprojection_px = refined.median_residual_px;
+  if (!capture.cameras.empty() && capture.cameras[0].crop_scale > 0)
+    summary->reprojection_source_px = refined.median_residual_px / capture.cameras[0].crop_scale;
+  summary->reason += std::string(summary->reason.empty() ? "" : "; ") + "refined with the face model from focal " +
+                     std::to_string(static_cast<int>(std::lround(refined.focal_before))) + " px";
+  if (applied) *applied = true;
   return Status::Ok();
 }
 

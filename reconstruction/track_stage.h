@@ -5,7 +5,8 @@
 
 #include <string>
 
-#include "calibration/camera_set.h"
+#include "calibration/calibrate.h"
+#include "core/camera_set.h"
 #include "capture/capture_io.h"
 #include "core/face_model.h"
 #include "core/options.h"
@@ -82,5 +83,14 @@ struct HeadPoseRefinement {
 Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capture, const TrackOptions& options,
                              const std::string& landmark_embedding, int max_rounds, double min_change,
                              CameraSet* cameras, HeadPoseRefinement* result);
+
+// The calibrate stage's last step for head-pose cameras (calibrate's result
+// when it chose head-pose): RefineHeadPoseCameras as `calibrate.head_pose.refine`
+// asks, its focal length and residual reported in `summary`. Leaves other
+// cameras, and a focal length the user gave, alone; `applied` (optional) says
+// whether it changed the cameras.
+Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCapture& capture, const FaceModel& model,
+                          int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary,
+                          bool* applied = nullptr);
 
 }  // namespace headforge

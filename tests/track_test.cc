@@ -125,7 +125,9 @@ SimulatedScores ScoreSimulated(const fs::path& root, const std::string& scene, i
   CameraSet cameras;
   EXPECT_TRUE(ReadIngestedCapture(ws, &capture).ok());
   EXPECT_TRUE(CameraSet::Read(ws / "cameras_head.json", &cameras).ok());
-  const Status scored = EvaluateTracking(Json(ws / "tracking.json"), cameras, capture, truth, animated, &s);
+  TrackingFile tracking;
+  EXPECT_TRUE(ReadTracking(ws / "tracking.json", &tracking).ok());
+  const Status scored = EvaluateTracking(tracking, cameras, capture, truth, animated, &s);
   EXPECT_TRUE(scored.ok()) << scored.message();
   if (cameras.mode == "head-pose") {
     const double truth_focal = truth["cameras"][0]["fx"].get<double>() * capture.cameras[0].crop_scale;

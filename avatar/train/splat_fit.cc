@@ -1,0 +1,413 @@
+#include "avatar/train/splat_fit.h"
+
+#include <torch/torch.h>
+
+#include <chrono>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "avatar/metrics/image_metrics.h"
+#include "avatar/splat/splat_ops.h"
+#include "avatar/train/checkpoint.h"
+#include "core/interrupt.h"
+#include "core/log.h"
+
+namespace headforge {
+namespace {
+
+// Adam with its moments kept per Gaussian row, so densification can gather
+// and extend them with the parameters.
+class RowAdam {
+ public:
+  struct Slot {
+    torch::Tensor* param;
+    double lr;
+    torch::Tensor m, v;
+  };
+
+  void Add(torch::Tensor* param, double lr) {
+    slots_.push_back({param, lr, torch::zeros_like(*param), torch::zeros_like(*param)});
+  }
+  void SetLr(size_t index, double lr) { slots_[index].lr = lr; }
+
+  void Step() {
+    torch::NoGradGuard no_grad;
+    ++t_;
+    const double c1 = 1 - std::pow(kBeta1, t_), c2 = 1 - std::pow(kBeta2, t_);
+    for (Slot& s : slots_) {
+      const torch::Tensor& g = s.param->grad();
+      if (!g.defined()) continue;
+      s.m.mul_(kBeta1).add_(g, 1 - kBeta1);
+      s.v.mul_(kBeta2).addcmul_(g, g, 1 - kBeta2);
+      const torch::Tensor denom = (s.v / c2).sqrt_().add_(kEps);
+      s.param->addcdiv_(s.m, denom, -s.lr / c1);
+    }
+  }
+
+  void ZeroGrad() {
+    for (Slot& s : slots_) {
+      if (s.param->grad().defined()) s.param->mutable_grad().zero_();
+    }
+  }
+
+  // Rows `keep` of every parameter and moment, then `append` rows (new
+  // parameters with fresh moments), in the order the slots were added.
+  void Edit(const torch::Tensor& keep, const std::vector<torch::Tensor>& append) {
+    torch::NoGradGuard no_grad;
+    for (size_t i = 0; i < slots_.size(); ++i) {
+      Slot& s = slots_[i];
+      const torch::Tensor& extra = append[i];
+      auto gather = [&](const torch::Tensor& t, const torch::Tensor& added) {
+        const torch::Tensor kept = keep.defined() ? t.index_select(0, keep) : t;
+        return added.defined() && added.size(0) > 0 ? torch::cat({kept, added}) : kept;
+      };
+      *s.param = gather(s.param->detach(), extra).requires_grad_(true);
+      const torch::Tensor zeros = extra.defined() ? torch::zeros_like(extra) : torch::Tensor();
+      s.m = gather(s.m, zeros);
+      s.v = gather(s.v, zeros);
+    }
+  }
+
+  void ResetMoments(size_t index) {
+    slots_[index].m.zero_();
+    slots_[index].v.zero_();
+  }
+
+  void Save(const std::string& prefix, Checkpoint* c) const {
+    c->Put(prefix + "t", t_);
+    for (size_t i = 0; i < slots_.size(); ++i) {
+      c->Put(prefix + "m." + std::to_string(i), slots_[i].m);
+      c->Put(prefix + "v." + std::to_string(i), slots_[i].v);
+    }
+  }
+
+  // After the parameters were restored (the moments take their devices).
+  bool Load(const std::string& prefix, const Checkpoint& c) {
+    bool ok = c.Get(prefix + "t", &t_);
+    for (size_t i = 0; i < slots_.size(); ++i) {
+      Slot& s = slots_[i];
+      ok = ok && c.Get(prefix + "m." + std::to_string(i), &s.m) && c.Get(prefix + "v." + std::to_string(i), &s.v);
+      if (!ok) break;
+      s.m = s.m.to(s.param->device());
+      s.v = s.v.to(s.param->device());
+    }
+    return ok;
+  }
+
+ private:
+  static constexpr double kBeta1 = 0.9, kBeta2 = 0.999, kEps = 1e-15;
+  std::vector<Slot> slots_;
+  int64_t t_ = 0;
+};
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+struct Evaluation {
+  double psnr = 0, ssim = 0;
+  std::vector<double> view_psnr;
+  std::vector<torch::Tensor> renders;
+};
+
+// Renders come back on the CPU.
+Evaluation Evaluate(const GaussianParams& params, const std::vector<PosedImage>& views,
+                    const SplatOptions& splat) {
+  Evaluation e;
+  for (const PosedImage& v : views) {
+    const torch::Tensor render = RenderFitted(params, v.camera, splat);
+    const double psnr = Psnr(render, v.image);
+    e.view_psnr.push_back(psnr);
+    e.psnr += psnr / views.size();
+    e.ssim += Ssim(render, v.image).item<double>() / views.size();
+    e.renders.push_back(render.cpu());
+  }
+  return e;
+}
+
+// The views with their images on `device`.
+std::vector<PosedImage> OnDevice(const std::vector<PosedImage>& views, torch::Device device) {
+  std::vector<PosedImage> out = views;
+  for (PosedImage& v : out) v.image = v.image.to(device);
+  return out;
+}
+
+}  // namespace
+
+Status ParseSplatFitDevice(const std::string& name, torch::Device* device) {
+  try {
+    *device = torch::Device(name);
+  } catch (const c10::Error&) {
+    return Status::InvalidArgument("splat-fit: '" + name + "' is not a device (try cpu or cuda)");
+  }
+  if (device->is_cpu()) return Status::Ok();
+  if (!device->is_cuda()) {
+    return Status::InvalidArgument("splat-fit: no kernels for device " + name + " (cpu or cuda)");
+  }
+  if (!torch::cuda::is_available()) {
+    return Status::InvalidArgument(
+        "splat-fit: device " + name +
+        ": LibTorch sees no CUDA device (this build's LibTorch may be CPU-only; `headforge info` "
+        "says which); use --device cpu");
+  }
+  if (!device->has_index()) device->set_index(0);
+  if (device->index() >= int(torch::cuda::device_count())) {
+    return Status::InvalidArgument("splat-fit: device " + name + ": only " +
+                                   std::to_string(torch::cuda::device_count()) +
+                                   " CUDA device(s) are visible");
+  }
+  return Status::Ok();
+}
+
+bool SplatFitOptions::Check(std::string* why) const {
+  if (iterations < 1) {
+    *why = "iterations must be at least 1";
+    return false;
+  }
+  if (!(ssim_weight >= 0 && ssim_weight <= 1)) {
+    *why = "ssim_weight must be in [0, 1]";
+    return false;
+  }
+  if (!(lr_means >= 0 && lr_quats >= 0 && lr_scales >= 0 && lr_opacity >= 0 && lr_colours >= 0)) {
+    *why = "learning rates must be zero or positive";
+    return false;
+  }
+  if (!(init_opacity > 0 && init_opacity < 1)) {
+    *why = "init_opacity must be in (0, 1)";
+    return false;
+  }
+  if (log_every < 1 || eval_every < 0) {
+    *why = "log_every must be >= 1 and eval_every >= 0";
+    return false;
+  }
+  if (checkpoint_every < 1) {
+    *why = "checkpoint_every must be at least 1";
+    return false;
+  }
+  return splat.Check(why);
+}
+
+torch::Tensor RenderFitted(const GaussianParams& params, const SplatCamera& camera,
+                           const SplatOptions& options) {
+  torch::NoGradGuard no_grad;
+  SplatRenderOptions render;
+  render.splat = options;
+  return RenderGaussians(params.means, params.quats, params.log_scales,
+                         torch::sigmoid(params.opacity_logits), torch::sigmoid(params.colour_logits),
+                         {}, camera, render)
+      .image.clamp(0, 1);
+}
+
+namespace {
+
+// Everything of a fit that a checkpoint holds besides the parameters.
+struct FitState {
+  int step = 0;               // steps done
+  torch::Tensor order;        // the current pass's view order
+  double loss_sum = 0, l1_sum = 0;
+  int64_t loss_count = 0;
+  double seconds = 0;         // fitting time before this attempt
+};
+
+const char* const kParamNames[] = {"means", "quats", "log_scales", "opacity_logits", "colour_logits"};
+
+Status SaveFitCheckpoint(const fs::path& path, GaussianParams& p, const RowAdam& adam,
+                         const DensifyStrategy& densify, const at::Generator& gen, const FitState& state,
+                         size_t stats_lines) {
+  Checkpoint c;
+  c.Put("step", int64_t(state.step));
+  const auto params = p.All();
+  for (size_t i = 0; i < params.size(); ++i) c.Put(kParamNames[i], *params[i]);
+  adam.Save("adam.", &c);
+  densify.SaveState("densify.", &c);
+  c.Put("generator", gen.get_state());
+  c.Put("order", state.order);
+  c.Put("loss_sum", state.loss_sum);
+  c.Put("l1_sum", state.l1_sum);
+  c.Put("loss_count", state.loss_count);
+  c.Put("seconds", state.seconds);
+  c.Put("stats_lines", int64_t(stats_lines));
+  return c.Save(path);
+}
+
+// Restores what SaveFitCheckpoint wrote; `stats` is cut back to the lines the
+// checkpoint had seen.
+Status LoadFitCheckpoint(const fs::path& path, torch::Device device, GaussianParams* p, RowAdam* adam,
+                         DensifyStrategy* densify, at::Generator* gen, FitState* state, StatsLog* stats) {
+  Checkpoint c;
+  HF_RETURN_IF_ERROR(Checkpoint::Load(path, &c));
+  int64_t step = 0, stats_lines = 0;
+  torch::Tensor generator;
+  bool ok = c.Get("step", &step) && c.Get("generator", &generator) && c.Get("stats_lines", &stats_lines) &&
+            c.Get("loss_sum", &state->loss_sum) && c.Get("l1_sum", &state->l1_sum) &&
+            c.Get("loss_count", &state->loss_count) && c.Get("seconds", &state->seconds);
+  const auto params = p->All();
+  for (size_t i = 0; ok && i < params.size(); ++i) {
+    ok = c.Get(kParamNames[i], params[i]);
+    if (ok) *params[i] = params[i]->to(device).requires_grad_(true);
+  }
+  if (!ok || !adam->Load("adam.", c))
+    return Status::DataError(path.string() + " is not a splat-fit checkpoint; delete it to start over");
+  densify->LoadState("densify.", c);
+  gen->set_state(generator);
+  if (!c.Get("order", &state->order)) state->order = torch::Tensor();
+  state->step = int(step);
+  return stats->Truncate(size_t(stats_lines));
+}
+
+}  // namespace
+
+Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& train,
+                 const std::vector<PosedImage>& test, const InitPoints& init, StatsLog* stats,
+                 Progress* progress, SplatFitResult* result) {
+  std::string why;
+  if (!options.Check(&why)) return Status::InvalidArgument("splat-fit: " + why);
+  if (train.empty()) return Status::InvalidArgument("splat-fit: no training views");
+  if (!init.positions.defined() || init.positions.size(0) == 0) {
+    return Status::InvalidArgument("splat-fit: no initial points");
+  }
+  torch::Device device = torch::kCPU;
+  HF_RETURN_IF_ERROR(ParseSplatFitDevice(options.device, &device));
+  const std::vector<PosedImage> train_views = OnDevice(train, device);
+  const std::vector<PosedImage> test_views = OnDevice(test, device);
+  const auto t0 = std::chrono::steady_clock::now();
+  GaussianParams& p = result->params;
+  {
+    torch::NoGradGuard no_grad;
+    const int64_t n = init.positions.size(0);
+    const auto opts = torch::TensorOptions().dtype(torch::kFloat32).device(device);
+    p.means = init.positions.to(opts).clone();
+    p.quats = torch::zeros({n, 4}, opts);
+    p.quats.select(1, 0).fill_(1.0);
+    p.log_scales = init.sizes.to(opts).clamp_min(1e-6).log().unsqueeze(1).repeat({1, 3});
+    p.opacity_logits = torch::full({n}, std::log(options.init_opacity / (1 - options.init_opacity)), opts);
+    p.colour_logits = torch::logit(init.colours.to(opts).clamp(0.01, 0.99));
+    for (torch::Tensor* t : p.All()) t->requires_grad_(true);
+  }
+  const double extent = options.densify.scene_extent;
+  RowAdam adam;
+  adam.Add(&p.means, options.lr_means * extent);
+  adam.Add(&p.quats, options.lr_quats);
+  adam.Add(&p.log_scales, options.lr_scales);
+  adam.Add(&p.opacity_logits, options.lr_opacity);
+  adam.Add(&p.colour_logits, options.lr_colours);
+  const auto densify = MakeDefaultDensify(options.densify);
+  auto gen = at::detail::createCPUGenerator(options.seed);
+  FitState state;
+  const fs::path checkpoint = options.checkpoint_path;
+  std::error_code ec;
+  if (!checkpoint.empty() && fs::exists(checkpoint, ec)) {
+    HF_RETURN_IF_ERROR(LoadFitCheckpoint(checkpoint, device, &p, &adam, densify.get(), &gen, &state, stats));
+    HF_LOG(Info) << "splat-fit: resuming from the checkpoint at step " << state.step << " (" << p.size()
+                 << " Gaussians)";
+  }
+  auto elapsed = [&] { return state.seconds + Seconds(t0); };
+  auto save = [&](int step) {
+    FitState now = state;
+    now.step = step;
+    now.seconds = elapsed();
+    return SaveFitCheckpoint(checkpoint, p, adam, *densify, gen, now, stats->size());
+  };
+
+  SplatRenderOptions render_options;
+  render_options.splat = options.splat;
+  progress->Start("splat-fit", options.iterations);
+  progress->Advance(state.step);
+  result->resumed_from = state.step;
+  int step = 0;
+  for (step = state.step + 1; step <= options.iterations; ++step) {
+    const int64_t slot = (step - 1) % int64_t(train.size());
+    if (slot == 0) state.order = torch::randperm(int64_t(train.size()), gen);
+    const PosedImage& view = train_views[state.order[slot].item<int64_t>()];
+    adam.SetLr(0, options.lr_means * extent * std::pow(0.01, double(step) / options.iterations));
+
+    const auto out = RenderGaussians(p.means, p.quats, p.log_scales, torch::sigmoid(p.opacity_logits),
+                                     torch::sigmoid(p.colour_logits), {}, view.camera, render_options);
+    out.means2d.retain_grad();
+    const torch::Tensor l1 = (out.image - view.image).abs().mean();
+    const torch::Tensor loss =
+        (1 - options.ssim_weight) * l1 + options.ssim_weight * (1 - Ssim(out.image, view.image));
+    const double loss_value = loss.item<double>();
+    if (!std::isfinite(loss_value)) {
+      progress->Finish("diverged");
+      return Status::Internal("splat-fit: the loss became " + std::to_string(loss_value) + " at step " +
+                              std::to_string(step) +
+                              "; lower the learning rates (--lr-means, --lr-scales) or start from "
+                              "smaller Gaussians");
+    }
+    loss.backward();
+    densify->AfterBackward(out.means2d.grad(), out.radii, view.camera.width, view.camera.height);
+    adam.Step();
+    adam.ZeroGrad();
+    const DensifyPlan plan = densify->AfterStep(step, p);
+    if (plan.keep.defined()) {
+      adam.Edit(plan.keep, {plan.append.means, plan.append.quats, plan.append.log_scales,
+                            plan.append.opacity_logits, plan.append.colour_logits});
+    }
+    if (plan.reset_opacity > 0) {
+      torch::NoGradGuard no_grad;
+      const double cap = std::log(plan.reset_opacity / (1 - plan.reset_opacity));
+      p.opacity_logits.clamp_max_(cap);
+      adam.ResetMoments(3);
+    }
+    if (!plan.summary.empty()) HF_LOG(Debug) << "splat-fit step " << step << ": " << plan.summary;
+
+    state.loss_sum += loss_value;
+    state.l1_sum += l1.item<double>();
+    ++state.loss_count;
+    progress->Advance();
+    const bool out_of_time = options.max_minutes > 0 && elapsed() > 60.0 * options.max_minutes;
+    const bool last = step == options.iterations || out_of_time;
+    if (step % options.log_every == 0 || last) {
+      stats->Append(nlohmann::json{{"step", step},
+                                   {"loss", state.loss_sum / state.loss_count},
+                                   {"l1", state.l1_sum / state.loss_count},
+                                   {"gaussians", p.size()},
+                                   {"seconds", elapsed()}}
+                        .dump());
+      state.loss_sum = state.l1_sum = 0;
+      state.loss_count = 0;
+    }
+    if (!last && options.eval_every > 0 && step % options.eval_every == 0 && !test.empty()) {
+      const Evaluation e = Evaluate(p, test_views, options.splat);
+      stats->Append(nlohmann::json{{"step", step}, {"test_psnr", e.psnr}, {"test_ssim", e.ssim},
+                                   {"gaussians", p.size()}, {"seconds", elapsed()}}
+                        .dump());
+      HF_LOG(Info) << "splat-fit: step " << step << ", " << p.size()
+                   << " Gaussians, held-out PSNR " << e.psnr << " dB";
+    }
+    if (out_of_time) {
+      HF_LOG(Info) << "splat-fit: time limit of " << options.max_minutes << " min reached at step "
+                   << step;
+      break;
+    }
+    const bool stop = InterruptRequested();
+    if (!checkpoint.empty() && !last && (stop || step % options.checkpoint_every == 0))
+      HF_RETURN_IF_ERROR(save(step));
+    if (stop) {
+      progress->Finish("interrupted");
+      return Status::Interrupted(
+          "splat-fit stopped at step " + std::to_string(step) + " of " + std::to_string(options.iterations) +
+          (checkpoint.empty() ? " (no checkpoint kept)"
+                              : "; the checkpoint is saved: run the same command again to resume"));
+    }
+  }
+  result->steps = std::min(step, options.iterations);
+  result->train_seconds = elapsed();
+  progress->Finish(std::to_string(result->steps) + " steps, " + std::to_string(p.size()) +
+                   " Gaussians");
+  if (!test.empty()) {
+    Evaluation e = Evaluate(p, test_views, options.splat);
+    result->test_psnr = e.psnr;
+    result->test_ssim = e.ssim;
+    result->view_psnr = e.view_psnr;
+    result->test_renders = std::move(e.renders);
+    stats->Append(nlohmann::json{{"step", result->steps}, {"test_psnr", e.psnr}, {"test_ssim", e.ssim},
+                                 {"gaussians", p.size()}, {"seconds", result->train_seconds}, {"final", true}}
+                      .dump());
+  }
+  for (torch::Tensor* t : p.All()) *t = t->detach().cpu();
+  return Status::Ok();
+}
+
+}  // namespace headforge

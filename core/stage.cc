@@ -1,0 +1,49 @@
+#include "core/stage.h"
+
+#include "core/interrupt.h"
+#include "core/log.h"
+
+namespace headforge {
+
+Status StageFingerprint(const StageEntry& entry, const StageJob& job, const OptionSet& options,
+                        const Workspace& workspace, const StageSettings& settings, std::string* fingerprint) {
+  Hasher h;
+  h.Add(entry.name + "-" + std::to_string(entry.version)).Add(options.ToIni(entry.name, true));
+  for (const auto& name : entry.upstream) {
+    const StageRecord* r = workspace.Find(name);
+    if (!r || r->status != StageStatus::kDone)
+      return Status::InvalidArgument(entry.name + " needs the " + name + " stage first (headforge " + name +
+                                     " or headforge run)");
+    h.Add(r->fingerprint);
+  }
+  if (entry.uses_face_model) HF_RETURN_IF_ERROR(h.AddFileStamp(settings.face_model).WithContext("face model"));
+  HF_RETURN_IF_ERROR(job.AddInputs(&h).WithContext(entry.name));
+  *fingerprint = h.Hex();
+  return Status::Ok();
+}
+
+Status RunStageJob(const StageEntry& entry, StageJob* job, const OptionSet& options, Workspace* workspace,
+                   const StageSettings& settings, Progress* progress, bool force, bool* skipped) {
+  if (!entry.unavailable.empty()) return Status::InvalidArgument(entry.name + ": " + entry.unavailable);
+  HF_RETURN_IF_ERROR(job->Check());
+  StageRun run;
+  run.name = entry.name;
+  run.options_ini = options.ToIni(entry.name);
+  run.resumable = entry.resumable;
+  HF_RETURN_IF_ERROR(StageFingerprint(entry, *job, options, *workspace, settings, &run.fingerprint));
+  run.force = force;
+  // A resumable stage stops on SIGINT/SIGTERM after writing a checkpoint.
+  std::unique_ptr<InterruptScope> interrupts;
+  if (entry.resumable) interrupts = std::make_unique<InterruptScope>();
+  const StageEnv env{workspace, &settings, progress};
+  return RunStage(
+      workspace, run,
+      [&](const StageContext& context, StageResult* result) {
+        HF_RETURN_IF_ERROR(job->Run(env, context, result));
+        HF_LOG(Info) << entry.name << ": " << result->message;
+        return Status::Ok();
+      },
+      skipped);
+}
+
+}  // namespace headforge

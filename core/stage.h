@@ -1,0 +1,82 @@
+// A pipeline stage as the stage table sees it (DESIGN.md, "Stages and their
+// contracts"): its options, what it reads and writes, and its run function
+// behind one interface, so that the per-stage commands, `run`, `status` and
+// the fingerprints all come from one table (pipelines/stage_table.h) and
+// adding a stage is one entry plus its own files.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/hash.h"
+#include "core/options.h"
+#include "core/progress.h"
+#include "core/workspace.h"
+
+namespace headforge {
+
+// What every stage resolves the same way, once, from the common options.
+struct StageSettings {
+  std::string data_dir;    // the shared data folder
+  std::string face_model;  // the face model file (Basel-layout HDF5)
+  int threads = 1;         // worker threads, resolved (>= 1)
+};
+
+// What a stage's run function is handed besides its staging folder.
+struct StageEnv {
+  const Workspace* workspace;  // upstream stages' outputs are read from its root
+  const StageSettings* settings;
+  Progress* progress;
+};
+
+// One stage's options and work.
+class StageJob {
+ public:
+  virtual ~StageJob() = default;
+  // Binds the stage's options (keys "<stage>.*").
+  virtual void AddOptions(OptionSet* options) = 0;
+  // Fills defaults that live under the data folder.
+  virtual void Resolve(const StageSettings& settings) {}
+  // Says which option is wrong and why.
+  virtual Status Check() const = 0;
+  // Inputs other than upstream stages' outputs that decide the outputs
+  // (ingest: the videos' contents); options and upstream fingerprints are
+  // hashed by the runner.
+  virtual Status AddInputs(Hasher* hasher) const { return Status::Ok(); }
+  // Writes the stage's outputs into `context.staging` and names them in
+  // `result` with a one-line summary.
+  virtual Status Run(const StageEnv& env, const StageContext& context, StageResult* result) = 0;
+};
+
+struct StageEntry {
+  std::string name;
+  std::vector<std::string> upstream;  // stages whose outputs it reads; each must be done first
+  std::string summary;                // one line for `headforge --help`
+  std::string usage;                  // first line of `headforge <stage> --help`
+  std::string description;            // the rest of it
+  std::vector<std::string> reads;     // workspace files it reads (documentation, --help)
+  std::vector<std::string> writes;    // what it may write
+  // Bumped when the stage's outputs change for the same inputs and options.
+  int version = 1;
+  bool uses_face_model = false;  // the face model file's stamp enters the fingerprint
+  bool resumable = false;        // keeps checkpoints across interruptions (Workspace::BeginStage)
+  // Empty: the stage is available; else why not (said when it is asked for).
+  std::string unavailable;
+  std::function<std::unique_ptr<StageJob>()> make;
+};
+
+// The fingerprint of `entry` run by `job` with `options` (the options' INI
+// text of its section, its version, every upstream stage's fingerprint, the
+// face model's stamp, the job's own inputs). Fails, naming the stage to run,
+// when an upstream stage is not done.
+Status StageFingerprint(const StageEntry& entry, const StageJob& job, const OptionSet& options,
+                        const Workspace& workspace, const StageSettings& settings, std::string* fingerprint);
+
+// Runs the stage into the workspace, or skips it when it is up to date
+// (`force`: runs it even then). `*skipped` says which.
+Status RunStageJob(const StageEntry& entry, StageJob* job, const OptionSet& options, Workspace* workspace,
+                   const StageSettings& settings, Progress* progress, bool force, bool* skipped);
+
+}  // namespace headforge

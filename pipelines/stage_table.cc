@@ -1,0 +1,206 @@
+#include "pipelines/stage_table.h"
+
+#include <algorithm>
+
+#include "core/log.h"
+#include "pipelines/commands.h"
+#include "pipelines/stage_jobs.h"
+
+namespace headforge {
+
+const std::vector<StageEntry>& StageTable() {
+  static const std::vector<StageEntry> table = [] {
+    std::vector<StageEntry> t(6);
+    t[0].name = "ingest";
+    t[0].summary = "Turn videos or image folders into frames, landmarks and masks.";
+    t[0].usage = "headforge ingest --video FILE|DIR... --workspace DIR [options]";
+    t[0].description =
+        "Samples frames from one video or image folder per camera, drops blurred frames, detects\n"
+        "the face and its 68 landmarks, crops and resizes around the head, and makes a head mask.";
+    t[0].reads = {"the videos or image folders given with --video"};
+    t[0].writes = {"frames/", "masks/", "landmarks.json", "capture.json"};
+    t[0].version = 3;  // 3: capture.json and landmarks.json carry a version
+    t[0].make = MakeIngestJob;
+
+    t[1].name = "calibrate";
+    t[1].upstream = {"ingest"};
+    t[1].summary = "Estimate cameras: COLMAP, head pose (fixed camera) or a rig file.";
+    t[1].usage = "headforge calibrate --workspace DIR [--mode auto|colmap|head-pose|rig] [options]";
+    t[1].description =
+        "Estimates the cameras of the ingested frames: COLMAP structure from motion for a moving\n"
+        "camera or several cameras, head-pose cameras for a fixed camera (refined with the face\n"
+        "model), or a rig file.";
+    t[1].reads = {"capture.json", "landmarks.json", "frames/", "masks/"};
+    t[1].writes = {"cameras.json", "colmap/ (when COLMAP ran)"};
+    t[1].uses_face_model = true;
+    t[1].make = MakeCalibrateJob;
+
+    t[2].name = "align";
+    t[2].upstream = {"ingest", "calibrate"};
+    t[2].summary = "Align the cameras to the face model's metric head frame (Procrustes).";
+    t[2].usage = "headforge align --workspace DIR [options]";
+    t[2].description =
+        "Aligns the reconstruction to the face model's metric head frame: triangulates the\n"
+        "landmarks, fits a similarity by Umeyama's method in RANSAC, and for one camera round a\n"
+        "still head fits the face model to points triangulated on the skin; residuals in mm.";
+    t[2].reads = {"capture.json", "landmarks.json", "cameras.json", "frames/"};
+    t[2].writes = {"alignment.json", "cameras_head.json"};
+    t[2].uses_face_model = true;
+    t[2].make = MakeAlignJob;
+
+    t[3].name = "track";
+    t[3].upstream = {"ingest", "calibrate", "align"};
+    t[3].summary = "Fit the face model (identity, head motion, 53 expressions) to the landmarks.";
+    t[3].usage = "headforge track --workspace DIR [options]";
+    t[3].description =
+        "Fits the face model to the detected landmarks over the whole sequence with Ceres: a\n"
+        "shared identity, each frame's head motion (held by head-pose cameras) and 53 blendshape\n"
+        "weights in [0, 1], and draws the fitted mesh over the frames.";
+    t[3].reads = {"capture.json", "landmarks.json", "cameras_head.json", "frames/"};
+    t[3].writes = {"tracking.json", "overlay_<camera>.mp4", "meshes/ (--meshes)"};
+    t[3].uses_face_model = true;
+    t[3].make = MakeTrackJob;
+
+    t[4].name = "train";
+    t[4].upstream = {"ingest", "calibrate", "align", "track"};
+    t[4].summary = "Train the avatar model on the tracked capture.";
+    t[4].usage = "headforge train --workspace DIR [options]";
+    t[4].description = "Trains the avatar model on the frames, masks, head-frame cameras and tracking.";
+    t[4].reads = {"capture.json", "frames/", "masks/", "cameras_head.json", "tracking.json"};
+    t[4].writes = {"models/<model>/", "stats.jsonl"};
+    t[4].uses_face_model = true;
+    t[4].resumable = true;
+    t[4].unavailable = "training the avatar is not available in this version yet";
+
+    t[5].name = "export";
+    t[5].upstream = {"ingest", "calibrate", "align", "track", "train"};
+    t[5].summary = "Export the avatar: PLY, glTF, weights, videos and a report.";
+    t[5].usage = "headforge export --workspace DIR [options]";
+    t[5].description = "Writes the trained avatar in the formats other tools open, with videos and a report.";
+    t[5].reads = {"models/<model>/", "tracking.json", "cameras_head.json"};
+    t[5].writes = {"export/"};
+    t[5].uses_face_model = true;
+    t[5].unavailable = "export is not available in this version yet";
+    return t;
+  }();
+  return table;
+}
+
+const StageEntry* FindStage(const std::string& name) {
+  for (const StageEntry& e : StageTable())
+    if (e.name == name) return &e;
+  return nullptr;
+}
+
+std::vector<std::string> StageNames() {
+  std::vector<std::string> names;
+  for (const StageEntry& e : StageTable()) names.push_back(e.name);
+  return names;
+}
+
+namespace {
+
+std::string Joined(const std::vector<std::string>& items) {
+  std::string text;
+  for (const auto& item : items) text += (text.empty() ? "" : ", ") + item;
+  return text;
+}
+
+std::string Description(const StageEntry& entry) {
+  std::string text = entry.description + "\nReads: " + Joined(entry.reads) + "\nWrites: " + Joined(entry.writes);
+  if (!entry.upstream.empty()) text += "\nNeeds the stages: " + Joined(entry.upstream);
+  if (entry.resumable) text += "\nInterrupted (Ctrl-C, a kill), it resumes from its last checkpoint when run again.";
+  if (!entry.unavailable.empty()) text += "\nNot available: " + entry.unavailable + ".";
+  return text;
+}
+
+int OpenForWriting(const CommonOptions& common, std::unique_ptr<Workspace>* workspace) {
+  if (Status s = Workspace::Open(common.workspace, Workspace::Mode::kReadWrite, workspace); !s.ok())
+    return ReportFailure(s);
+  return -1;
+}
+
+}  // namespace
+
+int StageCommand(const StageEntry& entry, const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  AddCommonOptions(&options, &common, /*with_workspace=*/true);
+  std::unique_ptr<StageJob> job = entry.make ? entry.make() : nullptr;
+  if (job) job->AddOptions(&options);
+  const int parsed = ParseOrExit(&options, args, entry.usage, Description(entry));
+  if (parsed >= 0) return parsed;
+  if (!job) return ReportFailure(Status::InvalidArgument(entry.name + ": " + entry.unavailable));
+  if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
+  const StageSettings settings = common.Settings();
+  job->Resolve(settings);
+  if (Status s = job->Check(); !s.ok()) return ReportFailure(s);
+  ApplyCommonOptions(common);
+  std::unique_ptr<Workspace> workspace;
+  if (int code = OpenForWriting(common, &workspace); code >= 0) return code;
+  StderrProgress progress;
+  bool skipped = false;
+  if (Status s = RunStageJob(entry, job.get(), options, workspace.get(), settings, &progress, false, &skipped);
+      !s.ok())
+    return ReportFailure(s);
+  return kExitOk;
+}
+
+int RunCommand(const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  AddCommonOptions(&options, &common, /*with_workspace=*/true);
+  std::string from, until;
+  options.Add("from", &from, "Redo the stages from this one on, even when up to date (earlier ones as usual).",
+              "from", OptionSet::Effect::kRuntime);
+  options.Add("until", &until, "Stop after this stage.", "until", OptionSet::Effect::kRuntime);
+  const std::vector<StageEntry>& table = StageTable();
+  std::vector<std::unique_ptr<StageJob>> jobs;
+  for (const StageEntry& entry : table) {
+    jobs.push_back(entry.make ? entry.make() : nullptr);
+    if (jobs.back()) jobs.back()->AddOptions(&options);
+  }
+  const int parsed = ParseOrExit(
+      &options, args, "headforge run --video FILE|DIR... --workspace DIR [options]",
+      "Runs the pipeline's stages in order into one workspace: " + Joined(StageNames()) +
+          " (those available in this version). A stage whose inputs and options are unchanged is\n"
+          "skipped; a failed or interrupted one is redone, or resumed from its checkpoint.\n"
+          "Options of every stage are accepted, by their short flag or their dotted key.");
+  if (parsed >= 0) return parsed;
+  if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
+  for (const std::string* name : {&from, &until}) {
+    if (!name->empty() && !FindStage(*name))
+      return ReportFailure(Status::InvalidArgument("no stage named '" + *name + "' (the stages: " +
+                                                   Joined(StageNames()) + ")"));
+  }
+  const StageSettings settings = common.Settings();
+  for (size_t i = 0; i < table.size(); ++i) {
+    if (!jobs[i]) continue;
+    jobs[i]->Resolve(settings);
+    if (Status s = jobs[i]->Check(); !s.ok()) return ReportFailure(s);
+  }
+  ApplyCommonOptions(common);
+  std::unique_ptr<Workspace> workspace;
+  if (int code = OpenForWriting(common, &workspace); code >= 0) return code;
+  StderrProgress progress;
+  bool forcing = false;
+  std::string last;
+  for (size_t i = 0; i < table.size(); ++i) {
+    const StageEntry& entry = table[i];
+    if (!jobs[i] || !entry.unavailable.empty()) {
+      HF_LOG(Info) << "run: " << (last.empty() ? entry.name : last) << " is the last stage available in this version";
+      break;
+    }
+    forcing = forcing || entry.name == from;
+    bool skipped = false;
+    if (Status s = RunStageJob(entry, jobs[i].get(), options, workspace.get(), settings, &progress, forcing, &skipped);
+        !s.ok())
+      return ReportFailure(s);
+    last = entry.name;
+    if (entry.name == until) break;
+  }
+  HF_LOG(Info) << "run: results are in " << common.workspace << " (headforge status " << common.workspace << ")";
+  return kExitOk;
+}
+
+}  // namespace headforge

@@ -1,0 +1,46 @@
+// The track stage's job: the face model fitted to the landmarks over the sequence.
+#include <cstdio>
+
+#include "pipelines/stage_jobs.h"
+#include "reconstruction/track_stage.h"
+
+namespace headforge {
+namespace {
+
+class TrackJob : public StageJob {
+ public:
+  void AddOptions(OptionSet* options) override { AddTrackOptions(options, &options_); }
+  void Resolve(const StageSettings& settings) override { options_.fit.threads = settings.threads; }
+  Status Check() const override { return options_.Check(); }
+  Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
+    IngestedCapture capture;
+    HF_RETURN_IF_ERROR(ReadIngestedCapture(env.workspace->root(), &capture));
+    CameraSet cameras;
+    HF_RETURN_IF_ERROR(CameraSet::Read(env.workspace->Path("cameras_head.json"), &cameras));
+    FaceModel model;
+    HF_RETURN_IF_ERROR(FaceModel::Load(env.settings->face_model, &model));
+    TrackSummary summary;
+    HF_RETURN_IF_ERROR(RunTrack(options_, capture, cameras, model, context.staging, env.progress, &summary));
+    result->outputs = summary.outputs;
+    char text[200];
+    std::snprintf(text, sizeof(text),
+                  "%d frames, median landmark residual %.2f px, %d interpolated, %d low-confidence, %.1f s%s",
+                  summary.frames, summary.median_residual_px, summary.interpolated, summary.low_confidence,
+                  summary.seconds, summary.fixed_head ? ", head held by the cameras" : "");
+    result->message = text;
+    if (summary.dropped_views > 0) {
+      result->message += ", " + std::to_string(summary.dropped_views) +
+                         " views left out (their landmarks disagreed with the other views of their frame)";
+    }
+    return Status::Ok();
+  }
+
+ private:
+  TrackStageOptions options_;
+};
+
+}  // namespace
+
+std::unique_ptr<StageJob> MakeTrackJob() { return std::make_unique<TrackJob>(); }
+
+}  // namespace headforge

@@ -6,9 +6,12 @@ if(HEADFORGE_ARCH)
   target_compile_options(headforge_warnings INTERFACE -march=${HEADFORGE_ARCH})
 endif()
 
-# headforge_add_test(NAME [WHOLE] SOURCES... LIBS...): one gtest executable
-# registered with ctest, a ctest entry per test case, or one entry for the
-# whole executable with WHOLE (for suites sharing an expensive set-up).
+# headforge_add_test(NAME [WHOLE] SOURCES... LIBS... LABELS...): one gtest
+# executable registered with ctest, a ctest entry per test case, or one entry
+# for the whole executable with WHOLE (for suites sharing an expensive set-up).
+# Every test carries a tier label (ctest -L): unit (one module, seconds),
+# integration (the real binary or several stages), colmap (runs COLMAP),
+# train (trains a model), gpu (needs an NVIDIA GPU).
 function(headforge_add_test name)
   cmake_parse_arguments(ARG "WHOLE" "" "SOURCES;LIBS;LABELS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
@@ -16,8 +19,12 @@ function(headforge_add_test name)
   target_compile_definitions(${name} PRIVATE
     HEADFORGE_TEST_SHARED_DATA="${HEADFORGE_SHARED_DATA}"
     HEADFORGE_TEST_BINARY_DIR="${CMAKE_BINARY_DIR}")
+  if(NOT ARG_LABELS)
+    message(FATAL_ERROR "headforge_add_test(${name}): give its LABELS (unit, integration, colmap, train, gpu)")
+  endif()
   if(ARG_WHOLE)
     add_test(NAME ${name} COMMAND ${name})
+    set_tests_properties(${name} PROPERTIES LABELS "${ARG_LABELS}")
   else()
     gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
   endif()

@@ -17,6 +17,7 @@
 #include "core/hash.h"
 #include "core/json_io.h"
 #include "tests/run_headforge.h"
+#include "tests/shared_workspace.h"
 
 namespace headforge {
 namespace {
@@ -46,12 +47,11 @@ size_t CountFiles(const fs::path& dir) {
 
 class CliTest : public ::testing::Test {
  protected:
-  // One full run of the acceptance clip, shared by the tests that compare with it.
+  // One full run of the acceptance clip, shared by the tests that compare
+  // with it (and with track_test, which runs the same).
   static void SetUpTestSuite() {
-    reference_ = fs::temp_directory_path() / "hf_cli_reference";
-    fs::remove_all(reference_);
-    first_run_ = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
-                      reference_.string()});
+    reference_ = SharedRun("grid_bbaf2n", {(kGrid / "bbaf2n.mpg").string()});
+    first_run_.code = fs::exists(reference_ / ".complete") ? 0 : 1;
   }
   static fs::path Scratch(const std::string& name) {
     const fs::path dir = fs::temp_directory_path() / ("hf_cli_" + name);

@@ -9,6 +9,7 @@
 #include "core/json_io.h"
 #include "reconstruction/track_evaluation.h"
 #include "tests/run_headforge.h"
+#include "tests/shared_workspace.h"
 
 namespace headforge {
 namespace {
@@ -48,12 +49,17 @@ double MouthOpening(const nlohmann::json& points) {
   return (d(61, 67) + d(62, 66) + d(63, 65)) / 3.0 / d(36, 45);
 }
 
+// `headforge run` on a GRID clip with the defaults, shared with the other
+// tests (and test binaries) that read it.
+fs::path GridWorkspace(const std::string& clip) {
+  return SharedRun("grid_" + clip, {(kGrid / (clip + ".mpg")).string()});
+}
+
 class GridTrack : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(GridTrack, FitsTheLandmarksAndFollowsTheMouth) {
-  const fs::path ws = Scratch(GetParam());
-  const Result run = Headforge({"run", "--video", (kGrid / (GetParam() + ".mpg")).string(), "--workspace", ws.string()});
-  ASSERT_EQ(run.code, 0) << run.err;
+  const fs::path ws = GridWorkspace(GetParam());
+  ASSERT_TRUE(fs::exists(ws / "tracking.json"));
   const auto tracking = Json(ws / "tracking.json");
   const auto landmarks = Json(ws / "landmarks.json");
   const auto capture = Json(ws / "capture.json");
@@ -87,17 +93,20 @@ INSTANTIATE_TEST_SUITE_P(Clips, GridTrack, ::testing::Values("bbaf2n", "lbax4n",
 TEST(HeadPoseFocal, AgreesAcrossGridSpeakers) {
   std::vector<double> refined, mean_face;
   for (const std::string clip : {"bbaf2n", "lbax4n", "swiz3n"}) {
-    const fs::path ws = Scratch("focal_" + clip);
-    const Result ingest = Headforge({"ingest", "--workspace", ws.string(), "--video", (kGrid / (clip + ".mpg")).string()});
-    ASSERT_EQ(ingest.code, 0) << ingest.err;
-    const double scale = Json(ws / "capture.json")["cameras"][0]["crop"]["scale"];
-    for (const std::string refine : {"off", "face-model"}) {
-      const Result calibrate =
-          Headforge({"calibrate", "--workspace", ws.string(), "--mode", "head-pose", "--head-pose-refine", refine});
-      ASSERT_EQ(calibrate.code, 0) << calibrate.err;
-      const double focal = Json(ws / "cameras.json")["cameras"][0]["fx"].get<double>() / scale;
-      (refine == "off" ? mean_face : refined).push_back(focal);
-      std::printf("%s: focal %.0f source px (%s)\n", clip.c_str(), focal, refine.c_str());
+    // The default run chose head-pose cameras refined with the face model; a
+    // copy of its ingest is calibrated again from the mean face alone.
+    const fs::path shared = GridWorkspace(clip);
+    const double scale = Json(shared / "capture.json")["cameras"][0]["crop"]["scale"];
+    ASSERT_EQ(Json(shared / "cameras.json")["mode"], "head-pose");
+    const fs::path ws = CopyOf(shared, Scratch("focal_" + clip));
+    const Result calibrate =
+        Headforge({"calibrate", "--workspace", ws.string(), "--mode", "head-pose", "--head-pose-refine", "off"});
+    ASSERT_EQ(calibrate.code, 0) << calibrate.err;
+    for (const fs::path& cameras : {ws / "cameras.json", shared / "cameras.json"}) {
+      const bool off = cameras == ws / "cameras.json";
+      const double focal = Json(cameras)["cameras"][0]["fx"].get<double>() / scale;
+      (off ? mean_face : refined).push_back(focal);
+      std::printf("%s: focal %.0f source px (%s)\n", clip.c_str(), focal, off ? "off" : "face-model");
     }
   }
   auto spread = [](const std::vector<double>& f) {
@@ -142,23 +151,29 @@ SimulatedScores ScoreSimulated(const fs::path& root, const std::string& scene, i
   return s;
 }
 
-SimulatedScores RunSimulated(const std::string& scene, int frames, const std::vector<std::string>& animated) {
+// `headforge run` on the simulated scene; `shared` puts it among the shared
+// workspaces (for a test that only reads it).
+SimulatedScores RunSimulated(const std::string& scene, int frames, const std::vector<std::string>& animated,
+                             bool shared) {
+  const fs::path capture = SharedSimulation(scene, frames);
   const fs::path root = Scratch(scene);
-  const fs::path capture_dir = root / "capture";
-  const Result sim = Headforge({"simulate", "--scene", (fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / (scene + ".toml")).string(),
-                                "--out", capture_dir.string(), "--frames", std::to_string(frames)});
-  EXPECT_EQ(sim.code, 0) << sim.err;
-  const auto truth = Json(capture_dir / "ground_truth.json");
-  std::vector<std::string> args = {"run", "--workspace", (root / "ws").string(), "--video"};
-  for (const auto& cam : truth["cameras"]) args.push_back((capture_dir / cam["input"].get<std::string>()).string());
-  const Result run = Headforge(args);
-  EXPECT_EQ(run.code, 0) << run.err;
+  fs::create_directories(root);
+  fs::create_directory_symlink(capture, root / "capture");
+  const std::string name = scene + "_" + std::to_string(frames);
+  if (shared) {
+    fs::create_directory_symlink(SharedRun(name, SimulatedInputs(capture)), root / "ws");
+  } else {
+    std::vector<std::string> args = {"run", "--workspace", (root / "ws").string(), "--video"};
+    for (const auto& input : SimulatedInputs(capture)) args.push_back(input);
+    const Result run = Headforge(args);
+    EXPECT_EQ(run.code, 0) << run.err;
+  }
   return ScoreSimulated(root, scene, frames, animated);
 }
 
 TEST(SimulatedTrack, TalkingStatic) {
   const SimulatedScores s = RunSimulated(
-      "talking_static", 125, {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"});
+      "talking_static", 125, {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"}, true);
   EXPECT_LT(s.residual_px, 1.5);
   EXPECT_LT(s.mae.at("jawOpen"), 0.1);
   EXPECT_LT(s.mae.at("mouthSmile_L"), 0.1);
@@ -189,7 +204,7 @@ TEST(SimulatedTrack, TalkingStatic) {
 // frame is fitted from all views jointly.
 TEST(SimulatedTrack, Rig8Cam) {
   const std::vector<std::string> animated = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"};
-  const SimulatedScores s = RunSimulated("rig_8cam", 50, animated);
+  const SimulatedScores s = RunSimulated("rig_8cam", 50, animated, false);
   // The cameras of a frame see the head from 120 deg apart, so each view uses the
   // detector's points as seen from its side (the shipped view grid) and the
   // jaw contour, which each view draws on its own silhouette, weighs 0.05

@@ -1,0 +1,109 @@
+// Expensive fixtures made once and shared by every test, in any test binary,
+// that asks for them with the same arguments: a simulated capture, or a
+// workspace that `headforge run` took through track. Each lives in
+// HEADFORGE_TEST_BINARY_DIR/test_workspaces/<name>-<key>, where the key
+// hashes the arguments and the headforge binary's stamp (a rebuilt binary
+// makes them afresh). A file lock serialises their making, so tests that
+// ctest runs in parallel wait for the first. Tests that change a shared
+// workspace work on a copy (CopyOf).
+#pragma once
+
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "core/fs.h"
+#include "core/hash.h"
+#include "core/json_io.h"
+#include "tests/run_headforge.h"
+
+namespace headforge {
+
+// Makes `dir` with `make` unless an earlier call did; false (and `*error`
+// saying why) when making failed.
+inline bool MakeOnce(const fs::path& dir, const std::function<Result(const fs::path&)>& make, std::string* error) {
+  fs::create_directories(dir.parent_path());
+  const std::string lock_path = dir.string() + ".lock";
+  const int fd = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0 || ::flock(fd, LOCK_EX) != 0) {
+    *error = "cannot lock " + lock_path;
+    return false;
+  }
+  bool ok = fs::exists(dir / ".complete");
+  if (!ok) {
+    fs::remove_all(dir);
+    const Result made = make(dir);
+    ok = made.code == 0;
+    if (ok) {
+      ok = WriteFileAtomic(dir / ".complete", "").ok();
+    } else {
+      *error = made.err;
+    }
+  }
+  ::flock(fd, LOCK_UN);
+  ::close(fd);
+  return ok;
+}
+
+inline fs::path SharedDir(const std::string& name, const std::vector<std::string>& args) {
+  Hasher h;
+  EXPECT_TRUE(h.AddFileStamp(HEADFORGE_BINARY).ok());
+  for (const auto& a : args) h.Add(a);
+  return fs::path(HEADFORGE_TEST_BINARY_DIR) / "test_workspaces" / (name + "-" + h.Hex());
+}
+
+// `headforge simulate` of scenes/<scene>.toml, its first `frames` frames.
+inline fs::path SharedSimulation(const std::string& scene, int frames) {
+  const std::vector<std::string> args = {
+      "simulate", "--scene", (fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / (scene + ".toml")).string(),
+      "--frames", std::to_string(frames)};
+  const fs::path dir = SharedDir(scene + "_" + std::to_string(frames), args);
+  std::string error;
+  const bool ok = MakeOnce(dir, [&](const fs::path& out) {
+    std::vector<std::string> full = args;
+    full.insert(full.end(), {"--out", out.string()});
+    return Headforge(full);
+  }, &error);
+  EXPECT_TRUE(ok) << error;
+  return dir;
+}
+
+// The videos (or image folders) of a simulated capture, one per camera.
+inline std::vector<std::string> SimulatedInputs(const fs::path& capture) {
+  nlohmann::json truth;
+  EXPECT_TRUE(ReadJson(capture / "ground_truth.json", &truth).ok());
+  std::vector<std::string> inputs;
+  for (const auto& cam : truth["cameras"]) inputs.push_back((capture / cam["input"].get<std::string>()).string());
+  return inputs;
+}
+
+// `headforge run --video INPUTS... OPTIONS... --workspace DIR` (through track).
+inline fs::path SharedRun(const std::string& name, const std::vector<std::string>& inputs,
+                          const std::vector<std::string>& options = {}) {
+  std::vector<std::string> args = {"run", "--video"};
+  args.insert(args.end(), inputs.begin(), inputs.end());
+  args.insert(args.end(), options.begin(), options.end());
+  const fs::path dir = SharedDir(name, args);
+  std::string error;
+  const bool ok = MakeOnce(dir, [&](const fs::path& ws) {
+    std::vector<std::string> full = args;
+    full.insert(full.end(), {"--workspace", ws.string()});
+    return Headforge(full);
+  }, &error);
+  EXPECT_TRUE(ok) << error;
+  return dir;
+}
+
+// A private copy of a shared workspace at `to` (replacing what was there).
+inline fs::path CopyOf(const fs::path& shared, const fs::path& to) {
+  fs::remove_all(to);
+  fs::copy(shared, to, fs::copy_options::recursive);
+  fs::remove(to / ".complete");
+  return to;
+}
+
+}  // namespace headforge

@@ -161,7 +161,7 @@ SimulatedScores RunSimulated(const std::string& scene, int frames, const std::ve
   fs::create_directory_symlink(capture, root / "capture");
   const std::string name = scene + "_" + std::to_string(frames);
   if (shared) {
-    fs::create_directory_symlink(SharedRun(name, SimulatedInputs(capture)), root / "ws");
+    fs::create_directory_symlink(SharedRun(name + "_run", SimulatedInputs(capture)), root / "ws");
   } else {
     std::vector<std::string> args = {"run", "--workspace", (root / "ws").string(), "--video"};
     for (const auto& input : SimulatedInputs(capture)) args.push_back(input);

@@ -299,19 +299,25 @@ bool RefineByReprojection(const std::vector<std::vector<Observation>>& per_landm
   return true;
 }
 
-}  // namespace
+// Landmarks that name one point of the surface from any side: eye corners,
+// brow ends and mouth corners are marked by the skin's texture; the nose tip
+// and base need shading to be seen and may be rejected by RANSAC. The nose
+// bridge and jaw follow the visible contour (another surface point in every
+// view) and are left out.
+const std::vector<int>& RigidLandmarks() {
+  static const std::vector<int> rigid = {17, 21, 22, 26, 36, 39, 42, 45, 48, 54, 30, 33};
+  return rigid;
+}
 
-Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
-                const FaceModel& model, AlignResult* result) {
-  HF_RETURN_IF_ERROR(options.Check());
-  if (model.landmarks_ibug68().size() != 68) return Status::InvalidArgument("the face model has no iBUG-68 landmarks");
+// Every usable view with its landmarks and (world frame) its PnP head pose,
+// grouped by time: one group for a still head seen by one moving camera (or
+// head-pose cameras, whose head frame is shared), a group per frame when
+// several cameras watch a moving head (`per_frame`).
+std::map<int, std::vector<ViewPose>> CollectViewPoses(const AlignOptions& options, const IngestedCapture& capture,
+                                                      const CameraSet& cameras,
+                                                      const std::vector<Eigen::Vector3d>& model_points,
+                                                      bool per_frame) {
   const bool head_frame = cameras.frame == "head";
-  // Observations grouped by time: one group for a still head seen by one moving
-  // camera (or head-pose cameras, whose head frame is shared), a group per frame
-  // when several cameras watch a moving head.
-  const bool per_frame = !head_frame && capture.cameras.size() > 1;
-  const std::vector<Eigen::Vector3d> model_points = DetectorLandmarkPoints(model, options.landmark_embedding);
-  // Per group: every usable view, with its landmarks and (world frame) its PnP head pose.
   std::map<int, std::vector<ViewPose>> view_poses;
   for (const auto& cam : capture.cameras) {
     const CameraIntrinsics* in = cameras.FindCamera(cam.name);
@@ -340,177 +346,264 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
       view_poses[per_frame ? f.index : 0].push_back(std::move(v));
     }
   }
-  // Landmarks that name one point of the surface from any side: eye corners,
-  // brow ends and mouth corners are marked by the skin's texture; the nose tip
-  // and base need shading to be seen and may be rejected by RANSAC. The nose
-  // bridge and jaw follow the visible contour (another surface point in every
-  // view) and are left out.
-  std::vector<int> rigid = {17, 21, 22, 26, 36, 39, 42, 45, 48, 54, 30, 33};
+  return view_poses;
+}
 
-  if (head_frame) {
-    // Head-pose cameras already live in the head frame: the transform is the
-    // identity. Residual of a landmark: its median distance (mm) from its
-    // viewing rays, which needs no parallax between frames.
-    AlignResult r;
-    for (int i : rigid) {
-      std::vector<double> distances;
-      for (const auto& [frame, views] : view_poses)
-        for (const ViewPose& v : views) {
-          const Observation& o = v.landmarks[i];
-          const Eigen::Vector3d centre = ProjectionCentre(o.projection);
-          const Eigen::Vector3d dir =
-              o.projection.leftCols<3>().colPivHouseholderQr().solve(o.pixel.homogeneous()).normalized();
-          const Eigen::Vector3d d = model_points[i] - centre;
-          distances.push_back(1000.0 * (d - d.dot(dir) * dir).norm());
-        }
-      if (distances.empty()) continue;
-      std::nth_element(distances.begin(), distances.begin() + distances.size() / 2, distances.end());
-      r.landmarks_used.push_back(i);
-      r.residuals_mm.push_back(distances[distances.size() / 2]);
-      r.inlier.push_back(true);
-    }
-    if (r.landmarks_used.empty()) return Status::DataError("no frame has landmarks to measure the alignment with");
-    SummariseResiduals(&r);
-    r.cameras = cameras;
-    r.message = "head-pose cameras: identity transform; residuals are distances from the landmarks' viewing rays";
-    *result = std::move(r);
-    return Status::Ok();
+// Head-pose cameras already live in the head frame: the transform is the
+// identity. Residual of a landmark: its median distance (mm) from its viewing
+// rays, which needs no parallax between frames.
+Status MeasureHeadPoseCameras(const std::map<int, std::vector<ViewPose>>& view_poses,
+                              const std::vector<Eigen::Vector3d>& model_points, const CameraSet& cameras,
+                              AlignResult* result) {
+  AlignResult r;
+  for (int i : RigidLandmarks()) {
+    std::vector<double> distances;
+    for (const auto& [frame, views] : view_poses)
+      for (const ViewPose& v : views) {
+        const Observation& o = v.landmarks[i];
+        const Eigen::Vector3d centre = ProjectionCentre(o.projection);
+        const Eigen::Vector3d dir =
+            o.projection.leftCols<3>().colPivHouseholderQr().solve(o.pixel.homogeneous()).normalized();
+        const Eigen::Vector3d d = model_points[i] - centre;
+        distances.push_back(1000.0 * (d - d.dot(dir) * dir).norm());
+      }
+    if (distances.empty()) continue;
+    std::nth_element(distances.begin(), distances.begin() + distances.size() / 2, distances.end());
+    r.landmarks_used.push_back(i);
+    r.residuals_mm.push_back(distances[distances.size() / 2]);
+    r.inlier.push_back(true);
   }
+  if (r.landmarks_used.empty()) return Status::DataError("no frame has landmarks to measure the alignment with");
+  SummariseResiduals(&r);
+  r.cameras = cameras;
+  r.message = "head-pose cameras: identity transform; residuals are distances from the landmarks' viewing rays";
+  *result = std::move(r);
+  return Status::Ok();
+}
 
-  // The rigid landmarks triangulated from a group's views and matched to the
-  // model by Umeyama in RANSAC.
-  struct LandmarkFit {
-    std::vector<int> used;
-    Eigen::Matrix3Xd src, tgt;  // triangulated (world) and model (head) points
-    SimilarityResult sim;
-  };
-  auto fit_landmarks = [&](const std::vector<std::vector<Observation>>& per_landmark, LandmarkFit* fit) {
-    const auto points = TriangulateLandmarks(per_landmark, options.max_reprojection_px);
-    fit->used.clear();
-    for (int i : rigid)
-      if (points.count(i)) fit->used.push_back(i);
-    if (fit->used.size() < 4) return false;
-    fit->src.resize(3, Eigen::Index(fit->used.size()));
-    fit->tgt.resize(3, Eigen::Index(fit->used.size()));
-    for (size_t k = 0; k < fit->used.size(); ++k) {
-      fit->src.col(Eigen::Index(k)) = points.at(fit->used[k]);
-      fit->tgt.col(Eigen::Index(k)) = model_points[fit->used[k]];
-    }
-    // The world's unit is unknown before alignment: the RANSAC threshold
-    // applies in the target (head) frame, metres.
-    RansacOptions ransac;
-    ransac.inlier_threshold = options.inlier_mm / 1000.0;
-    fit->sim = EstimateSimilarityRansac(fit->src, fit->tgt, ransac);
-    return true;
-  };
+// The rigid landmarks triangulated from a group's views and matched to the
+// model by Umeyama in RANSAC.
+struct LandmarkFit {
+  std::vector<int> used;
+  Eigen::Matrix3Xd src, tgt;  // triangulated (world) and model (head) points
+  SimilarityResult sim;
+};
+
+bool FitLandmarks(const AlignOptions& options, const std::vector<Eigen::Vector3d>& model_points,
+                  const std::vector<std::vector<Observation>>& per_landmark, LandmarkFit* fit) {
+  const auto points = TriangulateLandmarks(per_landmark, options.max_reprojection_px);
+  fit->used.clear();
+  for (int i : RigidLandmarks())
+    if (points.count(i)) fit->used.push_back(i);
+  if (fit->used.size() < 4) return false;
+  fit->src.resize(3, Eigen::Index(fit->used.size()));
+  fit->tgt.resize(3, Eigen::Index(fit->used.size()));
+  for (size_t k = 0; k < fit->used.size(); ++k) {
+    fit->src.col(Eigen::Index(k)) = points.at(fit->used[k]);
+    fit->tgt.col(Eigen::Index(k)) = model_points[fit->used[k]];
+  }
+  // The world's unit is unknown before alignment: the RANSAC threshold
+  // applies in the target (head) frame, metres.
+  RansacOptions ransac;
+  ransac.inlier_threshold = options.inlier_mm / 1000.0;
+  fit->sim = EstimateSimilarityRansac(fit->src, fit->tgt, ransac);
+  return true;
+}
+
+// Chooses the views again by where their cameras are, under the rotation so
+// far, until the choice settles; then triangulates from those views. Keeps
+// the first choice when too few views face the face.
+void ChooseViewsByGeometry(const AlignOptions& options, const std::vector<Eigen::Vector3d>& model_points,
+                           const std::vector<ViewPose>& views, bool per_frame, Sim3* from_views,
+                           std::vector<std::vector<Observation>>* per_landmark, LandmarkFit* lf, int* views_used) {
+  const Eigen::Vector3d face_centre = lf->src.rowwise().mean();
+  const Sim3 first_choice = *from_views;
+  std::vector<ViewPose> chosen;
+  bool settled = false;
+  // A fixed-point iteration: each round moves the rotation by the part of
+  // the last move the detector does not see (unshaded orbits: about 0.7
+  // of it), so settling takes some fifteen rounds there; each round is a
+  // mean of rotations.
+  constexpr int kMaxRounds = 60;
+  for (int round = 0; round < kMaxRounds && !settled; ++round) {
+    const std::vector<ViewPose> facing =
+        ViewsFacing(views, from_views->rotation, face_centre, options.max_yaw_deg, options.max_elevation_deg);
+    Sim3 next;
+    if (!SimilarityFromViewPoses(facing, &next)) break;
+    const double moved = Eigen::AngleAxisd(next.rotation.transpose() * from_views->rotation).angle();
+    HF_LOG(Debug) << "align: view choice round " << round << ": " << facing.size() << " views, rotation moved "
+                  << moved * 180 / M_PI << " deg";
+    settled = moved < 1e-4;
+    *from_views = next;
+    chosen = facing;
+  }
+  if (!settled && !per_frame)
+    HF_LOG(Warning) << "align: the choice of views did not settle in " << kMaxRounds << " rounds; using the last ("
+                    << chosen.size() << " views)";
+  // Too few views to surround the face (a rig's few fixed cameras, tens of
+  // degrees apart): the window cannot be made even, and its mean follows
+  // whichever view falls in or out; keep the first choice.
+  constexpr size_t kMinFacingViews = 6;
+  LandmarkFit refit;
+  std::vector<std::vector<Observation>> chosen_landmarks = ByLandmark(chosen);
+  if (chosen.size() >= kMinFacingViews && FitLandmarks(options, model_points, chosen_landmarks, &refit)) {
+    *per_landmark = std::move(chosen_landmarks);
+    *lf = refit;
+    *views_used = static_cast<int>(chosen.size());
+  } else {
+    *from_views = first_choice;
+  }
+}
+
+// The views fix the rotation; scale and translation come from the landmarks
+// (their extent across the face is well measured even where their depth is
+// not), by least squares with the rotation held. `lf.sim` becomes that
+// similarity with its inliers.
+void FitScaleWithRotationHeld(const AlignOptions& options, Sim3 from_views, LandmarkFit* lf) {
+  const Eigen::Matrix3Xd& src = lf->src;
+  const Eigen::Matrix3Xd& tgt = lf->tgt;
+  SimilarityResult& sim = lf->sim;
+  std::vector<int> fit_set = sim.inliers;
+  if (!sim.ok || fit_set.size() < 3) {
+    fit_set.resize(lf->used.size());
+    for (size_t k = 0; k < lf->used.size(); ++k) fit_set[k] = static_cast<int>(k);
+  }
+  Eigen::Vector3d mean_w = Eigen::Vector3d::Zero(), mean_h = Eigen::Vector3d::Zero();
+  for (int k : fit_set) {
+    mean_w += src.col(k);
+    mean_h += tgt.col(k);
+  }
+  mean_w /= static_cast<double>(fit_set.size());
+  mean_h /= static_cast<double>(fit_set.size());
+  double num = 0, den = 0;
+  for (int k : fit_set) {
+    const Eigen::Vector3d w = from_views.rotation * (src.col(k) - mean_w);
+    num += w.dot(tgt.col(k) - mean_h);
+    den += w.squaredNorm();
+  }
+  if (num > 0 && den > 0) {
+    from_views.scale = num / den;
+    from_views.translation = mean_h - from_views.scale * (from_views.rotation * mean_w);
+  }
+  // Inliers and residuals of the landmarks under the combined similarity.
+  sim.ok = true;
+  sim.tgt_from_src = from_views;
+  sim.quality = SimilarityQuality::kGood;
+  sim.inliers.clear();
+  for (size_t k = 0; k < lf->used.size(); ++k)
+    if ((tgt.col(k) - from_views * src.col(k)).norm() < options.inlier_mm / 1000.0)
+      sim.inliers.push_back(static_cast<int>(k));
+}
+
+// The alignment from one group's views (false: too few landmarks, or no
+// similarity); `per_landmark` the observations it used.
+bool AlignGroup(const AlignOptions& options, const std::vector<Eigen::Vector3d>& model_points,
+                const std::vector<ViewPose>& views, int frame, bool per_frame, AlignResult* r,
+                std::vector<std::vector<Observation>>* per_landmark) {
+  std::vector<ViewPose> frontal;
+  for (const ViewPose& v : views)
+    if (v.frontal_by_pnp) frontal.push_back(v);
+  if (frontal.empty()) return false;
+  *per_landmark = ByLandmark(frontal);
+  LandmarkFit lf;
+  if (!FitLandmarks(options, model_points, *per_landmark, &lf)) return false;
+  Sim3 from_views;
+  const bool use_views = options.method == "views" && SimilarityFromViewPoses(frontal, &from_views);
+  int views_used = static_cast<int>(frontal.size());
+  if (use_views && options.select_views == "geometry")
+    ChooseViewsByGeometry(options, model_points, views, per_frame, &from_views, per_landmark, &lf, &views_used);
+  if (use_views) FitScaleWithRotationHeld(options, from_views, &lf);
+  if (!lf.sim.ok) return false;
+  *r = AlignResult();
+  r->head_from_world = lf.sim.tgt_from_src;
+  r->quality = lf.sim.quality;
+  r->method = use_views ? "views" : "landmarks";
+  r->views_used = use_views ? views_used : 0;
+  r->landmarks_used = lf.used;
+  r->reference_frame = per_frame ? frame : -1;
+  for (size_t k = 0; k < lf.used.size(); ++k) {
+    r->residuals_mm.push_back(1000.0 * (lf.tgt.col(k) - r->head_from_world * lf.src.col(k)).norm());
+    r->points.push_back(lf.src.col(k));
+    r->inlier.push_back(std::find(lf.sim.inliers.begin(), lf.sim.inliers.end(), static_cast<int>(k)) !=
+                        lf.sim.inliers.end());
+  }
+  SummariseResiduals(r);
+  return true;
+}
+
+// The landmarks' residuals and inliers under best.head_from_world.
+void Rescore(const AlignOptions& options, const std::vector<Eigen::Vector3d>& model_points, AlignResult* best) {
+  for (size_t k = 0; k < best->landmarks_used.size(); ++k) {
+    best->residuals_mm[k] =
+        1000.0 * (model_points[best->landmarks_used[k]] - best->head_from_world * best->points[k]).norm();
+    best->inlier[k] = best->residuals_mm[k] < options.inlier_mm;
+  }
+  SummariseResiduals(best);
+}
+
+// Landmarks leave the head frame a degree or more off and take its scale from
+// the mean face; thousands of points on the skin pin both. Only for a still
+// head seen by one moving camera: with several cameras watching a moving
+// head, the face's points would mix instants.
+void ApplySurfaceFit(const AlignOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
+                     const FaceModel& model, const std::vector<Eigen::Vector3d>& model_points, bool per_frame,
+                     AlignResult* best) {
+  if (per_frame) {
+    best->surface_note = "surface fit: not for several cameras (the head moves between instants)";
+    return;
+  }
+  if (capture.cameras.empty()) {
+    best->surface_note = "surface fit: the capture has no camera";
+    return;
+  }
+  std::vector<Eigen::Vector3d> face_points;
+  FacePointStats stats;
+  SurfaceFitOptions fit;
+  fit.noise_mm = options.surface_noise_mm;
+  SurfaceFitResult surface;
+  Sim3 refined = best->head_from_world;
+  Status fitted =
+      TriangulateFacePoints(capture, cameras, capture.cameras[0].name, FacePointOptions(), &face_points, &stats);
+  best->face_points = stats.points;
+  if (fitted.ok()) fitted = FitFaceSurface(model, face_points, fit, &refined, &surface);
+  if (!fitted.ok()) {
+    best->surface_note = fitted.message() + "; the landmarks' head frame is kept";
+    HF_LOG(Warning) << "align: " << best->surface_note;
+    return;
+  }
+  best->head_from_world = refined;
+  best->method += "+surface";
+  best->surface_points = surface.points;
+  best->surface_median_mm = surface.median_mm;
+  best->surface_turn_deg = surface.turn_deg;
+  best->surface_scale_change = surface.scale_change;
+  Rescore(options, model_points, best);
+  HF_LOG(Info) << "align: surface fit on " << surface.points << " of " << stats.points
+               << " points triangulated on the face: turned the head frame " << surface.turn_deg
+               << " deg and scaled it by " << 100 * surface.scale_change << "%; median distance " << surface.median_mm
+               << " mm";
+}
+
+}  // namespace
+
+Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
+                const FaceModel& model, AlignResult* result) {
+  HF_RETURN_IF_ERROR(options.Check());
+  if (model.landmarks_ibug68().size() != 68) return Status::InvalidArgument("the face model has no iBUG-68 landmarks");
+  const bool head_frame = cameras.frame == "head";
+  const bool per_frame = !head_frame && capture.cameras.size() > 1;
+  const std::vector<Eigen::Vector3d> model_points = DetectorLandmarkPoints(model, options.landmark_embedding);
+  const std::map<int, std::vector<ViewPose>> view_poses =
+      CollectViewPoses(options, capture, cameras, model_points, per_frame);
+  if (head_frame) return MeasureHeadPoseCameras(view_poses, model_points, cameras, result);
 
   AlignResult best;
   std::vector<std::vector<Observation>> best_observations;
   bool found = false;
   for (const auto& [frame, views] : view_poses) {
-    std::vector<ViewPose> frontal;
-    for (const ViewPose& v : views)
-      if (v.frontal_by_pnp) frontal.push_back(v);
-    if (frontal.empty()) continue;
-    std::vector<std::vector<Observation>> per_landmark = ByLandmark(frontal);
-    LandmarkFit lf;
-    if (!fit_landmarks(per_landmark, &lf)) continue;
-    Sim3 from_views;
-    const bool use_views = options.method == "views" && SimilarityFromViewPoses(frontal, &from_views);
-    int views_used = static_cast<int>(frontal.size());
-    if (use_views && options.select_views == "geometry") {
-      // Choose the views again by where their cameras are, under the rotation
-      // so far, until the choice settles; then triangulate from those views.
-      const Eigen::Vector3d face_centre = lf.src.rowwise().mean();
-      const Sim3 first_choice = from_views;
-      std::vector<ViewPose> chosen;
-      bool settled = false;
-      // A fixed-point iteration: each round moves the rotation by the part of
-      // the last move the detector does not see (unshaded orbits: about 0.7
-      // of it), so settling takes some fifteen rounds there; each round is a
-      // mean of rotations.
-      constexpr int kMaxRounds = 60;
-      for (int round = 0; round < kMaxRounds && !settled; ++round) {
-        const std::vector<ViewPose> facing = ViewsFacing(views, from_views.rotation, face_centre,
-                                                         options.max_yaw_deg, options.max_elevation_deg);
-        Sim3 next;
-        if (!SimilarityFromViewPoses(facing, &next)) break;
-        const double moved = Eigen::AngleAxisd(next.rotation.transpose() * from_views.rotation).angle();
-        HF_LOG(Debug) << "align: view choice round " << round << ": " << facing.size() << " views, rotation moved "
-                      << moved * 180 / M_PI << " deg";
-        settled = moved < 1e-4;
-        from_views = next;
-        chosen = facing;
-      }
-      if (!settled && !per_frame)
-        HF_LOG(Warning) << "align: the choice of views did not settle in " << kMaxRounds << " rounds; using the last ("
-                        << chosen.size() << " views)";
-      // Too few views to surround the face (a rig's few fixed cameras, tens of
-      // degrees apart): the window cannot be made even, and its mean follows
-      // whichever view falls in or out; keep the first choice.
-      constexpr size_t kMinFacingViews = 6;
-      LandmarkFit refit;
-      std::vector<std::vector<Observation>> chosen_landmarks = ByLandmark(chosen);
-      if (chosen.size() >= kMinFacingViews && fit_landmarks(chosen_landmarks, &refit)) {
-        per_landmark = std::move(chosen_landmarks);
-        lf = refit;
-        views_used = static_cast<int>(chosen.size());
-      } else {
-        from_views = first_choice;
-      }
-    }
-    const std::vector<int>& used = lf.used;
-    const Eigen::Matrix3Xd& src = lf.src;
-    const Eigen::Matrix3Xd& tgt = lf.tgt;
-    SimilarityResult& sim = lf.sim;
-    if (use_views) {
-      // The views fix the rotation; scale and translation come from the
-      // landmarks (their extent across the face is well measured even where
-      // their depth is not), by least squares with the rotation held.
-      const std::vector<int> fit_set = sim.ok && sim.inliers.size() >= 3 ? sim.inliers : [&] {
-        std::vector<int> all(used.size());
-        for (size_t k = 0; k < used.size(); ++k) all[k] = static_cast<int>(k);
-        return all;
-      }();
-      Eigen::Vector3d mean_w = Eigen::Vector3d::Zero(), mean_h = Eigen::Vector3d::Zero();
-      for (int k : fit_set) {
-        mean_w += src.col(k);
-        mean_h += tgt.col(k);
-      }
-      mean_w /= static_cast<double>(fit_set.size());
-      mean_h /= static_cast<double>(fit_set.size());
-      double num = 0, den = 0;
-      for (int k : fit_set) {
-        const Eigen::Vector3d w = from_views.rotation * (src.col(k) - mean_w);
-        num += w.dot(tgt.col(k) - mean_h);
-        den += w.squaredNorm();
-      }
-      if (num > 0 && den > 0) {
-        from_views.scale = num / den;
-        from_views.translation = mean_h - from_views.scale * (from_views.rotation * mean_w);
-      }
-      // Inliers and residuals of the landmarks under the combined similarity.
-      sim.ok = true;
-      sim.tgt_from_src = from_views;
-      sim.quality = SimilarityQuality::kGood;
-      sim.inliers.clear();
-      for (size_t k = 0; k < used.size(); ++k)
-        if ((tgt.col(k) - from_views * src.col(k)).norm() < options.inlier_mm / 1000.0) sim.inliers.push_back(static_cast<int>(k));
-    }
-    if (!sim.ok) continue;
     AlignResult r;
-    r.head_from_world = sim.tgt_from_src;
-    r.quality = sim.quality;
-    r.method = use_views ? "views" : "landmarks";
-    r.views_used = use_views ? views_used : 0;
-    r.landmarks_used = used;
-    r.reference_frame = per_frame ? frame : -1;
-    for (size_t k = 0; k < used.size(); ++k) {
-      r.residuals_mm.push_back(1000.0 * (tgt.col(k) - r.head_from_world * src.col(k)).norm());
-      r.points.push_back(src.col(k));
-      r.inlier.push_back(std::find(sim.inliers.begin(), sim.inliers.end(), static_cast<int>(k)) != sim.inliers.end());
-    }
-    SummariseResiduals(&r);
+    std::vector<std::vector<Observation>> per_landmark;
+    if (!AlignGroup(options, model_points, views, frame, per_frame, &r, &per_landmark)) continue;
     if (!found || r.median_mm < best.median_mm) {
       best = r;
       best_observations = per_landmark;
@@ -523,15 +616,6 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
                              "landmarks seen in 2 or more registered views with enough parallax)");
   if (best.quality != SimilarityQuality::kGood)
     best.message = std::string("alignment quality: ") + SimilarityQualityName(best.quality);
-  // The landmarks' residuals and inliers under best.head_from_world.
-  auto rescore = [&] {
-    for (size_t k = 0; k < best.landmarks_used.size(); ++k) {
-      best.residuals_mm[k] =
-          1000.0 * (model_points[best.landmarks_used[k]] - best.head_from_world * best.points[k]).norm();
-      best.inlier[k] = best.residuals_mm[k] < options.inlier_mm;
-    }
-    SummariseResiduals(&best);
-  };
   // The refinement reprojects every rigid landmark, triangulated or not (it
   // needs only their detections). Restricting it to the 3D fit's inliers was
   // tried: that set is chosen under the diluted scale, often a few landmarks
@@ -539,52 +623,15 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   // tempers the detections that stray.
   if (options.refine == "reprojection") {
     double median_px = 0;
-    if (RefineByReprojection(best_observations, model_points, rigid,
-                             options.refine_robust_px, &best.head_from_world, &median_px)) {
+    if (RefineByReprojection(best_observations, model_points, RigidLandmarks(), options.refine_robust_px,
+                             &best.head_from_world, &median_px)) {
       best.method += "+reprojection";
       best.reprojection_median_px = median_px;
-      rescore();
+      Rescore(options, model_points, &best);
     }
   }
-  // Landmarks leave the head frame a degree or more off and take its scale
-  // from the mean face; thousands of points on the skin pin both. Only for a
-  // still head seen by one moving camera: with several cameras watching a
-  // moving head, the face's points would mix instants.
   best.landmarks_head_from_world = best.head_from_world;
-  if (options.surface == "points" && !head_frame) {
-    if (per_frame) {
-      best.surface_note = "surface fit: not for several cameras (the head moves between instants)";
-    } else if (capture.cameras.empty()) {
-      best.surface_note = "surface fit: the capture has no camera";
-    } else {
-      std::vector<Eigen::Vector3d> face_points;
-      FacePointStats stats;
-      SurfaceFitOptions fit;
-      fit.noise_mm = options.surface_noise_mm;
-      SurfaceFitResult surface;
-      Sim3 refined = best.head_from_world;
-      Status fitted =
-          TriangulateFacePoints(capture, cameras, capture.cameras[0].name, FacePointOptions(), &face_points, &stats);
-      best.face_points = stats.points;
-      if (fitted.ok()) fitted = FitFaceSurface(model, face_points, fit, &refined, &surface);
-      if (fitted.ok()) {
-        best.head_from_world = refined;
-        best.method += "+surface";
-        best.surface_points = surface.points;
-        best.surface_median_mm = surface.median_mm;
-        best.surface_turn_deg = surface.turn_deg;
-        best.surface_scale_change = surface.scale_change;
-        rescore();
-        HF_LOG(Info) << "align: surface fit on " << surface.points << " of " << stats.points
-                     << " points triangulated on the face: turned the head frame " << surface.turn_deg
-                     << " deg and scaled it by " << 100 * surface.scale_change << "%; median distance "
-                     << surface.median_mm << " mm";
-      } else {
-        best.surface_note = fitted.message() + "; the landmarks' head frame is kept";
-        HF_LOG(Warning) << "align: " << best.surface_note;
-      }
-    }
-  }
+  if (options.surface == "points") ApplySurfaceFit(options, capture, cameras, model, model_points, per_frame, &best);
   // A face is some 150 mm across: landmarks that miss the model by tens of
   // millimetres mean the cameras do not see one consistent head, whatever
   // COLMAP's registration count said.

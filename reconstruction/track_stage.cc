@@ -177,6 +177,129 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
          "meshes");
 }
 
+namespace {
+
+// The widest spread, over the frames, of the yaws (degrees, about the head)
+// from which one frame's views see the head.
+double WidestViewSpread(const std::vector<TrackingView>& views) {
+  std::map<int, std::pair<double, double>> yaws;  // frame -> lowest, highest yaw of its views
+  double widest = 0;
+  for (const TrackingView& view : views) {
+    if (!view.landmarks) continue;
+    const Eigen::Vector3d c = view.camera.Centre();
+    const double yaw = std::atan2(c.x(), c.z()) * 180.0 / M_PI;
+    const auto [it, first] = yaws.emplace(view.frame, std::make_pair(yaw, yaw));
+    it->second.first = std::min(it->second.first, yaw);
+    it->second.second = std::max(it->second.second, yaw);
+    widest = std::max(widest, it->second.second - it->second.first);
+  }
+  return widest;
+}
+
+// Fits the sequence; with view-dependent points, a second time with each
+// view's points for the direction the first fit turned the head to.
+Status FitSequence(const ViewLandmarkBases& bases, const TrackOptions& fit, int num_frames,
+                   std::vector<TrackingView>* views, TrackResult* result) {
+  AttachViewBases(bases, {}, views);
+  HF_RETURN_IF_ERROR(TrackSequence(bases.any_view, *views, num_frames, fit, result));
+  if (bases.nodes.empty() || fit.fixed_head) return Status::Ok();
+  std::vector<Eigen::Isometry3d> motion;
+  for (const TrackedFrame& f : result->frames) motion.push_back(f.head_motion);
+  AttachViewBases(bases, motion, views);
+  const double first_seconds = result->seconds;
+  HF_RETURN_IF_ERROR(TrackSequence(bases.any_view, *views, num_frames, fit, result));
+  result->seconds += first_seconds;
+  return Status::Ok();
+}
+
+// The fitted head of a frame, moved by its head motion.
+Eigen::Matrix3Xf FittedVertices(const FaceModel& model, const Eigen::Matrix3Xf& identity_shape,
+                                const TrackedFrame& f) {
+  Eigen::Matrix3Xf v = identity_shape;
+  model.AddExpression(f.expression.cast<float>(), &v);
+  return (f.head_motion.cast<float>() * v.colwise().homogeneous()).topRows(3);
+}
+
+Status WriteMeshes(const FaceModel& model, const TrackResult& result, const fs::path& dir) {
+  HF_RETURN_IF_ERROR(EnsureDirectory(dir));
+  const Eigen::Matrix3Xf identity_shape = model.Identity(result.identity.cast<float>());
+  for (const TrackedFrame& f : result.frames) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06d.obj", f.frame);
+    HF_RETURN_IF_ERROR(WriteObj(dir / name, FittedVertices(model, identity_shape, f), model.triangles()));
+  }
+  return Status::Ok();
+}
+
+// overlay_<camera>.mp4 for every camera: the fitted face shaded over each
+// frame with the detected (green) and fitted (red) landmarks.
+Status WriteOverlays(const FaceModel& model, const IngestedCapture& capture, const CameraSet& cameras,
+                     const std::vector<TrackingView>& views, const std::vector<std::pair<int, int>>& view_source,
+                     const LandmarkBasis& basis, const TrackResult& result, const fs::path& out_dir,
+                     Progress* progress, std::vector<std::string>* outputs) {
+  // Only the face is drawn (the rest of the head has no landmarks to follow).
+  Mesh mesh;
+  mesh.triangles = model.triangles();
+  mesh.material.assign(model.num_triangles(), -1);
+  const FaceModel::Region* face = model.FindRegion("face");
+  for (int t = 0; t < model.num_triangles(); ++t) {
+    if (face == nullptr || face->ContainsTriangle(t)) mesh.material[t] = 0;
+  }
+  Material skin;
+  skin.colour = Eigen::Vector3f(0.75f, 0.8f, 0.85f);
+  mesh.materials = {skin};
+  const Eigen::Matrix3Xf identity_shape = model.Identity(result.identity.cast<float>());
+  // Frame by frame, so each frame's mesh is built once for all its views.
+  std::vector<size_t> order(views.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return views[a].frame < views[b].frame; });
+  progress->Start("track: overlay video", int64_t(views.size()));
+  std::map<int, cv::VideoWriter> writers;
+  int mesh_frame = -1;
+  for (const size_t i : order) {
+    const auto [c, position] = view_source[i];
+    const int frame = views[i].frame;
+    const IngestedCamera& cam = capture.cameras[c];
+    const cv::Mat image = cv::imread(capture.FramePath(cam.name, frame).string(), cv::IMREAD_COLOR);
+    if (image.empty()) return Status::IoError("track: cannot read frame " + capture.FramePath(cam.name, frame).string());
+    const TrackedFrame& f = result.frames[frame];
+    if (frame != mesh_frame) {
+      mesh.vertices = FittedVertices(model, identity_shape, f);
+      mesh.normals = VertexNormals(mesh.vertices, mesh.triangles);
+      mesh_frame = frame;
+    }
+    // Landmarks as detected and fitted ones through the lens (the shaded mesh is drawn without distortion).
+    const CameraIntrinsics& lens = *cameras.FindCamera(cam.name);
+    std::vector<Eigen::Vector2d> fitted;
+    const LandmarkBasis& seen_by = views[i].basis ? *views[i].basis : basis;
+    for (int l = 0; l < 68; ++l) {
+      const Eigen::Vector3d head = f.head_motion * seen_by.Point(l, result.identity, f.expression);
+      fitted.push_back(lens.Project(views[i].camera.rotation * head + views[i].camera.translation));
+    }
+    std::optional<std::array<Eigen::Vector2d, 68>> detected;
+    if (const auto& lm = cam.frames[position].landmarks) {
+      detected.emplace();
+      for (int l = 0; l < 68; ++l) (*detected)[l] = Eigen::Vector2d((*lm)[l].x, (*lm)[l].y);
+    }
+    const cv::Mat drawn = Overlay(image, mesh, views[i].camera, detected, fitted);
+    auto it = writers.find(c);
+    if (it == writers.end()) {
+      const fs::path video = out_dir / ("overlay_" + cam.name + ".mp4");
+      cv::VideoWriter writer(video.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('m', 'p', '4', 'v'), capture.fps,
+                             drawn.size());
+      if (!writer.isOpened()) return Status::IoError("track: cannot open " + video.string() + " for writing");
+      it = writers.emplace(c, std::move(writer)).first;
+      outputs->push_back(video.filename().string());
+    }
+    it->second.write(drawn);
+    progress->Advance();
+  }
+  progress->Finish();
+  return Status::Ok();
+}
+
+}  // namespace
+
 Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture, const CameraSet& cameras,
                 const FaceModel& model, const fs::path& out_dir, Progress* progress, TrackSummary* summary) {
   HF_RETURN_IF_ERROR(options.Check());
@@ -190,18 +313,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   std::vector<TrackingView> views;
   std::vector<std::pair<int, int>> view_source;  // camera index, position in its frames
   HF_RETURN_IF_ERROR(BuildTrackingViews(capture, cameras, &views, &view_source));
-  // How far apart the views of one frame see the head from.
-  std::map<int, std::pair<double, double>> yaws;  // frame -> lowest, highest yaw of its views
-  double widest = 0;
-  for (const TrackingView& view : views) {
-    if (!view.landmarks) continue;
-    const Eigen::Vector3d c = view.camera.Centre();
-    const double yaw = std::atan2(c.x(), c.z()) * 180.0 / M_PI;
-    const auto [it, first] = yaws.emplace(view.frame, std::make_pair(yaw, yaw));
-    it->second.first = std::min(it->second.first, yaw);
-    it->second.second = std::max(it->second.second, yaw);
-    widest = std::max(widest, it->second.second - it->second.first);
-  }
+  const double widest = WidestViewSpread(views);
   const bool surrounded = widest > options.grid_min_span_deg;
   if (surrounded) {
     // Each view draws the jaw contour where its own side of the face turns
@@ -224,25 +336,13 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   ViewLandmarkBases bases;
   HF_RETURN_IF_ERROR(BuildViewLandmarkBases(model, LoadLandmarkEmbedding(model, embedding), options.fit.identity_modes,
                                             &bases));
-  const LandmarkBasis& basis = bases.any_view;
-  AttachViewBases(bases, {}, &views);
   const int num_frames = capture.num_frames();
   HF_LOG(Info) << "track: " << views.size() << " views of " << num_frames << " frames, " << options.fit.identity_modes
                << " identity modes, " << model.num_expressions() << " expressions"
                << (fit.fixed_head ? ", head held by the head-pose cameras" : "");
   progress->Start("track: fitting", 0);
   TrackResult result;
-  HF_RETURN_IF_ERROR(TrackSequence(basis, views, num_frames, fit, &result));
-  if (!bases.nodes.empty() && !fit.fixed_head) {
-    // The first fit's head motion turns the head from its initial pose: each
-    // view's landmarks again for the direction it then sees the head from.
-    std::vector<Eigen::Isometry3d> motion;
-    for (const TrackedFrame& f : result.frames) motion.push_back(f.head_motion);
-    AttachViewBases(bases, motion, &views);
-    const double first_seconds = result.seconds;
-    HF_RETURN_IF_ERROR(TrackSequence(basis, views, num_frames, fit, &result));
-    result.seconds += first_seconds;
-  }
+  HF_RETURN_IF_ERROR(FitSequence(bases, fit, num_frames, &views, &result));
   progress->Finish(result.solver_report);
 
   TrackingFile tracking;
@@ -259,94 +359,21 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   tracking.solver = result.solver_report;
   tracking.seconds = result.seconds;
   tracking.frames = result.frames;
-  int interpolated = 0, low = 0;
-  for (const TrackedFrame& f : result.frames) {
-    interpolated += f.interpolated;
-    low += f.low_confidence;
-  }
   HF_RETURN_IF_ERROR(WriteTracking(tracking, out_dir / "tracking.json"));
   summary->outputs = {"tracking.json"};
-
-  const Eigen::VectorXf alpha = result.identity.cast<float>();
-  const Eigen::Matrix3Xf identity_shape = model.Identity(alpha);
-  // The fitted head of a frame, moved by its head motion.
-  auto fitted_vertices = [&](const TrackedFrame& f) {
-    Eigen::Matrix3Xf v = identity_shape;
-    model.AddExpression(f.expression.cast<float>(), &v);
-    return Eigen::Matrix3Xf((f.head_motion.cast<float>() * v.colwise().homogeneous()).topRows(3));
-  };
   if (options.meshes) {
-    HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "meshes"));
-    for (const TrackedFrame& f : result.frames) {
-      char name[32];
-      std::snprintf(name, sizeof(name), "%06d.obj", f.frame);
-      HF_RETURN_IF_ERROR(WriteObj(out_dir / "meshes" / name, fitted_vertices(f), model.triangles()));
-    }
+    HF_RETURN_IF_ERROR(WriteMeshes(model, result, out_dir / "meshes"));
     summary->outputs.push_back("meshes");
   }
-  if (options.overlay) {
-    // Only the face is drawn (the rest of the head has no landmarks to follow).
-    Mesh mesh;
-    mesh.triangles = model.triangles();
-    mesh.material.assign(model.num_triangles(), -1);
-    const FaceModel::Region* face = model.FindRegion("face");
-    for (int t = 0; t < model.num_triangles(); ++t) {
-      if (face == nullptr || face->ContainsTriangle(t)) mesh.material[t] = 0;
-    }
-    Material skin;
-    skin.colour = Eigen::Vector3f(0.75f, 0.8f, 0.85f);
-    mesh.materials = {skin};
-    // Frame by frame, so each frame's mesh is built once for all its views.
-    std::vector<size_t> order(views.size());
-    std::iota(order.begin(), order.end(), 0);
-    std::stable_sort(order.begin(), order.end(),
-                     [&](size_t a, size_t b) { return views[a].frame < views[b].frame; });
-    progress->Start("track: overlay video", int64_t(views.size()));
-    std::map<int, cv::VideoWriter> writers;
-    int mesh_frame = -1;
-    for (const size_t i : order) {
-      const auto [c, position] = view_source[i];
-      const int frame = views[i].frame;
-      const IngestedCamera& cam = capture.cameras[c];
-      const cv::Mat image = cv::imread(capture.FramePath(cam.name, frame).string(), cv::IMREAD_COLOR);
-      if (image.empty()) return Status::IoError("track: cannot read frame " + capture.FramePath(cam.name, frame).string());
-      const TrackedFrame& f = result.frames[frame];
-      if (frame != mesh_frame) {
-        mesh.vertices = fitted_vertices(f);
-        mesh.normals = VertexNormals(mesh.vertices, mesh.triangles);
-        mesh_frame = frame;
-      }
-      // Landmarks as detected and fitted ones through the lens (the shaded mesh is drawn without distortion).
-      const CameraIntrinsics& lens = *cameras.FindCamera(cam.name);
-      std::vector<Eigen::Vector2d> fitted;
-      const LandmarkBasis& seen_by = views[i].basis ? *views[i].basis : basis;
-      for (int l = 0; l < 68; ++l) {
-        const Eigen::Vector3d head = f.head_motion * seen_by.Point(l, result.identity, f.expression);
-        fitted.push_back(lens.Project(views[i].camera.rotation * head + views[i].camera.translation));
-      }
-      std::optional<std::array<Eigen::Vector2d, 68>> detected;
-      if (const auto& lm = cam.frames[position].landmarks) {
-        detected.emplace();
-        for (int l = 0; l < 68; ++l) (*detected)[l] = Eigen::Vector2d((*lm)[l].x, (*lm)[l].y);
-      }
-      const cv::Mat drawn = Overlay(image, mesh, views[i].camera, detected, fitted);
-      auto it = writers.find(c);
-      if (it == writers.end()) {
-        const fs::path video = out_dir / ("overlay_" + cam.name + ".mp4");
-        cv::VideoWriter writer(video.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('m', 'p', '4', 'v'),
-                               capture.fps, drawn.size());
-        if (!writer.isOpened()) return Status::IoError("track: cannot open " + video.string() + " for writing");
-        it = writers.emplace(c, std::move(writer)).first;
-        summary->outputs.push_back(video.filename().string());
-      }
-      it->second.write(drawn);
-      progress->Advance();
-    }
-    progress->Finish();
-  }
+  if (options.overlay)
+    HF_RETURN_IF_ERROR(WriteOverlays(model, capture, cameras, views, view_source, bases.any_view, result, out_dir,
+                                     progress, &summary->outputs));
   summary->frames = num_frames;
-  summary->interpolated = interpolated;
-  summary->low_confidence = low;
+  summary->interpolated = summary->low_confidence = 0;
+  for (const TrackedFrame& f : result.frames) {
+    summary->interpolated += f.interpolated;
+    summary->low_confidence += f.low_confidence;
+  }
   summary->median_residual_px = result.median_residual_px;
   summary->dropped_views = result.dropped_views;
   summary->seconds = result.seconds;

@@ -8,7 +8,7 @@ PACKAGES=(
   colmap
   libceres-dev libeigen3-dev
   libopencv-dev libopencv-contrib-dev opencv-data
-  libcgal-dev libopenmesh-dev
+  libopenmesh-dev
   libtorch-dev
   libboost-program-options-dev libboost-filesystem-dev
   libgtest-dev libgmock-dev libbenchmark-dev

@@ -22,10 +22,17 @@ function(headforge_add_test name)
   if(NOT ARG_LABELS)
     message(FATAL_ERROR "headforge_add_test(${name}): give its LABELS (unit, integration, colmap, train, gpu)")
   endif()
+  # OpenMP (OpenBLAS, Eigen, CHOLMOD, LibTorch) on one thread, as the command
+  # line starts it: two tests run at once on two cores, and the Ceres stages'
+  # small solves run several times slower threaded.
+  # One label per test, its tiers joined by "-" ("integration-colmap"):
+  # gtest_discover_tests cannot pass a list as a property's value, and ctest's
+  # -L and -LE take regular expressions, so -L colmap and -LE train still pick.
+  string(REPLACE ";" "-" label "${ARG_LABELS}")
   if(ARG_WHOLE)
     add_test(NAME ${name} COMMAND ${name})
-    set_tests_properties(${name} PROPERTIES LABELS "${ARG_LABELS}")
+    set_tests_properties(${name} PROPERTIES LABELS "${label}" ENVIRONMENT "OMP_NUM_THREADS=1")
   else()
-    gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
+    gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${label}" ENVIRONMENT "OMP_NUM_THREADS=1")
   endif()
 endfunction()

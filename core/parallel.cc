@@ -1,5 +1,7 @@
 #include "core/parallel.h"
 
+#include <dlfcn.h>
+
 #include <algorithm>
 #include <atomic>
 #include <exception>
@@ -38,6 +40,13 @@ void ParallelFor(int count, int threads, const std::function<void(int, int)>& fn
   work(0);
   for (auto& t : pool) t.join();
   if (error) std::rethrow_exception(error);
+}
+
+void SetBlasThreads(int threads) {
+  // Looked up at run time: the BLAS is whichever Debian's alternatives chose.
+  using SetThreads = void (*)(int);
+  static const auto set = reinterpret_cast<SetThreads>(::dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
+  if (set) set(std::max(1, threads));
 }
 
 }  // namespace headforge

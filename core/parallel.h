@@ -13,4 +13,8 @@ int HardwareThreads();
 // exception thrown by fn is rethrown here after all workers stop.
 void ParallelFor(int count, int threads, const std::function<void(int index, int worker)>& fn);
 
+// Threads OpenBLAS gives each call (a no-op with another BLAS); see
+// ConfigureTorchThreads (avatar/torch_runtime.h) for who sets it.
+void SetBlasThreads(int threads);
+
 }  // namespace headforge

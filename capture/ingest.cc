@@ -51,6 +51,7 @@ Status IngestOptions::Check() const {
   if (!(folder_fps > 0.0)) return Status::InvalidArgument("--folder-fps must be positive");
   if (mask.work_size < 32) return Status::InvalidArgument("--mask-size must be at least 32");
   if (mask.iterations < 1) return Status::InvalidArgument("--mask-iterations must be at least 1");
+  if (mask.attempts < 1) return Status::InvalidArgument("--mask-attempts must be at least 1");
   if (min_face_fraction < 0.0 || min_face_fraction > 1.0)
     return Status::InvalidArgument("--min-face-fraction must be in [0, 1]");
   return detector.Check();
@@ -100,6 +101,9 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
          "masks", OptionSet::Effect::kRuntime);
   o->Add("ingest.mask_size", &in->mask.work_size, "Working resolution of the automatic mask.",
          "mask-size");
+  o->Add("ingest.mask_attempts", &in->mask.attempts,
+         "GrabCut runs per frame from different seeds; the mask reaching least along the frame's top and sides is kept.",
+         "mask-attempts");
   o->Add("ingest.mask_iterations", &in->mask.iterations, "GrabCut iterations of the automatic mask.",
          "mask-iterations");
   o->Add("ingest.offsets", &in->offsets,

@@ -2,51 +2,16 @@
 
 #include <torch/torch.h>
 
-#include <opencv2/imgproc.hpp>
-
+#include "avatar/torch_runtime.h"
 #include "avatar/train/splat_fit.h"
+#include "avatar/train/tensor_image.h"
 
 namespace headforge {
 namespace {
 
-// An 8-bit BGR image as a [3, H, W] RGB tensor in [0, 1].
-torch::Tensor ToTensor(const cv::Mat& bgr) {
-  cv::Mat rgb;
-  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  rgb.convertTo(rgb, CV_32FC3, 1.0 / 255.0);
-  return torch::from_blob(rgb.data, {rgb.rows, rgb.cols, 3}, torch::kFloat32).permute({2, 0, 1}).clone();
-}
-
-cv::Mat ToImage(const torch::Tensor& rgb) {
-  const torch::Tensor hwc =
-      (rgb.clamp(0, 1) * 255.0).round().to(torch::kUInt8).permute({1, 2, 0}).contiguous();
-  cv::Mat image(int(hwc.size(0)), int(hwc.size(1)), CV_8UC3, hwc.data_ptr());
-  cv::Mat bgr;
-  cv::cvtColor(image, bgr, cv::COLOR_RGB2BGR);
-  return bgr;
-}
-
-// The rasterizer's camera for a pinhole camera (same conventions).
-SplatCamera ToSplatCamera(const PinholeCamera& camera) {
-  SplatCamera out;
-  const Eigen::Matrix3d r = camera.cam_from_world.linear();
-  const Eigen::Vector3d t = camera.cam_from_world.translation();
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) out.cam_from_world[4 * i + j] = r(i, j);
-    out.cam_from_world[4 * i + 3] = t[i];
-  }
-  out.fx = camera.fx;
-  out.fy = camera.fy;
-  out.cx = camera.cx;
-  out.cy = camera.cy;
-  out.width = camera.width;
-  out.height = camera.height;
-  return out;
-}
-
 std::vector<PosedImage> ToPosed(const std::vector<SplatFitView>& views) {
   std::vector<PosedImage> out;
-  for (const SplatFitView& v : views) out.push_back({ToSplatCamera(v.camera), ToTensor(v.image), v.name});
+  for (const SplatFitView& v : views) out.push_back({ToSplatCamera(v.camera), ImageToTensor(v.image), v.name});
   return out;
 }
 
@@ -65,6 +30,7 @@ Status CheckSplatFitDevice(const std::string& device) {
 Status RunSplatFit(const SplatFitOptions& options, const std::vector<SplatFitView>& train,
                    const std::vector<SplatFitView>& test, const SplatFitPoints& init, StatsLog* stats,
                    Progress* progress, SplatFitOutput* output) {
+  UseTensorThreads();
   const int64_t n = int64_t(init.sizes.size());
   if (init.positions.size() != size_t(3 * n) || init.colours.size() != size_t(3 * n)) {
     return Status::InvalidArgument("splat-fit: starting points, colours and sizes differ in count");
@@ -84,7 +50,7 @@ Status RunSplatFit(const SplatFitOptions& options, const std::vector<SplatFitVie
   output->test_ssim = result.test_ssim;
   output->view_psnr = result.view_psnr;
   output->test_renders.clear();
-  for (const torch::Tensor& r : result.test_renders) output->test_renders.push_back(ToImage(r));
+  for (const torch::Tensor& r : result.test_renders) output->test_renders.push_back(TensorToImage(r));
   output->size = p.size();
   output->means = Flat(p.means);
   output->colours = Flat(torch::sigmoid(p.colour_logits));

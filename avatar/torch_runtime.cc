@@ -4,10 +4,24 @@
 
 #include <algorithm>
 
+#include "core/parallel.h"
+
 namespace headforge {
 
+namespace {
+int tensor_threads = 1;
+}  // namespace
+
 void ConfigureTorchThreads(int threads) {
-  at::set_num_threads(std::max(1, threads));
+  tensor_threads = std::max(1, threads);
+  // OpenBLAS (OpenMP) sets OpenMP's count, which is LibTorch's, to its own.
+  SetBlasThreads(1);
+  at::set_num_threads(1);
+}
+
+void UseTensorThreads() {
+  SetBlasThreads(tensor_threads);
+  at::set_num_threads(tensor_threads);
 }
 
 std::string TorchDescription() {

@@ -6,8 +6,14 @@
 
 namespace headforge {
 
-// Sets LibTorch's intra-op thread count (it starts with one on these machines).
+// Records the thread count for tensor work and leaves OpenMP, which
+// LibTorch, OpenBLAS, Eigen and CHOLMOD share, on one thread until
+// UseTensorThreads: the Ceres stages' small dense and sparse solves run
+// several times slower threaded.
 void ConfigureTorchThreads(int threads);
+// Gives LibTorch and the BLAS the recorded count, for the models' large
+// products: training, rendering and splat-fit call it as their tensor work begins.
+void UseTensorThreads();
 // "1.13.0 (CPU)" or "2.4.0 (CUDA, 1 device(s))".
 std::string TorchDescription();
 

@@ -282,6 +282,7 @@ int main(int argc, char** argv) {
   mallopt(M_MMAP_THRESHOLD, 256 * 1024);
   mallopt(M_TRIM_THRESHOLD, 256 * 1024);
   headforge::ConfigureTorchThreads(headforge::HardwareThreads());
+  headforge::UseTensorThreads();
   bool markdown = false;
   for (int i = 1; i < argc;) {
     const std::string arg = argv[i];

@@ -219,6 +219,7 @@ Status OptionSet::Parse(const std::vector<std::string>& args) {
     return Status::InvalidArgument(e.what());
   }
   help_requested_ = given.count("help") > 0;
+  given_.clear();
   if (help_requested_) return Status::Ok();
 
   // Positional arguments.
@@ -276,9 +277,12 @@ Status OptionSet::Parse(const std::vector<std::string>& args) {
     if (!status.ok())
       return Status::InvalidArgument("option --" + option->key + " (" + origin +
                                      "): " + status.message());
+    given_.insert(option->key);
   }
   return Status::Ok();
 }
+
+bool OptionSet::WasGiven(const std::string& key) const { return given_.count(key) > 0; }
 
 std::string OptionSet::Help(const std::string& usage, const std::string& description) const {
   std::ostringstream out;

@@ -11,6 +11,7 @@
 
 #include <functional>
 #include <memory>
+#include <set>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -47,6 +48,9 @@ class OptionSet {
   Status Parse(const std::vector<std::string>& args);
 
   bool help_requested() const { return help_requested_; }
+  // Whether the last Parse set `key` from the command line or the config
+  // file (presets fill only the options nobody gave).
+  bool WasGiven(const std::string& key) const;
   // Keys given in a config file that no option of this command knows.
   const std::vector<std::string>& unknown_config_keys() const { return unknown_config_keys_; }
 
@@ -68,6 +72,7 @@ class OptionSet {
   std::string config_path_;
   bool help_requested_ = false;
   std::vector<std::string> unknown_config_keys_;
+  std::set<std::string> given_;
 };
 
 // Internal: the type-erased option record behind Add<T>().

@@ -37,8 +37,9 @@ class StageJob {
   virtual ~StageJob() = default;
   // Binds the stage's options (keys "<stage>.*").
   virtual void AddOptions(OptionSet* options) = 0;
-  // Fills defaults that live under the data folder.
-  virtual void Resolve(const StageSettings& settings) {}
+  // After parsing: fills defaults that live under the data folder, or that
+  // a preset gives to the options `parsed` says nobody set.
+  virtual void Resolve(const StageSettings& settings, const OptionSet& parsed) {}
   // Says which option is wrong and why.
   virtual Status Check() const = 0;
   // Inputs other than upstream stages' outputs that decide the outputs

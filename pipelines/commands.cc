@@ -24,6 +24,7 @@ const std::vector<Command>& Commands() {
                       [&stage](const std::vector<std::string>& args) { return StageCommand(stage, args); }});
     }
     const std::vector<Command> tools = {
+      {"render", "Render a trained avatar's frames from any camera round the head.", RenderCommand},
       {"simulate", "Render a synthetic head capture with ground truth from a scene file.",
        SimulateCommand},
       {"status", "Show the stages of a workspace: status, wall time, summary.", StatusCommand},

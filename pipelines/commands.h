@@ -59,7 +59,9 @@ int SimulateCommand(const std::vector<std::string>& args);
 int EmbedLandmarksCommand(const std::vector<std::string>& args);
 int FaceModelCommand(const std::vector<std::string>& args);
 int BenchCommand(const std::vector<std::string>& args);
+int BenchTrain(const std::vector<std::string>& args);
 int SplatFitCommand(const std::vector<std::string>& args);
+int RenderCommand(const std::vector<std::string>& args);
 int StatusCommand(const std::vector<std::string>& args);
 int VersionCommand(const std::vector<std::string>& args);
 

@@ -495,10 +495,12 @@ int BenchTrack(const std::vector<std::string>& args) {
 int BenchCommand(const std::vector<std::string>& args) {
   if (!args.empty() && args[0] == "calibrate") return BenchCalibrate(std::vector<std::string>(args.begin() + 1, args.end()));
   if (!args.empty() && args[0] == "track") return BenchTrack(std::vector<std::string>(args.begin() + 1, args.end()));
+  if (!args.empty() && args[0] == "train") return BenchTrain(std::vector<std::string>(args.begin() + 1, args.end()));
   std::fprintf(stderr,
-               "Usage: headforge bench calibrate|track [options]\n"
+               "Usage: headforge bench calibrate|track|train [options]\n"
                "  calibrate   camera accuracy against time on simulated scenes\n"
                "  track       tracking accuracy over many simulated subjects\n"
+               "  train       the avatar's ablation on a tracked workspace\n"
                "(rendering and kernel speed: build/bench/headforge_bench)\n");
   return args.empty() || args[0] == "--help" ? (args.empty() ? kExitUsage : kExitOk) : kExitUsage;
 }

@@ -8,7 +8,7 @@ namespace {
 class IngestJob : public StageJob {
  public:
   void AddOptions(OptionSet* options) override { AddIngestOptions(options, &options_); }
-  void Resolve(const StageSettings& settings) override { ResolveIngestDefaults(settings.data_dir, &options_); }
+  void Resolve(const StageSettings& settings, const OptionSet&) override { ResolveIngestDefaults(settings.data_dir, &options_); }
   Status Check() const override { return options_.Check(); }
   Status AddInputs(Hasher* hasher) const override { return AddIngestInputs(options_, hasher); }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {

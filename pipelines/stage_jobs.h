@@ -12,5 +12,6 @@ std::unique_ptr<StageJob> MakeIngestJob();
 std::unique_ptr<StageJob> MakeCalibrateJob();
 std::unique_ptr<StageJob> MakeAlignJob();
 std::unique_ptr<StageJob> MakeTrackJob();
+std::unique_ptr<StageJob> MakeTrainJob();
 
 }  // namespace headforge

@@ -19,7 +19,7 @@ const std::vector<StageEntry>& StageTable() {
         "the face and its 68 landmarks, crops and resizes around the head, and makes a head mask.";
     t[0].reads = {"the videos or image folders given with --video"};
     t[0].writes = {"frames/", "masks/", "landmarks.json", "capture.json"};
-    t[0].version = 3;  // 3: capture.json and landmarks.json carry a version
+    t[0].version = 4;  // 3: capture.json and landmarks.json carry a version; 4: masks from several GrabCut draws
     t[0].make = MakeIngestJob;
 
     t[1].name = "calibrate";
@@ -64,13 +64,17 @@ const std::vector<StageEntry>& StageTable() {
     t[4].name = "train";
     t[4].upstream = {"ingest", "calibrate", "align", "track"};
     t[4].summary = "Train the avatar model on the tracked capture.";
-    t[4].usage = "headforge train --workspace DIR [options]";
-    t[4].description = "Trains the avatar model on the frames, masks, head-frame cameras and tracking.";
+    t[4].usage = "headforge train --workspace DIR [--preset draft|standard|high] [options]";
+    t[4].description =
+        "Trains the gaussian-style avatar on the frames, masks, head-frame cameras and tracking:\n"
+        "stage 1, canonical Gaussians sampled on the tracked mesh and a temporal triplane\n"
+        "generator; stage 2, the attention deformation driven by the tracked expressions and\n"
+        "head pose, with a loss on the eyes and mouth. The last frames are held out and scored.";
     t[4].reads = {"capture.json", "frames/", "masks/", "cameras_head.json", "tracking.json"};
-    t[4].writes = {"models/<model>/", "stats.jsonl"};
+    t[4].writes = {"models/<model>/ (model.pt, config.json, stats.jsonl, eval.json, previews/, held_out/)"};
     t[4].uses_face_model = true;
     t[4].resumable = true;
-    t[4].unavailable = "training the avatar is not available in this version yet";
+    t[4].make = MakeTrainJob;
 
     t[5].name = "export";
     t[5].upstream = {"ingest", "calibrate", "align", "track", "train"};
@@ -133,7 +137,7 @@ int StageCommand(const StageEntry& entry, const std::vector<std::string>& args) 
   if (!job) return ReportFailure(Status::InvalidArgument(entry.name + ": " + entry.unavailable));
   if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
   const StageSettings settings = common.Settings();
-  job->Resolve(settings);
+  job->Resolve(settings, options);
   if (Status s = job->Check(); !s.ok()) return ReportFailure(s);
   ApplyCommonOptions(common);
   std::unique_ptr<Workspace> workspace;
@@ -176,7 +180,7 @@ int RunCommand(const std::vector<std::string>& args) {
   const StageSettings settings = common.Settings();
   for (size_t i = 0; i < table.size(); ++i) {
     if (!jobs[i]) continue;
-    jobs[i]->Resolve(settings);
+    jobs[i]->Resolve(settings, options);
     if (Status s = jobs[i]->Check(); !s.ok()) return ReportFailure(s);
   }
   ApplyCommonOptions(common);

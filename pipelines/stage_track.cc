@@ -10,7 +10,7 @@ namespace {
 class TrackJob : public StageJob {
  public:
   void AddOptions(OptionSet* options) override { AddTrackOptions(options, &options_); }
-  void Resolve(const StageSettings& settings) override { options_.fit.threads = settings.threads; }
+  void Resolve(const StageSettings& settings, const OptionSet&) override { options_.fit.threads = settings.threads; }
   Status Check() const override { return options_.Check(); }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     IngestedCapture capture;

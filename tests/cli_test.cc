@@ -38,13 +38,6 @@ std::string OutputsHash(const fs::path& ws) {
   return h.Hex();
 }
 
-size_t CountFiles(const fs::path& dir) {
-  std::error_code ec;
-  size_t n = 0;
-  for (auto it = fs::directory_iterator(dir, ec); !ec && it != fs::directory_iterator(); it.increment(ec)) ++n;
-  return n;
-}
-
 class CliTest : public ::testing::Test {
  protected:
   // One full run of the acceptance clip, shared by the tests that compare
@@ -108,7 +101,8 @@ TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
   ASSERT_TRUE(ReadJson(ws / "workspace.json", &before).ok());
   const auto capture_time = fs::last_write_time(ws / "capture.json");
 
-  const Result again = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace", ws.string()});
+  const Result again =
+      Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace", ws.string(), "--until", "track"});
   ASSERT_EQ(again.code, 0) << again.err;
   EXPECT_TRUE(Contains(again.err, "ingest: up to date")) << again.err;
   nlohmann::json after;
@@ -118,7 +112,7 @@ TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
 
   // A changed option redoes the stage.
   const Result changed = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
-                              ws.string(), "--max-frames", "5", "--resolution", "128"});
+                              ws.string(), "--until", "track", "--max-frames", "5", "--resolution", "128"});
   ASSERT_EQ(changed.code, 0) << changed.err;
   EXPECT_FALSE(Contains(changed.err, "up to date"));
   EXPECT_EQ(CountFiles(ws / "frames" / "cam0"), 5u);
@@ -129,7 +123,7 @@ TEST_F(CliTest, KilledMidIngestResumesToTheSameOutputs) {
   const fs::path ws = Scratch("killed");
   const fs::path log = fs::temp_directory_path() / "hf_cli_killed.log";
   const pid_t pid = Spawn({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
-                           ws.string(), "--threads", "1"},
+                           ws.string(), "--until", "track", "--threads", "1"},
                           log, log);
   // Wait until ingest is writing frames, then kill it without warning.
   const fs::path staging = ws / ".staging" / "ingest" / "frames" / "cam0";
@@ -152,7 +146,8 @@ TEST_F(CliTest, KilledMidIngestResumesToTheSameOutputs) {
   const Result status_out = Headforge({"status", ws.string()});
   EXPECT_TRUE(Contains(status_out.out, "interrupted")) << status_out.out;
 
-  const Result resumed = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace", ws.string()});
+  const Result resumed =
+      Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace", ws.string(), "--until", "track"});
   ASSERT_EQ(resumed.code, 0) << resumed.err;
   EXPECT_TRUE(Contains(resumed.err, "interrupted")) << resumed.err;
   EXPECT_EQ(OutputsHash(ws), OutputsHash(reference_));
@@ -166,7 +161,7 @@ TEST_F(CliTest, FailedRerunKeepsEarlierOutputs) {
   const std::string before = OutputsHash(ws);
   const fs::path corrupt = fs::temp_directory_path() / "hf_cli_corrupt.mp4";
   ASSERT_TRUE(WriteFileAtomic(corrupt, std::string(5000, 'x')).ok());
-  const Result failed = Headforge({"run", "--video", corrupt.string(), "--workspace", ws.string()});
+  const Result failed = Headforge({"run", "--video", corrupt.string(), "--workspace", ws.string(), "--until", "track"});
   EXPECT_EQ(failed.code, 1);
   EXPECT_TRUE(Contains(failed.err, "headforge: ingest: cannot decode")) << failed.err;
   EXPECT_TRUE(Contains(failed.err, "hf_cli_corrupt.mp4")) << failed.err;

@@ -46,6 +46,14 @@ inline std::string Slurp(const fs::path& path) {
   return s.str();
 }
 
+// Entries in `dir` (0 when it does not exist).
+inline size_t CountFiles(const fs::path& dir) {
+  std::error_code ec;
+  size_t n = 0;
+  for (auto it = fs::directory_iterator(dir, ec); !ec && it != fs::directory_iterator(); it.increment(ec)) ++n;
+  return n;
+}
+
 inline Result Headforge(const std::vector<std::string>& args) {
   const fs::path out = fs::temp_directory_path() / ("hf_cli_out_" + std::to_string(getpid()));
   const fs::path err = fs::temp_directory_path() / ("hf_cli_err_" + std::to_string(getpid()));

@@ -81,10 +81,10 @@ inline std::vector<std::string> SimulatedInputs(const fs::path& capture) {
   return inputs;
 }
 
-// `headforge run --video INPUTS... OPTIONS... --workspace DIR` (through track).
+// `headforge run --until track --video INPUTS... OPTIONS... --workspace DIR`.
 inline fs::path SharedRun(const std::string& name, const std::vector<std::string>& inputs,
                           const std::vector<std::string>& options = {}) {
-  std::vector<std::string> args = {"run", "--video"};
+  std::vector<std::string> args = {"run", "--until", "track", "--video"};
   args.insert(args.end(), inputs.begin(), inputs.end());
   args.insert(args.end(), options.begin(), options.end());
   const fs::path dir = SharedDir(name, args);

@@ -163,7 +163,7 @@ SimulatedScores RunSimulated(const std::string& scene, int frames, const std::ve
   if (shared) {
     fs::create_directory_symlink(SharedRun(name + "_run", SimulatedInputs(capture)), root / "ws");
   } else {
-    std::vector<std::string> args = {"run", "--workspace", (root / "ws").string(), "--video"};
+    std::vector<std::string> args = {"run", "--until", "track", "--workspace", (root / "ws").string(), "--video"};
     for (const auto& input : SimulatedInputs(capture)) args.push_back(input);
     const Result run = Headforge(args);
     EXPECT_EQ(run.code, 0) << run.err;

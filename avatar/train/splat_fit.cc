@@ -8,97 +8,13 @@
 
 #include "avatar/metrics/image_metrics.h"
 #include "avatar/splat/splat_ops.h"
+#include "avatar/train/adam.h"
 #include "avatar/train/checkpoint.h"
 #include "core/interrupt.h"
 #include "core/log.h"
 
 namespace headforge {
 namespace {
-
-// Adam with its moments kept per Gaussian row, so densification can gather
-// and extend them with the parameters.
-class RowAdam {
- public:
-  struct Slot {
-    torch::Tensor* param;
-    double lr;
-    torch::Tensor m, v;
-  };
-
-  void Add(torch::Tensor* param, double lr) {
-    slots_.push_back({param, lr, torch::zeros_like(*param), torch::zeros_like(*param)});
-  }
-  void SetLr(size_t index, double lr) { slots_[index].lr = lr; }
-
-  void Step() {
-    torch::NoGradGuard no_grad;
-    ++t_;
-    const double c1 = 1 - std::pow(kBeta1, t_), c2 = 1 - std::pow(kBeta2, t_);
-    for (Slot& s : slots_) {
-      const torch::Tensor& g = s.param->grad();
-      if (!g.defined()) continue;
-      s.m.mul_(kBeta1).add_(g, 1 - kBeta1);
-      s.v.mul_(kBeta2).addcmul_(g, g, 1 - kBeta2);
-      const torch::Tensor denom = (s.v / c2).sqrt_().add_(kEps);
-      s.param->addcdiv_(s.m, denom, -s.lr / c1);
-    }
-  }
-
-  void ZeroGrad() {
-    for (Slot& s : slots_) {
-      if (s.param->grad().defined()) s.param->mutable_grad().zero_();
-    }
-  }
-
-  // Rows `keep` of every parameter and moment, then `append` rows (new
-  // parameters with fresh moments), in the order the slots were added.
-  void Edit(const torch::Tensor& keep, const std::vector<torch::Tensor>& append) {
-    torch::NoGradGuard no_grad;
-    for (size_t i = 0; i < slots_.size(); ++i) {
-      Slot& s = slots_[i];
-      const torch::Tensor& extra = append[i];
-      auto gather = [&](const torch::Tensor& t, const torch::Tensor& added) {
-        const torch::Tensor kept = keep.defined() ? t.index_select(0, keep) : t;
-        return added.defined() && added.size(0) > 0 ? torch::cat({kept, added}) : kept;
-      };
-      *s.param = gather(s.param->detach(), extra).requires_grad_(true);
-      const torch::Tensor zeros = extra.defined() ? torch::zeros_like(extra) : torch::Tensor();
-      s.m = gather(s.m, zeros);
-      s.v = gather(s.v, zeros);
-    }
-  }
-
-  void ResetMoments(size_t index) {
-    slots_[index].m.zero_();
-    slots_[index].v.zero_();
-  }
-
-  void Save(const std::string& prefix, Checkpoint* c) const {
-    c->Put(prefix + "t", t_);
-    for (size_t i = 0; i < slots_.size(); ++i) {
-      c->Put(prefix + "m." + std::to_string(i), slots_[i].m);
-      c->Put(prefix + "v." + std::to_string(i), slots_[i].v);
-    }
-  }
-
-  // After the parameters were restored (the moments take their devices).
-  bool Load(const std::string& prefix, const Checkpoint& c) {
-    bool ok = c.Get(prefix + "t", &t_);
-    for (size_t i = 0; i < slots_.size(); ++i) {
-      Slot& s = slots_[i];
-      ok = ok && c.Get(prefix + "m." + std::to_string(i), &s.m) && c.Get(prefix + "v." + std::to_string(i), &s.v);
-      if (!ok) break;
-      s.m = s.m.to(s.param->device());
-      s.v = s.v.to(s.param->device());
-    }
-    return ok;
-  }
-
- private:
-  static constexpr double kBeta1 = 0.9, kBeta2 = 0.999, kEps = 1e-15;
-  std::vector<Slot> slots_;
-  int64_t t_ = 0;
-};
 
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
@@ -211,7 +127,7 @@ struct FitState {
 
 const char* const kParamNames[] = {"means", "quats", "log_scales", "opacity_logits", "colour_logits"};
 
-Status SaveFitCheckpoint(const fs::path& path, GaussianParams& p, const RowAdam& adam,
+Status SaveFitCheckpoint(const fs::path& path, GaussianParams& p, const Adam& adam,
                          const DensifyStrategy& densify, const at::Generator& gen, const FitState& state,
                          size_t stats_lines) {
   Checkpoint c;
@@ -232,7 +148,7 @@ Status SaveFitCheckpoint(const fs::path& path, GaussianParams& p, const RowAdam&
 
 // Restores what SaveFitCheckpoint wrote; `stats` is cut back to the lines the
 // checkpoint had seen.
-Status LoadFitCheckpoint(const fs::path& path, torch::Device device, GaussianParams* p, RowAdam* adam,
+Status LoadFitCheckpoint(const fs::path& path, torch::Device device, GaussianParams* p, Adam* adam,
                          DensifyStrategy* densify, at::Generator* gen, FitState* state, StatsLog* stats) {
   Checkpoint c;
   HF_RETURN_IF_ERROR(Checkpoint::Load(path, &c));
@@ -285,12 +201,12 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
     for (torch::Tensor* t : p.All()) t->requires_grad_(true);
   }
   const double extent = options.densify.scene_extent;
-  RowAdam adam;
-  adam.Add(&p.means, options.lr_means * extent);
-  adam.Add(&p.quats, options.lr_quats);
-  adam.Add(&p.log_scales, options.lr_scales);
-  adam.Add(&p.opacity_logits, options.lr_opacity);
-  adam.Add(&p.colour_logits, options.lr_colours);
+  Adam adam;
+  adam.Add(&p.means, options.lr_means * extent, true);
+  adam.Add(&p.quats, options.lr_quats, true);
+  adam.Add(&p.log_scales, options.lr_scales, true);
+  adam.Add(&p.opacity_logits, options.lr_opacity, true);
+  adam.Add(&p.colour_logits, options.lr_colours, true);
   const auto densify = MakeDefaultDensify(options.densify);
   auto gen = at::detail::createCPUGenerator(options.seed);
   FitState state;

@@ -1,0 +1,176 @@
+#include "avatar/avatar_train.h"
+
+#include <torch/torch.h>
+
+#include <cstdio>
+
+#include "avatar/gaussian_style/trainer.h"
+#include "avatar/torch_runtime.h"
+#include "core/log.h"
+
+namespace headforge {
+namespace {
+
+// What a preset sets; every value is also an option of its own.
+struct Preset {
+  const char* name;
+  const char* device;
+  int resolution, steps;
+  double max_minutes;
+  int init_gaussians;
+  int64_t max_gaussians;
+  int densify_until, triplane_resolution;
+  double lr_network;
+  int eval_every, preview_every;
+};
+
+// draft: measured on two CPU cores to end within its 15 minutes
+// (docs/benchmarks.md); standard: one GPU at 512 px; high: the paper's
+// learning rate and a long run.
+const Preset kPresets[] = {
+    {"draft", "cpu", 256, 6000, 15, 20000, 40000, 3000, 64, 5e-4, 1000, 1000},
+    {"standard", "cuda", 512, 30000, 10, 50000, 300000, 20000, 128, 2e-4, 2000, 2000},
+    {"high", "cuda", 512, 100000, 0, 100000, 500000, 60000, 256, 1e-4, 5000, 5000},
+};
+
+}  // namespace
+
+Status TrainOptions::Check() const {
+  if (model != "gaussian-style" && model != "gan-avatar")
+    return Status::InvalidArgument("train: --model must be gaussian-style or gan-avatar, not '" + model + "'");
+  if (resolution < 16 || resolution > 4096) return Status::InvalidArgument("train: --resolution must be in [16, 4096]");
+  if (steps < 1) return Status::InvalidArgument("train: --steps must be at least 1");
+  if (!(max_minutes >= 0)) return Status::InvalidArgument("train: --max-minutes must be zero or positive");
+  if (!(canonical_fraction >= 0 && canonical_fraction <= 1))
+    return Status::InvalidArgument("train: --canonical-fraction must be in [0, 1]");
+  if (!(region_weight >= 0) || !(ssim_weight >= 0 && ssim_weight <= 1))
+    return Status::InvalidArgument("train: --region-weight must be >= 0 and --ssim-weight in [0, 1]");
+  if (!(holdout > 0 && holdout < 0.9)) return Status::InvalidArgument("train: --holdout must be in (0, 0.9)");
+  if (init_gaussians < 1 || max_gaussians < init_gaussians)
+    return Status::InvalidArgument("train: --init-gaussians must be positive and at most --max-gaussians");
+  if (densify_every < 1) return Status::InvalidArgument("train: --densify-every must be at least 1");
+  for (double lr : {lr_network, lr_means, lr_quats, lr_scales, lr_opacity, lr_features})
+    if (!(lr >= 0)) return Status::InvalidArgument("train: learning rates must be zero or positive");
+  if (feature_channels < 3) return Status::InvalidArgument("train: --feature-channels must be at least 3 (RGB)");
+  if (triplane_resolution < 8 || (triplane_resolution & (triplane_resolution - 1)) != 0)
+    return Status::InvalidArgument("train: --triplane-resolution must be a power of two of at least 8");
+  if (latent_dim < 1) return Status::InvalidArgument("train: --latent-dim must be positive");
+  if (log_every < 1 || eval_every < 0 || preview_every < 0 || checkpoint_every < 1)
+    return Status::InvalidArgument("train: --log-every and --checkpoint-every must be >= 1, the others >= 0");
+  return Status::Ok();
+}
+
+void AddTrainOptions(OptionSet* o, TrainOptions* t) {
+  o->Add("train.model", &t->model, "Avatar model: gaussian-style (gan-avatar is not available yet).", "model");
+  o->Add("train.preset", &t->preset,
+         "draft (2 CPU cores, 256 px, within 15 min), standard (one GPU, 512 px), high (the paper's scale); it sets "
+         "the defaults of the options below that are not given.",
+         "preset");
+  o->Add("train.device", &t->device, "cpu, or cuda (cuda:N) in a build against a LibTorch with CUDA.", "device",
+         OptionSet::Effect::kRuntime);
+  o->Add("train.resolution", &t->resolution, "The frames' longer side while training, pixels.", "resolution");
+  o->Add("train.steps", &t->steps, "Optimisation steps (one view each), both stages.", "steps");
+  o->Add("train.max_minutes", &t->max_minutes, "Stop training after this many minutes (0: no limit).", "max-minutes");
+  o->Add("train.canonical_fraction", &t->canonical_fraction,
+         "The share of the steps in stage 1 (canonical Gaussians and triplanes) before stage 2 (deformation).",
+         "canonical-fraction");
+  o->Add("train.deform", &t->deform, "Train stage 2, the attention deformation (false: stage 1 only).", "deform");
+  o->Add("train.mesh_riding", &t->mesh_riding,
+         "Bind the Gaussians to the tracked mesh's triangles; the network predicts changes in their frames.",
+         "mesh-riding");
+  o->Add("train.region_weight", &t->region_weight, "Weight of stage 2's L1 on the eyes' and mouth's crops (0: none).",
+         "region-weight");
+  o->Add("train.ssim_weight", &t->ssim_weight, "Loss = (1 - w) L1 + w (1 - SSIM).", "ssim-weight");
+  o->Add("train.holdout", &t->holdout, "The last fraction of the frames, held out for evaluation.", "holdout");
+  o->Add("train.init_gaussians", &t->init_gaussians, "Gaussians sampled on the tracked mesh to start with.",
+         "init-gaussians");
+  o->Add("train.max_gaussians", &t->max_gaussians, "Densification adds no more beyond this count.", "max-gaussians");
+  o->Add("train.densify_from", &t->densify_from, "First step that densifies.", "densify-from");
+  o->Add("train.densify_until", &t->densify_until, "Last step that densifies.", "densify-until");
+  o->Add("train.densify_every", &t->densify_every, "Steps between densifications.", "densify-every");
+  o->Add("train.grad_threshold", &t->grad_threshold,
+         "Mean screen-space gradient above which a Gaussian is cloned or split.", "grad-threshold");
+  o->Add("train.lr_network", &t->lr_network, "Adam step of the networks and frame latents.", "lr-network");
+  o->Add("train.lr_means", &t->lr_means, "Adam step of the positions (times the extent), decaying to 1%.", "lr-means");
+  o->Add("train.lr_quats", &t->lr_quats, "Adam step of the rotations.", "lr-quats");
+  o->Add("train.lr_scales", &t->lr_scales, "Adam step of the log-scales.", "lr-scales");
+  o->Add("train.lr_opacity", &t->lr_opacity, "Adam step of the opacity logits.", "lr-opacity");
+  o->Add("train.lr_features", &t->lr_features, "Adam step of the Gaussians' features.", "lr-features");
+  o->Add("train.feature_channels", &t->feature_channels, "Feature channels per Gaussian (the first three RGB).",
+         "feature-channels");
+  o->Add("train.triplane_resolution", &t->triplane_resolution, "Side of each triplane, a power of two.",
+         "triplane-resolution");
+  o->Add("train.latent_dim", &t->latent_dim, "Size of each frame's latent.", "latent-dim");
+  o->Add("train.log_every", &t->log_every, "Steps between lines of stats.jsonl.", "log-every");
+  o->Add("train.eval_every", &t->eval_every, "Steps between held-out evaluations (0: only at the end).", "eval-every");
+  o->Add("train.preview_every", &t->preview_every, "Steps between preview images (0: none).", "preview-every");
+  o->Add("train.checkpoint_every", &t->checkpoint_every,
+         "Steps between checkpoints; an interrupted run (Ctrl-C, a kill) resumes from the last.", "checkpoint-every",
+         OptionSet::Effect::kRuntime);
+  o->Add("train.seed", &t->seed, "Seed of the initial Gaussians, the networks, the view order and backgrounds.",
+         "train-seed");
+}
+
+Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* t) {
+  const Preset* preset = nullptr;
+  for (const Preset& p : kPresets)
+    if (t->preset == p.name) preset = &p;
+  if (!preset) return Status::InvalidArgument("train: --preset must be draft, standard or high, not '" + t->preset + "'");
+  auto fill = [&](const char* key, auto* field, auto value) {
+    if (!parsed.WasGiven(key)) *field = value;
+  };
+  fill("train.device", &t->device, std::string(preset->device));
+  fill("train.resolution", &t->resolution, preset->resolution);
+  fill("train.steps", &t->steps, preset->steps);
+  fill("train.max_minutes", &t->max_minutes, preset->max_minutes);
+  fill("train.init_gaussians", &t->init_gaussians, preset->init_gaussians);
+  fill("train.max_gaussians", &t->max_gaussians, preset->max_gaussians);
+  fill("train.densify_until", &t->densify_until, preset->densify_until);
+  fill("train.triplane_resolution", &t->triplane_resolution, preset->triplane_resolution);
+  fill("train.lr_network", &t->lr_network, preset->lr_network);
+  fill("train.eval_every", &t->eval_every, preset->eval_every);
+  fill("train.preview_every", &t->preview_every, preset->preview_every);
+  return Status::Ok();
+}
+
+std::string TrainSummary::OneLine() const {
+  char text[320];
+  std::snprintf(text, sizeof(text),
+                "%d steps in %.0f s%s, %lld Gaussians; %d held-out views: PSNR %.2f dB / SSIM %.3f over the head, "
+                "%.2f dB / %.3f over the frame",
+                steps, seconds, resumed_from > 0 ? (" (resumed at step " + std::to_string(resumed_from) + ")").c_str() : "",
+                static_cast<long long>(gaussians), test_views, psnr_masked, ssim_masked, psnr_full, ssim_full);
+  return text;
+}
+
+Status RunTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
+                const fs::path& out_dir, Progress* progress, TrainSummary* summary) {
+  UseTensorThreads();
+  HF_RETURN_IF_ERROR(options.Check());
+  if (options.model != "gaussian-style")
+    return Status::InvalidArgument("train: the gan-avatar model is not available in this version yet; use --model "
+                                   "gaussian-style");
+  FaceModel model;
+  HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+  DatasetOptions loading;
+  loading.resolution = options.resolution;
+  loading.holdout = options.holdout;
+  AvatarDataset data;
+  HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, &data).WithContext("train"));
+  HF_LOG(Info) << "train: " << data.train.size() << " training and " << data.test.size() << " held-out views at "
+               << data.width << "x" << data.height << " (frames " << data.first_test_frame << "-"
+               << data.num_frames - 1 << " held out)";
+  HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
+  // Lines written after the last checkpoint, or with none, are dropped.
+  std::error_code ec;
+  if (!fs::exists(out_dir / "checkpoint.pt", ec)) HF_RETURN_IF_ERROR(RemoveAll(out_dir / "stats.jsonl"));
+  StatsLog stats;
+  HF_RETURN_IF_ERROR(StatsLog::Open(out_dir / "stats.jsonl", &stats));
+  *summary = TrainSummary();
+  HF_RETURN_IF_ERROR(TrainGaussianStyle(options, data, model, out_dir, &stats, progress, summary));
+  summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json", "held_out"};
+  if (fs::exists(out_dir / "previews", ec)) summary->outputs.push_back("previews");
+  return Status::Ok();
+}
+
+}  // namespace headforge

@@ -1,0 +1,73 @@
+// Training an avatar on a tracked workspace, for callers that do not use
+// LibTorch (the train stage, the benches): options with presets, the run, and
+// what it reports. The gaussian-style model's stages 1 (canonical Gaussians
+// and the triplane generator) and 2 (the attention deformation and the
+// region loss) run here; see docs/avatar.md.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/fs.h"
+#include "core/options.h"
+#include "core/progress.h"
+#include "core/status.h"
+
+namespace headforge {
+
+struct TrainOptions {
+  std::string model = "gaussian-style";
+  // draft: two CPU cores, 256 px, about 15 minutes; standard: one GPU, 512 px;
+  // high: the paper's scale. A preset fills only the options not given.
+  std::string preset = "draft";
+  std::string device = "cpu";   // cpu, or cuda (cuda:N) with a CUDA LibTorch
+  int resolution = 256;         // the frames' longer side, pixels
+  int steps = 6000;             // optimisation steps, one view each
+  double max_minutes = 15;      // stop training at this wall time (0: no limit)
+  double canonical_fraction = 0.25;  // the share of the steps in stage 1
+  bool deform = true;           // stage 2; false trains stage 1 alone
+  bool mesh_riding = false;     // Gaussians bound to the tracked mesh's triangles
+  double region_weight = 1.0;   // stage 2's L1 on the eyes' and mouth's crops (0: none)
+  double ssim_weight = 0.2;     // loss = (1 - w) L1 + w (1 - SSIM)
+  double holdout = 0.2;         // the last fraction of the frames, never trained on
+  int init_gaussians = 20000;   // sampled on the tracked mesh
+  int64_t max_gaussians = 60000;
+  int densify_from = 300, densify_until = 4000, densify_every = 100;
+  double grad_threshold = 0.0002;
+  double lr_network = 5e-4;     // Adam for the networks and latents (the paper: 1e-4)
+  double lr_means = 1.6e-4, lr_quats = 1e-3, lr_scales = 5e-3, lr_opacity = 5e-2, lr_features = 2.5e-3;
+  int feature_channels = 32;
+  int triplane_resolution = 64;
+  int latent_dim = 64;
+  int log_every = 50, eval_every = 1000, preview_every = 1000, checkpoint_every = 250;
+  int seed = 0;
+
+  Status Check() const;
+};
+
+void AddTrainOptions(OptionSet* options, TrainOptions* train);
+// Gives the preset's values to the options `parsed` says nobody set.
+Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* train);
+
+struct TrainSummary {
+  int steps = 0, resumed_from = 0;
+  double seconds = 0;           // training time, over every attempt
+  int64_t gaussians = 0;
+  int test_views = 0;
+  // Held-out views, background one colour in both images: over the head
+  // mask, and over the whole frame.
+  double psnr_masked = 0, ssim_masked = 0, psnr_full = 0, ssim_full = 0, l1_masked = 0;
+  double train_psnr_masked = 0;  // every 10th training view, with its own frame latent
+  std::vector<std::string> outputs;  // relative to the output folder
+  std::string OneLine() const;
+};
+
+// Trains on `workspace` (ingest, calibrate, align and track done) into
+// `out_dir`, which holds its checkpoint between attempts: a run that finds
+// one continues from it. Writes model.pt, config.json, stats.jsonl,
+// eval.json, previews/ and held_out/.
+Status RunTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
+                const fs::path& out_dir, Progress* progress, TrainSummary* summary);
+
+}  // namespace headforge

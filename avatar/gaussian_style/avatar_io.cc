@@ -1,0 +1,175 @@
+// Posing, rendering, scoring, saving and loading a gaussian-style avatar.
+#include <torch/torch.h>
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+#include "avatar/gaussian_style/trainer.h"
+#include "avatar/metrics/image_metrics.h"
+#include "avatar/splat/splat_ops.h"
+#include "avatar/train/checkpoint.h"
+#include "core/json_io.h"
+
+namespace headforge {
+
+PosedGaussians GaussianStyleAvatar::Pose(const AvatarDataset& data, const torch::Tensor& condition, int64_t latent,
+                                         bool deform_now) {
+  const torch::Device device = gaussians.params.means.device();
+  if (!model->options().mesh_riding)
+    return model->Pose(gaussians, condition.to(device), latent, nullptr, nullptr, deform_now);
+  TriangleFrames mesh;
+  {
+    torch::NoGradGuard no_grad;  // the mesh is data, not trained
+    const int64_t e = model->options().expressions;
+    mesh = ComputeTriangleFrames(data.Vertices(condition.slice(0, 0, e)).to(device), data.triangles.to(device));
+  }
+  return model->Pose(gaussians, condition.to(device), latent, &mesh, &neutral, deform_now);
+}
+
+torch::Tensor RenderRgb(const PosedGaussians& posed, const SplatCamera& camera, const torch::Tensor& background) {
+  return RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities, posed.features.slice(1, 0, 3),
+                         background, camera)
+      .image;
+}
+
+ViewScores ScoreRender(const torch::Tensor& render, const torch::Tensor& image, const torch::Tensor& mask,
+                       const torch::Tensor& background) {
+  torch::NoGradGuard no_grad;
+  const torch::Tensor r = render.detach().to(torch::kFloat64).cpu().clamp(0, 1);
+  const torch::Tensor m = mask.to(torch::kFloat64).cpu();
+  const torch::Tensor target = image.to(torch::kFloat64).cpu() * m + background.to(torch::kFloat64).cpu().view({3, 1, 1}) * (1 - m);
+  const torch::Tensor squared = (r - target).pow(2);
+  const double inside = std::max(m.sum().item<double>(), 1.0);
+  ViewScores s;
+  s.has_head = m.sum().item<double>() >= 1;
+  const double mse_masked = (squared * m).sum().item<double>() / (3 * inside);
+  const double mse_full = squared.mean().item<double>();
+  s.psnr_masked = 10 * std::log10(1 / std::max(mse_masked, 1e-12));
+  s.psnr_full = 10 * std::log10(1 / std::max(mse_full, 1e-12));
+  s.l1_masked = ((r - target).abs() * m).sum().item<double>() / (3 * inside);
+  const torch::Tensor map = SsimMap(r.unsqueeze(0), target.unsqueeze(0))[0].mean(0, true);  // [1, H, W]
+  s.ssim_masked = (map * m).sum().item<double>() / inside;
+  s.ssim_full = map.mean().item<double>();
+  return s;
+}
+
+ViewScores MeanScores(const std::vector<ViewScores>& scores) {
+  ViewScores mean;
+  const double heads = double(std::count_if(scores.begin(), scores.end(), [](const ViewScores& s) { return s.has_head; }));
+  mean.has_head = heads > 0;
+  for (const ViewScores& s : scores) {
+    if (s.has_head) {
+      mean.psnr_masked += s.psnr_masked / heads;
+      mean.ssim_masked += s.ssim_masked / heads;
+      mean.l1_masked += s.l1_masked / heads;
+    }
+    mean.psnr_full += s.psnr_full / double(scores.size());
+    mean.ssim_full += s.ssim_full / double(scores.size());
+  }
+  return mean;
+}
+
+namespace {
+
+nlohmann::json OptionsJson(const GaussianStyleOptions& o) {
+  return {{"feature_channels", o.feature_channels},
+          {"latent_dim", o.triplane.latent_dim},
+          {"w_dim", o.triplane.w_dim},
+          {"generator_channels", o.triplane.channels},
+          {"triplane_resolution", o.triplane.resolution},
+          {"plane_channels", o.triplane.plane_channels},
+          {"mapping_layers", o.triplane.mapping_layers},
+          {"token_dim", o.token_dim},
+          {"heads", o.heads},
+          {"blocks", o.blocks},
+          {"ffn_hidden", o.ffn_hidden},
+          {"deform_hidden", o.deform_hidden},
+          {"expressions", o.expressions},
+          {"mesh_riding", o.mesh_riding},
+          {"box_half_size", o.box_half_size}};
+}
+
+GaussianStyleOptions OptionsFromJson(const nlohmann::json& j) {
+  GaussianStyleOptions o;
+  o.feature_channels = j.at("feature_channels").get<int64_t>();
+  o.triplane.latent_dim = j.at("latent_dim").get<int64_t>();
+  o.triplane.w_dim = j.at("w_dim").get<int64_t>();
+  o.triplane.channels = j.at("generator_channels").get<int64_t>();
+  o.triplane.resolution = j.at("triplane_resolution").get<int64_t>();
+  o.triplane.plane_channels = j.at("plane_channels").get<int64_t>();
+  o.triplane.mapping_layers = j.at("mapping_layers").get<int>();
+  o.token_dim = j.at("token_dim").get<int64_t>();
+  o.heads = j.at("heads").get<int64_t>();
+  o.blocks = j.at("blocks").get<int>();
+  o.ffn_hidden = j.at("ffn_hidden").get<int64_t>();
+  o.deform_hidden = j.at("deform_hidden").get<int64_t>();
+  o.expressions = j.at("expressions").get<int64_t>();
+  o.mesh_riding = j.at("mesh_riding").get<bool>();
+  o.box_half_size = j.at("box_half_size").get<double>();
+  return o;
+}
+
+const char* const kGaussianNames[] = {"means", "quats", "log_scales", "opacity_logits", "features"};
+
+}  // namespace
+
+Status SaveAvatar(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,
+                  const fs::path& dir) {
+  Checkpoint c;
+  GaussianParams p = avatar.gaussians.params;
+  const auto params = p.All();
+  for (size_t i = 0; i < params.size(); ++i) c.Put(std::string("gaussians.") + kGaussianNames[i], *params[i]);
+  c.Put("gaussians.binding", avatar.gaussians.binding);
+  for (const auto& item : avatar.model->named_parameters()) c.Put("model." + item.key(), item.value());
+  HF_RETURN_IF_ERROR(c.Save(dir / "model.pt"));
+  const nlohmann::json config = {{"version", 1},
+                                 {"model", "gaussian-style"},
+                                 {"architecture", OptionsJson(avatar.model->options())},
+                                 {"frames", data.num_frames},
+                                 {"deform", avatar.deform},
+                                 {"resolution", options.resolution},
+                                 {"width", data.width},
+                                 {"height", data.height},
+                                 {"gaussians", avatar.gaussians.params.size()},
+                                 {"expression_names", data.expression_names}};
+  return WriteJsonAtomic(dir / "config.json", config, 2);
+}
+
+Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar* avatar, TrainOptions* options) {
+  nlohmann::json config;
+  HF_RETURN_IF_ERROR(ReadArtefact(dir / "config.json", 1, "train", &config));
+  Checkpoint c;
+  HF_RETURN_IF_ERROR(Checkpoint::Load(dir / "model.pt", &c));
+  GaussianStyleAvatar out;
+  try {
+    out.model = GaussianStyle(OptionsFromJson(config.at("architecture")), config.at("frames").get<int64_t>());
+    out.deform = config.at("deform").get<bool>();
+    if (options) {
+      options->resolution = config.at("resolution").get<int>();
+      options->mesh_riding = out.model->options().mesh_riding;
+    }
+  } catch (const std::exception& e) {
+    return Status::DataError((dir / "config.json").string() + " is damaged (" + e.what() + "); run headforge train again");
+  }
+  torch::NoGradGuard no_grad;
+  for (auto& item : out.model->named_parameters()) {
+    torch::Tensor value;
+    if (!c.Get("model." + item.key(), &value) || !value.sizes().equals(item.value().sizes()))
+      return Status::DataError((dir / "model.pt").string() + " does not hold " + item.key() +
+                               " as config.json describes it; run headforge train again");
+    item.value().copy_(value);
+  }
+  out.model->to(device);
+  auto params = out.gaussians.params.All();
+  for (size_t i = 0; i < params.size(); ++i)
+    if (!c.Get(std::string("gaussians.") + kGaussianNames[i], params[i]))
+      return Status::DataError((dir / "model.pt").string() + " holds no Gaussians; run headforge train again");
+  for (torch::Tensor* t : params) *t = t->to(device);
+  if (c.Get("gaussians.binding", &out.gaussians.binding)) out.gaussians.binding = out.gaussians.binding.to(device);
+  *avatar = std::move(out);
+  return Status::Ok();
+}
+
+}  // namespace headforge

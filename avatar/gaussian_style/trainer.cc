@@ -1,0 +1,446 @@
+// The gaussian-style avatar's training loop: stage 1 (canonical Gaussians,
+// triplane generator, L1 + D-SSIM on the first three splatted channels), then
+// stage 2 (the attention deformation, plus L1 on the eyes' and mouth's
+// crops), with densification, checkpoints, stats.jsonl and previews.
+#include <torch/torch.h>
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "avatar/gaussian_style/trainer.h"
+#include "avatar/metrics/image_metrics.h"
+#include "avatar/splat/splat_ops.h"
+#include "avatar/train/adam.h"
+#include "avatar/train/tensor_image.h"
+#include "core/image_io.h"
+#include "core/interrupt.h"
+#include "core/json_io.h"
+#include "core/log.h"
+
+namespace headforge {
+namespace {
+
+namespace F = torch::nn::functional;
+
+// The evaluation's background, in the render and the target alike.
+constexpr double kEvalBackground = 0.5;
+// Side of the eye and mouth crops of the region loss, pixels.
+constexpr int64_t kCropSize = 24;
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+// The eyes' and mouth's boxes of `view` cut from `image` [3, H, W] and
+// resampled to kCropSize^2 (RoI-align with one bilinear sample per cell) -> [R, 3, S, S].
+torch::Tensor RegionCrops(const torch::Tensor& image, const AvatarView& view) {
+  const int64_t w = image.size(2), h = image.size(1);
+  const auto opts = image.options();
+  const torch::Tensor cells = (torch::arange(kCropSize, opts) + 0.5) / kCropSize;  // [S]
+  std::vector<torch::Tensor> grids;
+  for (const auto& box : view.regions) {
+    const torch::Tensor x = box[0] + (box[2] - box[0]) * cells, y = box[1] + (box[3] - box[1]) * cells;
+    const torch::Tensor u = (x + 0.5) / w * 2 - 1, v = (y + 0.5) / h * 2 - 1;
+    grids.push_back(torch::stack({u.unsqueeze(0).expand({kCropSize, kCropSize}),
+                                  v.unsqueeze(1).expand({kCropSize, kCropSize})},
+                                 2));
+  }
+  const torch::Tensor grid = torch::stack(grids);  // [R, S, S, 2]
+  const torch::Tensor batch = image.unsqueeze(0).expand({grid.size(0), -1, -1, -1});
+  return F::grid_sample(batch, grid, F::GridSampleFuncOptions().mode(torch::kBilinear).align_corners(false));
+}
+
+struct TrainState {
+  int step = 0;             // steps done
+  torch::Tensor order;      // the current pass's view order
+  double loss_sum = 0, l1_sum = 0, region_sum = 0;
+  int64_t loss_count = 0;
+  double seconds = 0;       // training time of earlier attempts
+};
+
+const char* const kRowNames[] = {"means", "quats", "log_scales", "opacity_logits", "features"};
+
+class Trainer {
+ public:
+  Trainer(const TrainOptions& options, const AvatarDataset& data, torch::Device device)
+      : options_(options), data_(data), device_(device), gen_(at::detail::createCPUGenerator(options.seed)) {
+    const int canonical = options.deform ? int(std::lround(options.canonical_fraction * options.steps)) : options.steps;
+    stage1_steps_ = std::clamp(canonical, 0, options.steps);
+  }
+
+  Status Start(const FaceModel& model, const fs::path& checkpoint, StatsLog* stats);
+  Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
+  Status Finish(const fs::path& out_dir, TrainSummary* summary);
+  int step() const { return state_.step; }
+
+ private:
+  double Step(int step);
+  void Densify(int step);
+  // Scores every `stride`-th held-out (or training) view, writing each
+  // render | target | error into `write_dir` when given.
+  std::vector<ViewScores> Evaluate(int stride, const fs::path& write_dir, bool training_views = false);
+  Status SaveCheckpoint(const fs::path& path, size_t stats_lines) const;
+  Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
+  Status WritePreview(const fs::path& dir, int step);
+  bool deform_now(int step) const { return options_.deform && step > stage1_steps_; }
+
+  TrainOptions options_;
+  const AvatarDataset& data_;
+  torch::Device device_;
+  at::Generator gen_;
+  int stage1_steps_ = 0;
+  GaussianStyleAvatar avatar_;
+  std::vector<torch::Tensor> network_;  // the networks' parameters, in the optimiser after the rows
+  Adam adam_;
+  std::unique_ptr<DensifyStrategy> densify_;
+  TrainState state_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  std::vector<torch::Tensor> images_, masks_;  // the training views' on the device
+  std::vector<int64_t> usable_;  // the training views whose tracking is reliable
+  double lr_means_ = 0;  // the means' first learning rate; it decays to 1% over the steps
+};
+
+Status Trainer::Start(const FaceModel& model, const fs::path& checkpoint, StatsLog* stats) {
+  GaussianStyleOptions architecture;
+  architecture.feature_channels = options_.feature_channels;
+  architecture.triplane.latent_dim = options_.latent_dim;
+  architecture.triplane.resolution = options_.triplane_resolution;
+  architecture.expressions = int64_t(data_.expression_names.size());
+  architecture.mesh_riding = options_.mesh_riding;
+  torch::manual_seed(uint64_t(options_.seed));  // the networks' initial weights
+  avatar_.model = GaussianStyle(architecture, data_.num_frames);
+  avatar_.deform = options_.deform;
+  if (options_.mesh_riding) avatar_.neutral = ComputeTriangleFrames(data_.identity_vertices, data_.triangles);
+  HF_RETURN_IF_ERROR(InitGaussians(data_, model, options_, avatar_, &avatar_.gaussians));
+  avatar_.model->to(device_);
+  if (options_.mesh_riding) {
+    TriangleFrames& n = avatar_.neutral;
+    for (torch::Tensor* t : {&n.origin, &n.rotation, &n.quat, &n.scale}) *t = t->to(device_);
+  }
+  GaussianParams& p = avatar_.gaussians.params;
+  for (torch::Tensor* t : p.All()) *t = t->to(device_).requires_grad_(true);
+  if (avatar_.gaussians.binding.defined()) avatar_.gaussians.binding = avatar_.gaussians.binding.to(device_);
+  // Gaussian parameters live in metres (canonical) or in their triangles'
+  // sizes (riding, about 2.5 mm): the extent scales position steps and the
+  // size beyond which densification splits rather than clones.
+  const double extent = options_.mesh_riding ? 100.0 : 0.3;
+  lr_means_ = options_.lr_means * extent;
+  adam_.Add(&p.means, lr_means_, true);
+  adam_.Add(&p.quats, options_.lr_quats, true);
+  adam_.Add(&p.log_scales, options_.lr_scales, true);
+  adam_.Add(&p.opacity_logits, options_.lr_opacity, true);
+  adam_.Add(&p.colour_logits, options_.lr_features, true);
+  network_ = avatar_.model->parameters();
+  for (torch::Tensor& t : network_) adam_.Add(&t, options_.lr_network, false);
+  DefaultDensifyOptions densify;
+  densify.start = options_.densify_from;
+  densify.stop = options_.densify_until;
+  densify.interval = options_.densify_every;
+  densify.reset_every = 0;
+  densify.grad_threshold = options_.grad_threshold;
+  densify.max_gaussians = options_.max_gaussians;
+  densify.scene_extent = extent;
+  densify.seed = uint64_t(options_.seed) + 1;
+  densify_ = MakeDefaultDensify(densify);
+  for (size_t i = 0; i < data_.train.size(); ++i) {
+    images_.push_back(data_.train[i].image.to(device_));
+    masks_.push_back(data_.train[i].mask.to(device_));
+    if (!data_.train[i].unreliable) usable_.push_back(int64_t(i));
+  }
+  // Frames the tracker interpolated or flagged would teach the deformation
+  // the wrong expression: they are left out.
+  if (usable_.size() < data_.train.size())
+    HF_LOG(Info) << "train: " << data_.train.size() - usable_.size() << " of " << data_.train.size()
+                 << " training views left out (tracking interpolated or low-confidence)";
+  if (usable_.empty())
+    return Status::DataError("train: the tracker flagged every training frame as interpolated or low-confidence; "
+                             "check overlay_<camera>.mp4 and run headforge track again");
+  std::error_code ec;
+  if (fs::exists(checkpoint, ec)) HF_RETURN_IF_ERROR(LoadCheckpoint(checkpoint, stats));
+  return Status::Ok();
+}
+
+double Trainer::Step(int step) {
+  const int64_t views = int64_t(usable_.size());
+  const int64_t slot = (step - 1) % views;
+  if (slot == 0) state_.order = torch::randperm(views, gen_);
+  const int64_t index = usable_[size_t(state_.order[slot].item<int64_t>())];
+  const AvatarView& view = data_.train[size_t(index)];
+  adam_.SetLr(0, lr_means_ * std::pow(0.01, double(step) / options_.steps));
+  const bool stage2 = deform_now(step);
+  // A random background each step: only the head may be opaque.
+  const torch::Tensor background = torch::rand({3}, gen_).to(device_);
+  const PosedGaussians posed = avatar_.Pose(data_, view.condition, view.frame, stage2);
+  const SplatRenderResult out = RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities,
+                                                posed.features.slice(1, 0, 3), background, view.view);
+  out.means2d.retain_grad();
+  const torch::Tensor& mask = masks_[size_t(index)];
+  const torch::Tensor target = images_[size_t(index)] * mask + background.view({3, 1, 1}) * (1 - mask);
+  const torch::Tensor l1 = (out.image - target).abs().mean();
+  torch::Tensor loss = (1 - options_.ssim_weight) * l1 + options_.ssim_weight * (1 - Ssim(out.image, target));
+  double region = 0;
+  if (stage2 && options_.region_weight > 0 && view.has_landmarks) {
+    const torch::Tensor r = (RegionCrops(out.image, view) - RegionCrops(target, view)).abs().mean();
+    loss = loss + options_.region_weight * r;
+    region = r.item<double>();
+  }
+  const double value = loss.item<double>();
+  if (!std::isfinite(value)) return value;
+  loss.backward();
+  densify_->AfterBackward(out.means2d.grad(), out.radii, view.view.width, view.view.height);
+  adam_.Step();
+  adam_.ZeroGrad();
+  Densify(step);
+  state_.loss_sum += value;
+  state_.l1_sum += l1.item<double>();
+  state_.region_sum += region;
+  ++state_.loss_count;
+  return value;
+}
+
+void Trainer::Densify(int step) {
+  GaussianParams& p = avatar_.gaussians.params;
+  const DensifyPlan plan = densify_->AfterStep(step, p);
+  if (plan.keep.defined()) {
+    torch::Tensor& binding = avatar_.gaussians.binding;
+    if (binding.defined()) {
+      // Clones and splits ride their parent's triangle.
+      const torch::Tensor old = binding;
+      binding = old.index_select(0, plan.keep);
+      if (plan.parents.defined() && plan.parents.numel() > 0)
+        binding = torch::cat({binding, old.index_select(0, plan.parents.to(old.device()))});
+    }
+    adam_.Edit(plan.keep, {plan.append.means, plan.append.quats, plan.append.log_scales, plan.append.opacity_logits,
+                           plan.append.colour_logits});
+  }
+  if (!plan.summary.empty()) HF_LOG(Debug) << "train step " << step << ": " << plan.summary;
+}
+
+std::vector<ViewScores> Trainer::Evaluate(int stride, const fs::path& write_dir, bool training_views) {
+  torch::NoGradGuard no_grad;
+  const torch::Tensor background = torch::full({3}, kEvalBackground, torch::TensorOptions().device(device_));
+  const std::vector<AvatarView>& views = training_views ? data_.train : data_.test;
+  std::vector<ViewScores> scores;
+  for (size_t i = 0; i < views.size(); i += size_t(std::max(stride, 1))) {
+    const AvatarView& view = views[i];
+    // Inference takes frame 0's latent: a held-out frame has none of its own.
+    // Training views are scored as trained, with their own.
+    const PosedGaussians posed = avatar_.Pose(data_, view.condition, training_views ? view.frame : 0, avatar_.deform);
+    const torch::Tensor render = RenderRgb(posed, view.view, background).clamp(0, 1).cpu();
+    ViewScores s = ScoreRender(render, view.image, view.mask, background.cpu());
+    s.frame = view.frame;
+    s.camera = view.camera;
+    scores.push_back(s);
+    if (write_dir.empty()) continue;
+    const torch::Tensor target = view.image * view.mask + kEvalBackground * (1 - view.mask);
+    const torch::Tensor error = ((render - target).abs() * 4).clamp(0, 1);
+    char name[64];
+    std::snprintf(name, sizeof(name), "%s_%06d.png", view.camera.c_str(), view.frame);
+    WriteImageAtomic(write_dir / name, TensorToImage(torch::cat({render, target, error}, 2))).ok();
+  }
+  return scores;
+}
+
+Status Trainer::WritePreview(const fs::path& dir, int step) {
+  if (data_.test.empty()) return Status::Ok();
+  torch::NoGradGuard no_grad;
+  const AvatarView& view = data_.test.front();
+  const torch::Tensor background = torch::full({3}, kEvalBackground, torch::TensorOptions().device(device_));
+  const torch::Tensor render =
+      RenderRgb(avatar_.Pose(data_, view.condition, 0, deform_now(step)), view.view, background).cpu();
+  const torch::Tensor target = view.image * view.mask + kEvalBackground * (1 - view.mask);
+  char name[32];
+  std::snprintf(name, sizeof(name), "step_%06d.png", step);
+  HF_RETURN_IF_ERROR(EnsureDirectory(dir));
+  return WriteImageAtomic(dir / name, TensorToImage(torch::cat({render, target}, 2)));
+}
+
+Status Trainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
+  Checkpoint c;
+  c.Put("step", int64_t(state_.step));
+  GaussianParams p = avatar_.gaussians.params;
+  const auto rows = p.All();
+  for (size_t i = 0; i < rows.size(); ++i) c.Put(std::string("gaussians.") + kRowNames[i], *rows[i]);
+  c.Put("gaussians.binding", avatar_.gaussians.binding);
+  for (const auto& item : avatar_.model->named_parameters()) c.Put("model." + item.key(), item.value());
+  adam_.Save("adam.", &c);
+  densify_->SaveState("densify.", &c);
+  c.Put("generator", gen_.get_state());
+  c.Put("order", state_.order);
+  c.Put("loss_sum", state_.loss_sum);
+  c.Put("l1_sum", state_.l1_sum);
+  c.Put("region_sum", state_.region_sum);
+  c.Put("loss_count", state_.loss_count);
+  c.Put("seconds", state_.seconds + Seconds(start_));
+  c.Put("stats_lines", int64_t(stats_lines));
+  return c.Save(path);
+}
+
+Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
+  Checkpoint c;
+  HF_RETURN_IF_ERROR(Checkpoint::Load(path, &c));
+  const Status damaged = Status::DataError(path.string() + " is not this training's checkpoint; delete it to start over");
+  int64_t step = 0, lines = 0;
+  torch::Tensor generator;
+  if (!c.Get("step", &step) || !c.Get("generator", &generator) || !c.Get("stats_lines", &lines) ||
+      !c.Get("loss_sum", &state_.loss_sum) || !c.Get("l1_sum", &state_.l1_sum) ||
+      !c.Get("region_sum", &state_.region_sum) || !c.Get("loss_count", &state_.loss_count) ||
+      !c.Get("seconds", &state_.seconds))
+    return damaged;
+  GaussianParams& p = avatar_.gaussians.params;
+  const auto rows = p.All();
+  for (size_t i = 0; i < rows.size(); ++i) {
+    if (!c.Get(std::string("gaussians.") + kRowNames[i], rows[i])) return damaged;
+    *rows[i] = rows[i]->to(device_).requires_grad_(true);
+  }
+  if (c.Get("gaussians.binding", &avatar_.gaussians.binding))
+    avatar_.gaussians.binding = avatar_.gaussians.binding.to(device_);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& item : avatar_.model->named_parameters()) {
+      torch::Tensor value;
+      if (!c.Get("model." + item.key(), &value) || !value.sizes().equals(item.value().sizes())) return damaged;
+      item.value().copy_(value);
+    }
+  }
+  if (!adam_.Load("adam.", c)) return damaged;
+  densify_->LoadState("densify.", c);
+  gen_.set_state(generator);
+  if (!c.Get("order", &state_.order)) state_.order = torch::Tensor();
+  state_.step = int(step);
+  HF_LOG(Info) << "train: resuming from the checkpoint at step " << step << " (" << p.size() << " Gaussians)";
+  return stats->Truncate(size_t(lines));
+}
+
+Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
+  auto elapsed = [&] { return state_.seconds + Seconds(start_); };
+  progress->Start("train: gaussian-style", options_.steps);
+  progress->Advance(state_.step);
+  for (int step = state_.step + 1; step <= options_.steps; ++step) {
+    if (step == stage1_steps_ + 1 && options_.deform)
+      HF_LOG(Info) << "train: stage 2 (deformation" << (options_.region_weight > 0 ? ", region loss" : "")
+                   << ") from step " << step;
+    const double loss = Step(step);
+    if (!std::isfinite(loss)) {
+      progress->Finish("diverged");
+      return Status::Internal("train: the loss became " + std::to_string(loss) + " at step " + std::to_string(step) +
+                              "; lower --lr-network or --lr-means (a changed option starts training over)");
+    }
+    state_.step = step;
+    progress->Advance();
+    const bool out_of_time = options_.max_minutes > 0 && elapsed() > 60.0 * options_.max_minutes;
+    const bool last = step == options_.steps || out_of_time;
+    if (step % options_.log_every == 0 || last) {
+      const double n = double(std::max<int64_t>(state_.loss_count, 1));
+      stats->Append(nlohmann::json{{"step", step},
+                                   {"stage", deform_now(step) ? 2 : 1},
+                                   {"loss", state_.loss_sum / n},
+                                   {"l1", state_.l1_sum / n},
+                                   {"region_l1", state_.region_sum / n},
+                                   {"gaussians", avatar_.gaussians.params.size()},
+                                   {"seconds", elapsed()}}
+                        .dump());
+      state_.loss_sum = state_.l1_sum = state_.region_sum = 0;
+      state_.loss_count = 0;
+    }
+    if (!last && options_.eval_every > 0 && step % options_.eval_every == 0) {
+      const bool deform = avatar_.deform;
+      avatar_.deform = deform_now(step);
+      const ViewScores s = MeanScores(Evaluate(5, {}));
+      avatar_.deform = deform;
+      stats->Append(nlohmann::json{{"step", step}, {"test_psnr_masked", s.psnr_masked}, {"test_ssim_masked", s.ssim_masked},
+                                   {"gaussians", avatar_.gaussians.params.size()}, {"seconds", elapsed()}}
+                        .dump());
+      HF_LOG(Info) << "train: step " << step << ", " << avatar_.gaussians.params.size()
+                   << " Gaussians, held-out PSNR " << s.psnr_masked << " dB over the head (every 5th view)";
+    }
+    if (options_.preview_every > 0 && step % options_.preview_every == 0)
+      HF_RETURN_IF_ERROR(WritePreview(out_dir / "previews", step));
+    if (out_of_time) {
+      HF_LOG(Info) << "train: time limit of " << options_.max_minutes << " min reached at step " << step;
+      break;
+    }
+    const bool stop = InterruptRequested();
+    if (!last && (stop || step % options_.checkpoint_every == 0))
+      HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, stats->size()));
+    if (stop) {
+      progress->Finish("interrupted");
+      return Status::Interrupted("training stopped at step " + std::to_string(step) + " of " +
+                                 std::to_string(options_.steps) +
+                                 "; the checkpoint is saved: run the same command again to resume");
+    }
+  }
+  progress->Finish(std::to_string(state_.step) + " steps, " + std::to_string(avatar_.gaussians.params.size()) +
+                   " Gaussians");
+  state_.seconds = elapsed();
+  start_ = std::chrono::steady_clock::now();
+  avatar_.deform = deform_now(state_.step);
+  return Status::Ok();
+}
+
+Status Trainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
+  HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "held_out"));
+  const std::vector<ViewScores> scores = Evaluate(1, out_dir / "held_out");
+  const ViewScores mean = MeanScores(scores);
+  // How well the training views themselves are fitted (every 10th): set
+  // against the held-out figures, it tells underfitting from what the
+  // held-out frames bring that training never saw.
+  const ViewScores fitted = MeanScores(Evaluate(10, {}, true));
+  nlohmann::json views = nlohmann::json::array();
+  for (const ViewScores& s : scores)
+    views.push_back({{"frame", s.frame}, {"camera", s.camera}, {"psnr_masked", s.psnr_masked},
+                     {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full}, {"ssim", s.ssim_full},
+                     {"l1_masked", s.l1_masked}});
+  const nlohmann::json eval = {
+      {"held_out_frames", "the last " + std::to_string(data_.num_frames - data_.first_test_frame) + " of " +
+                              std::to_string(data_.num_frames)},
+      {"background", kEvalBackground},
+      {"latent_frame", 0},
+      {"mean", {{"psnr_masked", mean.psnr_masked}, {"ssim_masked", mean.ssim_masked}, {"psnr", mean.psnr_full},
+                {"ssim", mean.ssim_full}, {"l1_masked", mean.l1_masked}}},
+      {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
+      {"views", views}};
+  HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "eval.json", eval, 1));
+  HF_RETURN_IF_ERROR(SaveAvatar(avatar_, options_, data_, out_dir));
+  summary->steps = state_.step;
+  summary->seconds = state_.seconds;
+  summary->gaussians = avatar_.gaussians.params.size();
+  summary->test_views = int(scores.size());
+  summary->psnr_masked = mean.psnr_masked;
+  summary->ssim_masked = mean.ssim_masked;
+  summary->psnr_full = mean.psnr_full;
+  summary->ssim_full = mean.ssim_full;
+  summary->l1_masked = mean.l1_masked;
+  summary->train_psnr_masked = fitted.psnr_masked;
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
+                          const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary) {
+  torch::Device device = torch::kCPU;
+  try {
+    device = torch::Device(options.device);
+  } catch (const c10::Error&) {
+    return Status::InvalidArgument("train: '" + options.device + "' is not a device (cpu or cuda)");
+  }
+  if (device.is_cuda() && !torch::cuda::is_available())
+    return Status::InvalidArgument("train: --device " + options.device +
+                                   ": this build's LibTorch sees no CUDA device; use --device cpu");
+  const fs::path checkpoint = out_dir / "checkpoint.pt";
+  Trainer trainer(options, data, device);
+  HF_RETURN_IF_ERROR(trainer.Start(model, checkpoint, stats));
+  const int resumed_from = trainer.step();
+  HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
+  HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
+  summary->resumed_from = resumed_from;
+  std::error_code ec;
+  fs::remove(checkpoint, ec);
+  return Status::Ok();
+}
+
+}  // namespace headforge

@@ -1,0 +1,64 @@
+// Training the gaussian-style avatar (stages 1 and 2) on an AvatarDataset,
+// rendering it, and scoring its renders; the pieces RunTrain
+// (avatar/avatar_train.h), `headforge render` and the benches share.
+#pragma once
+
+#include <torch/types.h>
+
+#include <string>
+#include <vector>
+
+#include "avatar/avatar_train.h"
+#include "avatar/gaussian_style/model.h"
+#include "avatar/train/dataset.h"
+#include "core/face_model.h"
+#include "core/stats_log.h"
+
+namespace headforge {
+
+// Everything that renders a trained avatar.
+struct GaussianStyleAvatar {
+  GaussianStyle model{nullptr};
+  AvatarGaussians gaussians;
+  TriangleFrames neutral;  // the mesh without expression (mesh riding)
+  bool deform = true;      // trained with stage 2
+
+  // The Gaussians for `condition` [E + 9] with frame latent `latent`; with
+  // mesh riding they ride the mesh of the condition's expressions.
+  PosedGaussians Pose(const AvatarDataset& data, const torch::Tensor& condition, int64_t latent,
+                      bool deform_now);
+};
+
+// Gaussians sampled by area on the tracked identity's face, scalp, neck,
+// ears, eyes, teeth and mouth (not the eyelashes or the eyes' shells), grey
+// or the colour the first training views see there.
+Status InitGaussians(const AvatarDataset& data, const FaceModel& model, const TrainOptions& options,
+                     const GaussianStyleAvatar& avatar, AvatarGaussians* gaussians);
+
+// The RGB render [3, H, W] of `view`'s camera over `background` [3].
+torch::Tensor RenderRgb(const PosedGaussians& posed, const SplatCamera& camera, const torch::Tensor& background);
+
+struct ViewScores {
+  int frame = 0;
+  std::string camera;
+  double psnr_masked = 0, ssim_masked = 0, psnr_full = 0, ssim_full = 0, l1_masked = 0;
+  bool has_head = true;  // false: the mask is empty and the masked figures mean nothing
+};
+// `render` [3, H, W] against `image` [3, H, W] on `mask` [1, H, W], the
+// image's background set to `background` [3] (the render's own).
+ViewScores ScoreRender(const torch::Tensor& render, const torch::Tensor& image, const torch::Tensor& mask,
+                       const torch::Tensor& background);
+// Means over views; the masked figures over the views with a head.
+ViewScores MeanScores(const std::vector<ViewScores>& scores);
+
+// The model file (model.pt + config.json in `dir`).
+Status SaveAvatar(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,
+                  const fs::path& dir);
+Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar* avatar, TrainOptions* options);
+
+// Stages 1 and 2 into `out_dir` (checkpoint.pt between attempts; a run that
+// finds one continues from it).
+Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
+                          const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary);
+
+}  // namespace headforge

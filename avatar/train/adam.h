@@ -1,0 +1,51 @@
+// Adam over a trainer's parameters: the Gaussians' rows (which densification
+// gathers and extends, moments and all) and networks' weights in one
+// optimiser, each parameter with its own learning rate; its state goes into a
+// Checkpoint so that a resumed run steps exactly as an uninterrupted one.
+#pragma once
+
+#include <torch/types.h>
+
+#include <string>
+#include <vector>
+
+#include "avatar/train/checkpoint.h"
+
+namespace headforge {
+
+class Adam {
+ public:
+  // `param` must outlive the optimiser (Gaussian parameters are replaced by
+  // densification: the optimiser follows the pointer). `rows`: a per-Gaussian
+  // parameter that Edit() gathers and extends.
+  void Add(torch::Tensor* param, double lr, bool rows);
+  size_t size() const { return slots_.size(); }
+  void SetLr(size_t index, double lr) { slots_[index].lr = lr; }
+  double lr(size_t index) const { return slots_[index].lr; }
+
+  void Step();
+  void ZeroGrad();
+
+  // Every row parameter becomes its rows `keep` (all when undefined), then
+  // `append`'s rows (one tensor per row parameter, in the order they were
+  // added; new rows get zero moments).
+  void Edit(const torch::Tensor& keep, const std::vector<torch::Tensor>& append);
+  void ResetMoments(size_t index);
+
+  void Save(const std::string& prefix, Checkpoint* checkpoint) const;
+  // After the parameters themselves were restored (moments follow their devices).
+  bool Load(const std::string& prefix, const Checkpoint& checkpoint);
+
+ private:
+  struct Slot {
+    torch::Tensor* param;
+    double lr;
+    bool rows;
+    torch::Tensor m, v;
+  };
+  static constexpr double kBeta1 = 0.9, kBeta2 = 0.999, kEps = 1e-15;
+  std::vector<Slot> slots_;
+  int64_t t_ = 0;
+};
+
+}  // namespace headforge

@@ -1,0 +1,71 @@
+// A workspace's capture as the avatar models train on it, read through the
+// typed artefacts (capture.json, cameras_head.json, tracking.json): each
+// registered view's frame and mask at the training resolution, its camera in
+// the canonical head frame (the head's tracked motion taken into the camera),
+// the frame's tracked expression and head pose as the condition, and boxes
+// round the eyes and the mouth from its landmarks. The last frames are held out.
+#pragma once
+
+#include <torch/types.h>
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "avatar/splat/splat_camera.h"
+#include "core/face_model.h"
+#include "core/fs.h"
+#include "core/status.h"
+
+namespace headforge {
+
+struct AvatarView {
+  int frame = 0;          // output frame index
+  std::string camera;     // its camera's name
+  torch::Tensor image;    // [3, H, W] RGB in [0, 1]
+  torch::Tensor mask;     // [1, H, W] 1 on the head
+  SplatCamera view;       // cam_from_canonical and intrinsics at the training resolution
+  torch::Tensor condition;  // [E + 9] expression weights, then the head's pose (below)
+  // Left eye, right eye, mouth: (x0, y0, x1, y1) pixels; all zero without landmarks.
+  std::array<std::array<float, 4>, 3> regions{};
+  bool has_landmarks = false;
+  bool unreliable = false;  // tracking interpolated it or flagged it low-confidence
+};
+
+struct DatasetOptions {
+  int resolution = 256;       // the frames' longer side, pixels
+  double holdout = 0.2;       // the last fraction of the frames held out
+  int min_train_frames = 8;   // fewer is refused
+  bool images = true;         // false: cameras and conditions only (rendering)
+};
+
+struct AvatarDataset {
+  int width = 0, height = 0;
+  int num_frames = 0;
+  int first_test_frame = 0;            // frames from here on are held out
+  std::vector<AvatarView> train, test;
+  std::vector<std::string> expression_names;
+  // The subject's mesh: identity shape [V, 3] (head frame, metres), the
+  // expression basis [V * 3, E] and triangles [T, 3] (int64).
+  torch::Tensor identity_vertices, expression_basis, triangles;
+
+  // The tracked mesh for `expression` [E]: [V, 3].
+  torch::Tensor Vertices(const torch::Tensor& expression) const;
+};
+
+// The pose part of a condition: the head's rotation (its first two columns)
+// and translation (metres) relative to what lights it: the camera for
+// head-pose cameras (one fixed camera), else the aligned world.
+torch::Tensor PoseCondition(const double rotation[9], const double translation[3]);
+
+// `camera` moved round the head frame's origin by `yaw_deg` (toward the
+// subject's left, +x) and `pitch_deg` (up, +y), still looking the same way
+// relative to the head: a view no camera of the capture had.
+SplatCamera OrbitCamera(const SplatCamera& camera, double yaw_deg, double pitch_deg);
+
+// Reads the workspace; clear errors for what is missing or inconsistent
+// (no tracking, too few frames, tracking and frames that disagree).
+Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, const DatasetOptions& options,
+                         AvatarDataset* dataset);
+
+}  // namespace headforge

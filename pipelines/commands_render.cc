@@ -1,0 +1,50 @@
+// `headforge render`: a trained avatar's frames from any camera round the head.
+#include <cstdio>
+
+#include "avatar/avatar_render.h"
+#include "core/log.h"
+#include "pipelines/commands.h"
+
+namespace headforge {
+
+int RenderCommand(const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  AddCommonOptions(&options, &common, /*with_workspace=*/true);
+  AvatarRenderOptions render;
+  std::string out;
+  options.Add("render.out", &out, "Output folder (default: WORKSPACE/renders).", "out", OptionSet::Effect::kRuntime);
+  options.Add("render.frames", &render.frames, "Frames to render, e.g. 0,10,20 (default: all).", "frames");
+  options.Add("render.yaw", &render.yaw_deg, "Degrees the camera moves round the head toward the subject's left.",
+              "yaw");
+  options.Add("render.pitch", &render.pitch_deg, "Degrees the camera moves round the head upward.", "pitch");
+  options.Add("render.resolution", &render.resolution, "The renders' longer side in pixels (0: as trained).",
+              "resolution");
+  options.Add("render.drive", &render.drive,
+              "Another tracked workspace whose expressions drive this avatar (cross-reenactment).", "drive");
+  options.Add("render.video", &render.video, "Write render.mp4 instead of one PNG per frame.", "video");
+  options.Add("render.side_by_side", &render.side_by_side, "Put each frame beside its render.", "side-by-side");
+  options.Add("render.background", &render.background, "Grey level behind the head, in [0, 1].", "background");
+  options.Add("render.device", &render.device, "cpu, or cuda with a CUDA LibTorch.", "device");
+  const int parsed = ParseOrExit(
+      &options, args, "headforge render --workspace DIR [--frames A,B,...] [--yaw DEG] [--pitch DEG] [options]",
+      "Renders the avatar trained in the workspace (headforge train) for its tracked frames, or\n"
+      "driven by another workspace's tracking (--drive), from each frame's camera moved round\n"
+      "the head by --yaw and --pitch. Writes PNGs (or render.mp4) and says the time per frame.");
+  if (parsed >= 0) return parsed;
+  if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
+  if (!(render.background >= 0 && render.background <= 1))
+    return ReportFailure(Status::InvalidArgument("--background must be in [0, 1]"));
+  ApplyCommonOptions(common);
+  const fs::path out_dir = out.empty() ? fs::path(common.workspace) / "renders" : fs::path(out);
+  StderrProgress progress;
+  AvatarRenderSummary summary;
+  if (Status s = RenderAvatarFrames(common.workspace, common.Settings().face_model, render, out_dir, &progress, &summary);
+      !s.ok())
+    return ReportFailure(s);
+  HF_LOG(Info) << "render: " << summary.frames << " frames into " << out_dir.string() << ", "
+               << 1000 * summary.seconds_per_frame << " ms per frame (posing and rendering)";
+  return kExitOk;
+}
+
+}  // namespace headforge

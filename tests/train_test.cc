@@ -1,0 +1,273 @@
+// The train stage end to end on a small simulated capture (talking_static,
+// tracked once and shared with track_test), at 48 px and a few hundred
+// steps: the loss falls, a second run with the same seed gives the same
+// model, a run killed outright resumes from its checkpoint to the same
+// model, `headforge run` chains train after track and skips it when
+// nothing changed, and a workspace that cannot be trained on says what to run.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <thread>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/fs.h"
+#include "core/hash.h"
+#include "core/json_io.h"
+#include "tests/run_headforge.h"
+#include "tests/shared_workspace.h"
+
+namespace headforge {
+namespace {
+
+const char* const kModelDir = "models/gaussian_style";
+
+// The tracked capture every test starts from (a copy when it changes it).
+fs::path Tracked() { return SharedRun("talking_static_125_run", SimulatedInputs(SharedSimulation("talking_static", 125))); }
+
+fs::path Scratch(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("hf_train_" + name);
+  fs::remove_all(dir);
+  return dir;
+}
+
+// Small enough for seconds a run: 48 px, 300 steps (half in stage 1), a
+// few thousand Gaussians, a checkpoint every 20 steps.
+std::vector<std::string> TinyOptions() {
+  return {"--resolution", "48", "--steps", "300", "--canonical-fraction", "0.5", "--init-gaussians", "1500",
+          "--max-gaussians", "2500", "--densify-from", "20", "--densify-every", "20", "--densify-until", "120",
+          "--eval-every", "0", "--preview-every", "0", "--log-every", "10", "--checkpoint-every", "20",
+          "--max-minutes", "0", "--threads", "2"};
+}
+
+std::vector<std::string> TrainArgs(const fs::path& ws) {
+  std::vector<std::string> args = {"train", "--workspace", ws.string()};
+  for (const auto& a : TinyOptions()) args.push_back(a);
+  return args;
+}
+
+std::string FileHash(const fs::path& path) {
+  Hasher h;
+  EXPECT_TRUE(h.AddFileContents(path).ok()) << path;
+  return h.Hex();
+}
+
+std::vector<nlohmann::json> StatsLines(const fs::path& path) {
+  std::vector<nlohmann::json> lines;
+  std::istringstream in(Slurp(path));
+  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
+  return lines;
+}
+
+// One uninterrupted tiny run, shared by the tests that compare with it.
+class TrainStage : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    reference_ = CopyOf(Tracked(), Scratch("reference"));
+    first_ = Headforge(TrainArgs(reference_));
+  }
+  static fs::path reference_;
+  static Result first_;
+};
+fs::path TrainStage::reference_;
+Result TrainStage::first_;
+
+TEST_F(TrainStage, TheLossFallsAndTheHeldOutFramesAreScored) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const fs::path model = reference_ / kModelDir;
+  for (const char* file : {"model.pt", "config.json", "stats.jsonl", "eval.json"})
+    EXPECT_TRUE(fs::exists(model / file)) << file;
+  const std::vector<nlohmann::json> stats = StatsLines(model / "stats.jsonl");
+  ASSERT_EQ(stats.size(), 30u);  // a line every 10 steps
+  EXPECT_EQ(stats.front()["stage"], 1);
+  EXPECT_EQ(stats.back()["stage"], 2);
+  // L1 over the masked frame (random backgrounds): the last 50 steps against the first 10.
+  const double first = stats.front()["l1"], last = stats.back()["l1"];
+  std::printf("L1 %.4f -> %.4f\n", first, last);
+  EXPECT_LT(last, 0.7 * first);
+  for (const auto& line : stats) EXPECT_TRUE(std::isfinite(line["loss"].get<double>())) << line;
+
+  nlohmann::json eval;
+  ASSERT_TRUE(ReadJson(model / "eval.json", &eval).ok());
+  EXPECT_EQ(eval["views"].size(), 25u);  // the last 25 of 125 frames
+  EXPECT_EQ(CountFiles(model / "held_out"), 25u);
+  const double psnr = eval["mean"]["psnr_masked"];
+  std::printf("held-out PSNR over the head %.2f dB, training views %.2f dB\n", psnr,
+              eval["training_views"]["psnr_masked"].get<double>());
+  // The initial Gaussians (one step) score 17.4 dB here; 300 steps at 48 px reach 25.9.
+  EXPECT_GT(psnr, 22.0);
+  EXPECT_LT(psnr, 60.0);
+}
+
+TEST_F(TrainStage, TheSameSeedGivesTheSameModel) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const fs::path again = CopyOf(Tracked(), Scratch("again"));
+  const Result second = Headforge(TrainArgs(again));
+  ASSERT_EQ(second.code, 0) << second.err;
+  EXPECT_EQ(FileHash(again / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
+
+  // Another seed gives another model.
+  std::vector<std::string> args = TrainArgs(again);
+  args.insert(args.end(), {"--train-seed", "5"});
+  const Result other = Headforge(args);
+  ASSERT_EQ(other.code, 0) << other.err;
+  EXPECT_NE(FileHash(again / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
+}
+
+TEST_F(TrainStage, KilledMidTrainingResumesToTheSameModel) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const fs::path ws = CopyOf(Tracked(), Scratch("killed"));
+  const fs::path log = fs::temp_directory_path() / "hf_train_killed.log";
+  const pid_t pid = Spawn(TrainArgs(ws), log, log);
+  const fs::path staging = ws / ".staging" / "train" / kModelDir;
+  // Kill it without warning once a checkpoint past step 100 exists (stats.jsonl
+  // has a line every 10 steps).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(300);
+  int status = 0;
+  bool exited = false;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (waitpid(pid, &status, WNOHANG) == pid) {
+      exited = true;
+      break;
+    }
+    const std::string stats = fs::exists(staging / "checkpoint.pt") ? Slurp(staging / "stats.jsonl") : "";
+    if (std::count(stats.begin(), stats.end(), '\n') >= 11) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_FALSE(exited) << "training finished before it could be killed:\n" << Slurp(log);
+  ASSERT_EQ(kill(pid, SIGKILL), 0);
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status));
+  EXPECT_FALSE(fs::exists(ws / kModelDir / "model.pt"));
+
+  const Result resumed = Headforge(TrainArgs(ws));
+  ASSERT_EQ(resumed.code, 0) << resumed.err;
+  EXPECT_NE(resumed.err.find("resuming from the checkpoint at step"), std::string::npos) << resumed.err;
+  EXPECT_EQ(FileHash(ws / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
+  // stats.jsonl lost the lines logged after the checkpoint and has the
+  // reference's losses (its times differ).
+  const std::vector<nlohmann::json> stats = StatsLines(ws / kModelDir / "stats.jsonl");
+  const std::vector<nlohmann::json> expected = StatsLines(reference_ / kModelDir / "stats.jsonl");
+  ASSERT_EQ(stats.size(), expected.size());
+  for (size_t i = 0; i < stats.size(); ++i) EXPECT_EQ(stats[i]["loss"], expected[i]["loss"]) << i;
+  EXPECT_FALSE(fs::exists(ws / kModelDir / "checkpoint.pt"));
+}
+
+TEST_F(TrainStage, RunChainsTrainAfterTrackAndSkipsItWhenNothingChanged) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const fs::path ws = CopyOf(Tracked(), Scratch("run"));
+  std::vector<std::string> args = {"run", "--workspace", ws.string(), "--video"};
+  for (const auto& input : SimulatedInputs(SharedSimulation("talking_static", 125))) args.push_back(input);
+  for (const auto& a : TinyOptions()) args.push_back(a == "--resolution" ? "--train.resolution" : a);
+  const Result first = Headforge(args);
+  ASSERT_EQ(first.code, 0) << first.err;
+  EXPECT_NE(first.err.find("track: up to date"), std::string::npos) << first.err;
+  EXPECT_TRUE(fs::exists(ws / kModelDir / "model.pt"));
+  const Result status = Headforge({"status", ws.string()});
+  EXPECT_NE(status.out.find("train      done"), std::string::npos) << status.out;
+
+  const auto trained_at = fs::last_write_time(ws / kModelDir / "model.pt");
+  const Result again = Headforge(args);
+  ASSERT_EQ(again.code, 0) << again.err;
+  EXPECT_NE(again.err.find("train: up to date"), std::string::npos) << again.err;
+  EXPECT_EQ(fs::last_write_time(ws / kModelDir / "model.pt"), trained_at);
+}
+
+TEST_F(TrainStage, RenderDrawsAnyFrameFromAnyCamera) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const fs::path out = Scratch("render");
+  const Result r = Headforge({"render", "--workspace", reference_.string(), "--frames", "110,20", "--background", "0.5",
+                              "--out", out.string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  // Held-out frame 110 from its own camera is what training's evaluation drew
+  // (held_out/: render | frame | error).
+  const cv::Mat render = cv::imread((out / "frame_000110.png").string());
+  const cv::Mat scored = cv::imread((reference_ / kModelDir / "held_out" / "cam0_000110.png").string());
+  ASSERT_FALSE(render.empty());
+  ASSERT_EQ(scored.cols, 3 * render.cols);
+  EXPECT_LE(cv::norm(render, scored(cv::Rect(0, 0, render.cols, render.rows)), cv::NORM_INF), 1.0);
+  EXPECT_TRUE(fs::exists(out / "frame_000020.png"));
+
+  // 20 degrees round the head: the same size, another picture.
+  const Result turned = Headforge({"render", "--workspace", reference_.string(), "--frames", "110", "--yaw", "20",
+                                   "--background", "0.5", "--out", (out / "yaw20").string()});
+  ASSERT_EQ(turned.code, 0) << turned.err;
+  const cv::Mat side = cv::imread((out / "yaw20" / "frame_000110.png").string());
+  ASSERT_EQ(side.size(), render.size());
+  EXPECT_GT(cv::norm(side, render, cv::NORM_L1) / double(render.total() * 3), 2.0);
+
+  const Result missing = Headforge({"render", "--workspace", reference_.string(), "--frames", "500", "--out",
+                                    out.string()});
+  EXPECT_NE(missing.code, 0);
+  EXPECT_NE(missing.err.find("no frame 500 (the frames run 0-124)"), std::string::npos) << missing.err;
+}
+
+// Edits `file` (JSON) of `ws` in place.
+void EditJson(const fs::path& file, const std::function<void(nlohmann::json*)>& edit) {
+  nlohmann::json j;
+  ASSERT_TRUE(ReadJson(file, &j).ok()) << file;
+  edit(&j);
+  ASSERT_TRUE(WriteJsonAtomic(file, j, 1).ok());
+}
+
+TEST(TrainBadInput, AWorkspaceWithoutTrackingSaysToRunTrack) {
+  const fs::path ws = CopyOf(Tracked(), Scratch("no_tracking"));
+  fs::remove(ws / "tracking.json");
+  EditJson(ws / "workspace.json", [](nlohmann::json* j) {
+    nlohmann::json kept = nlohmann::json::array();
+    for (const auto& stage : (*j)["stages"])
+      if (stage["name"] != "track") kept.push_back(stage);
+    (*j)["stages"] = kept;
+  });
+  const Result r = Headforge(TrainArgs(ws));
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("track"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(ws / kModelDir));
+}
+
+TEST(TrainBadInput, TrackingThatDisagreesWithTheFramesIsRefused) {
+  const fs::path ws = CopyOf(Tracked(), Scratch("mismatch"));
+  EditJson(ws / "tracking.json", [](nlohmann::json* j) { (*j)["frames"].erase((*j)["frames"].begin() + 100, (*j)["frames"].end()); });
+  const Result r = Headforge(TrainArgs(ws));
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("tracking.json holds 100 frames and the capture 125"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("run headforge track again"), std::string::npos) << r.err;
+}
+
+TEST(TrainBadInput, TooFewFramesIsAClearError) {
+  const fs::path ws = CopyOf(Tracked(), Scratch("few"));
+  // Six frames in the capture and the tracking alike.
+  EditJson(ws / "capture.json", [](nlohmann::json* j) {
+    (*j)["frames"].erase((*j)["frames"].begin() + 6, (*j)["frames"].end());
+    for (auto& cam : (*j)["cameras"]) cam["frames"].erase(cam["frames"].begin() + 6, cam["frames"].end());
+  });
+  EditJson(ws / "tracking.json", [](nlohmann::json* j) { (*j)["frames"].erase((*j)["frames"].begin() + 6, (*j)["frames"].end()); });
+  const Result r = Headforge(TrainArgs(ws));
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("the capture has 6 frames"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("ingest a longer video"), std::string::npos) << r.err;
+}
+
+TEST(TrainHardCases, FramesTheTrackerFlaggedAreLeftOutOfTraining) {
+  const fs::path ws = CopyOf(Tracked(), Scratch("flagged"));
+  // Frames 10-29 "failed": interpolated or low-confidence, as the tracker marks them.
+  EditJson(ws / "tracking.json", [](nlohmann::json* j) {
+    for (int f = 10; f < 30; ++f) (*j)["frames"][size_t(f)][f % 2 ? "interpolated" : "low_confidence"] = true;
+  });
+  std::vector<std::string> args = TrainArgs(ws);
+  *(std::find(args.begin(), args.end(), "--steps") + 1) = "60";
+  args.insert(args.end(), {"--log-level", "info"});
+  const Result r = Headforge(args);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("20 of 100 training views left out"), std::string::npos) << r.err;
+  for (const auto& line : StatsLines(ws / kModelDir / "stats.jsonl"))
+    EXPECT_TRUE(std::isfinite(line["loss"].get<double>())) << line;
+}
+
+}  // namespace
+}  // namespace headforge

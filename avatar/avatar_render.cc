@@ -2,17 +2,25 @@
 
 #include <torch/torch.h>
 
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
+
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <map>
+
+#include <Eigen/Geometry>
 
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/tensor_image.h"
 #include "core/image_io.h"
+#include "core/json_io.h"
 #include "core/log.h"
 
 namespace headforge {
@@ -27,6 +35,25 @@ std::vector<const AvatarView*> AllViews(const AvatarDataset& data) {
     return a->frame != b->frame ? a->frame < b->frame : a->camera < b->camera;
   });
   return views;
+}
+
+// The avatar in `model_dir` and the workspace's views at `resolution` (0:
+// the training resolution), ready to pose.
+Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                   torch::Device device, int resolution, DatasetOptions* loading, GaussianStyleAvatar* avatar,
+                   TrainOptions* trained, FaceModel* model, AvatarDataset* data) {
+  HF_RETURN_IF_ERROR(LoadAvatar(model_dir, device, avatar, trained));
+  HF_RETURN_IF_ERROR(FaceModel::Load(face_model, model));
+  loading->resolution = resolution > 0 ? resolution : trained->resolution;
+  loading->min_train_frames = 1;
+  loading->holdout = trained->holdout;
+  HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, *model, *loading, data).WithContext("render"));
+  if (trained->mesh_riding) {
+    avatar->neutral = ComputeTriangleFrames(data->identity_vertices, data->triangles);
+    TriangleFrames& n = avatar->neutral;
+    for (torch::Tensor* t : {&n.origin, &n.rotation, &n.quat, &n.scale}) *t = t->to(device);
+  }
+  return Status::Ok();
 }
 
 }  // namespace
@@ -46,20 +73,13 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     return Status::InvalidArgument("render: --side-by-side shows the avatar's own frames; leave out --drive");
   GaussianStyleAvatar avatar;
   TrainOptions trained;
-  HF_RETURN_IF_ERROR(LoadAvatar(workspace / "models" / "gaussian_style", device, &avatar, &trained));
   FaceModel model;
-  HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
   DatasetOptions loading;
-  loading.resolution = options.resolution > 0 ? options.resolution : trained.resolution;
   loading.images = options.side_by_side;
-  loading.min_train_frames = 1;
   AvatarDataset own, drive;
-  HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, &own).WithContext("render"));
-  if (trained.mesh_riding) {
-    avatar.neutral = ComputeTriangleFrames(own.identity_vertices, own.triangles);
-    TriangleFrames& n = avatar.neutral;
-    for (torch::Tensor* t : {&n.origin, &n.rotation, &n.quat, &n.scale}) *t = t->to(device);
-  }
+  const fs::path model_dir = options.model.empty() ? workspace / "models" / "gaussian_style" : fs::path(options.model);
+  HF_RETURN_IF_ERROR(LoadTrained(workspace, model_dir, face_model, device,
+                                 options.resolution, &loading, &avatar, &trained, &model, &own));
   const std::vector<const AvatarView*> own_views = AllViews(own);
   std::vector<const AvatarView*> drivers = own_views;
   if (!options.drive.empty()) {
@@ -120,6 +140,119 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
   progress->Finish();
   summary->frames = int(frames.size());
   summary->seconds_per_frame = frames.empty() ? 0 : posing / frames.size();
+  return Status::Ok();
+}
+
+namespace {
+
+Eigen::Isometry3d IsometryFromJson(const nlohmann::json& rows) {
+  Eigen::Isometry3d m = Eigen::Isometry3d::Identity();
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 4; ++j) m.matrix()(i, j) = rows.at(i).at(j).get<double>();
+  return m;
+}
+
+// Azimuth (toward +x) and elevation (toward +y) of a camera's centre round the origin, degrees.
+std::pair<double, double> AzimuthElevation(const Eigen::Isometry3d& cam_from_world) {
+  const Eigen::Vector3d c = cam_from_world.inverse().translation();
+  return {std::atan2(c.x(), c.z()) * 180 / M_PI, std::asin(c.y() / c.norm()) * 180 / M_PI};
+}
+
+}  // namespace
+
+Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                       const fs::path& truth, const fs::path& write_dir, std::vector<NovelViewScore>* scores) {
+  UseTensorThreads();
+  torch::NoGradGuard no_grad;
+  GaussianStyleAvatar avatar;
+  TrainOptions trained;
+  FaceModel model;
+  DatasetOptions loading;
+  loading.images = false;
+  AvatarDataset data;
+  HF_RETURN_IF_ERROR(
+      LoadTrained(workspace, model_dir, face_model, torch::kCPU, 0, &loading, &avatar, &trained, &model, &data));
+  nlohmann::json gt;
+  HF_RETURN_IF_ERROR(ReadJson(truth / "ground_truth.json", &gt));
+  if (data.test.empty()) return Status::DataError("novel views: the workspace has no held-out frames");
+  const std::string trained_on = data.test.front().camera;
+  const double fps = gt.at("fps").get<double>();
+  const nlohmann::json& frames = gt.at("frames");
+  const torch::Tensor background = torch::full({3}, 0.5);
+  std::vector<NovelViewScore> out;
+  try {
+    for (const nlohmann::json& cam : gt.at("cameras")) {
+      const std::string name = cam.at("name");
+      const double scale = double(loading.resolution) / std::max(cam.at("width").get<int>(), cam.at("height").get<int>());
+      SplatCamera lens;
+      lens.width = int(std::lround(cam.at("width").get<int>() * scale));
+      lens.height = int(std::lround(cam.at("height").get<int>() * scale));
+      lens.fx = cam.at("fx").get<double>() * scale;
+      lens.fy = cam.at("fy").get<double>() * scale;
+      lens.cx = (cam.at("cx").get<double>() + 0.5) * scale - 0.5;
+      lens.cy = (cam.at("cy").get<double>() + 0.5) * scale - 0.5;
+      std::vector<ViewScores> per_view;
+      NovelViewScore row;
+      row.camera = name;
+      for (const AvatarView& view : data.test) {
+        if (view.camera != trained_on) continue;
+        const int index = int(std::lround(view.time_s * fps));
+        if (index < 0 || index >= int(frames.size()) ||
+            std::abs(frames[size_t(index)].at("time_s").get<double>() - view.time_s) > 0.5 / fps)
+          return Status::DataError("novel views: " + truth.string() + " has no frame at " +
+                                   std::to_string(view.time_s) + " s; simulate the scene the workspace came from");
+        const nlohmann::json& views = frames[size_t(index)].at("views");
+        if (!views.contains(trained_on))
+          return Status::DataError("novel views: " + truth.string() + " has no camera " + trained_on +
+                                   ", the camera the avatar was trained on");
+        // The head frame in truth's world, through the training camera.
+        Eigen::Isometry3d cam_from_head = Eigen::Isometry3d::Identity();
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 4; ++j) cam_from_head.matrix()(i, j) = view.view.cam_from_world[size_t(4 * i + j)];
+        const Eigen::Isometry3d world_from_head = IsometryFromJson(views.at(trained_on).at("cam_from_world")).inverse() *
+                                                  cam_from_head;
+        const Eigen::Isometry3d novel = IsometryFromJson(views.at(name).at("cam_from_world"));
+        const auto [azimuth, elevation] = AzimuthElevation(novel);
+        const auto [azimuth0, elevation0] = AzimuthElevation(IsometryFromJson(views.at(trained_on).at("cam_from_world")));
+        row.yaw_deg = azimuth - azimuth0;
+        row.pitch_deg = elevation - elevation0;
+        SplatCamera camera = lens;
+        const Eigen::Isometry3d novel_from_head = novel * world_from_head;
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 4; ++j) camera.cam_from_world[size_t(4 * i + j)] = novel_from_head.matrix()(i, j);
+        const torch::Tensor render =
+            RenderRgb(avatar.Pose(data, view.condition, 0, avatar.deform), camera, background).clamp(0, 1);
+        char file[32];
+        std::snprintf(file, sizeof(file), "%06d.png", index);
+        const fs::path image_path = truth / cam.at("input").get<std::string>() / file;
+        const fs::path mask_path = truth / "masks" / name / file;
+        cv::Mat image = cv::imread(image_path.string(), cv::IMREAD_COLOR);
+        cv::Mat mask = cv::imread(mask_path.string(), cv::IMREAD_GRAYSCALE);
+        if (image.empty() || mask.empty())
+          return Status::DataError("novel views: cannot read " + image_path.string() + " or its mask");
+        cv::resize(image, image, cv::Size(lens.width, lens.height), 0, 0, cv::INTER_AREA);
+        cv::resize(mask, mask, cv::Size(lens.width, lens.height), 0, 0, cv::INTER_AREA);
+        const torch::Tensor target = ImageToTensor(image), cover = MaskToTensor(mask);
+        per_view.push_back(ScoreRender(render, target, cover, background));
+        if (!write_dir.empty()) {
+          HF_RETURN_IF_ERROR(EnsureDirectory(write_dir));
+          const torch::Tensor shown = target * cover + 0.5 * (1 - cover);
+          const torch::Tensor error = ((render - shown).abs() * 4).clamp(0, 1);
+          HF_RETURN_IF_ERROR(WriteImageAtomic(write_dir / (name + "_" + file),
+                                              TensorToImage(torch::cat({render, shown, error}, 2))));
+        }
+      }
+      const ViewScores mean = MeanScores(per_view);
+      row.views = int(per_view.size());
+      row.psnr_masked = mean.psnr_masked;
+      row.ssim_masked = mean.ssim_masked;
+      row.psnr_full = mean.psnr_full;
+      out.push_back(row);
+    }
+  } catch (const nlohmann::json::exception& e) {
+    return Status::DataError("novel views: " + (truth / "ground_truth.json").string() + " is damaged: " + e.what());
+  }
+  *scores = std::move(out);
   return Status::Ok();
 }
 

@@ -13,6 +13,7 @@
 namespace headforge {
 
 struct AvatarRenderOptions {
+  std::string model;            // the model folder ("": WORKSPACE/models/gaussian_style)
   std::string drive;            // a workspace whose tracked expressions drive the avatar ("": its own)
   std::vector<int> frames;      // frames to render (of `drive` when given); empty: all
   double yaw_deg = 0;           // the camera moved round the head, toward the subject's left
@@ -30,8 +31,25 @@ struct AvatarRenderSummary {
   std::vector<std::string> files;
 };
 
-// Renders the avatar trained in `workspace` (models/gaussian_style) into `out_dir`.
+// Renders the avatar trained in `workspace` (or options.model) into `out_dir`.
 Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_model, const AvatarRenderOptions& options,
                           const fs::path& out_dir, Progress* progress, AvatarRenderSummary* summary);
+
+// The avatar against a simulated capture's ground truth from cameras training
+// never had: `truth` is a `headforge simulate` output of the same scene with
+// more cameras, one of them named as the workspace's (the training camera).
+// Each held-out frame is rendered from each of truth's cameras, placed in the
+// avatar's head frame through the training camera (its estimated pose at that
+// frame and its true pose give the head frame in truth's world), with the
+// truth's intrinsics at the training resolution, and scored over the truth's
+// head mask (grey 0.5 behind it in both images) and over the frame.
+struct NovelViewScore {
+  std::string camera;
+  double yaw_deg = 0, pitch_deg = 0;  // its centre round the head, from the training camera's
+  int views = 0;
+  double psnr_masked = 0, ssim_masked = 0, psnr_full = 0;
+};
+Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                       const fs::path& truth, const fs::path& write_dir, std::vector<NovelViewScore>* scores);
 
 }  // namespace headforge

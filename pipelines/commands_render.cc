@@ -12,7 +12,7 @@ int RenderCommand(const std::vector<std::string>& args) {
   CommonOptions common;
   AddCommonOptions(&options, &common, /*with_workspace=*/true);
   AvatarRenderOptions render;
-  std::string out;
+  std::string out, truth;
   options.Add("render.out", &out, "Output folder (default: WORKSPACE/renders).", "out", OptionSet::Effect::kRuntime);
   options.Add("render.frames", &render.frames, "Frames to render, e.g. 0,10,20 (default: all).", "frames");
   options.Add("render.yaw", &render.yaw_deg, "Degrees the camera moves round the head toward the subject's left.",
@@ -26,6 +26,12 @@ int RenderCommand(const std::vector<std::string>& args) {
   options.Add("render.side_by_side", &render.side_by_side, "Put each frame beside its render.", "side-by-side");
   options.Add("render.background", &render.background, "Grey level behind the head, in [0, 1].", "background");
   options.Add("render.device", &render.device, "cpu, or cuda with a CUDA LibTorch.", "device");
+  options.Add("render.model", &render.model, "The model folder (default: WORKSPACE/models/gaussian_style).", "model");
+  options.Add("render.truth", &truth,
+              "Score instead of render: a simulated capture of the workspace's scene with more cameras "
+              "(scenes/talking_static_novel.toml); the held-out frames from each of its cameras against its "
+              "renders, render | truth | error images into --out.",
+              "truth");
   const int parsed = ParseOrExit(
       &options, args, "headforge render --workspace DIR [--frames A,B,...] [--yaw DEG] [--pitch DEG] [options]",
       "Renders the avatar trained in the workspace (headforge train) for its tracked frames, or\n"
@@ -36,7 +42,21 @@ int RenderCommand(const std::vector<std::string>& args) {
   if (!(render.background >= 0 && render.background <= 1))
     return ReportFailure(Status::InvalidArgument("--background must be in [0, 1]"));
   ApplyCommonOptions(common);
-  const fs::path out_dir = out.empty() ? fs::path(common.workspace) / "renders" : fs::path(out);
+  const fs::path out_dir = out.empty() ? fs::path(common.workspace) / (truth.empty() ? "renders" : "novel_views")
+                                       : fs::path(out);
+  if (!truth.empty()) {
+    const fs::path model_dir =
+        render.model.empty() ? fs::path(common.workspace) / "models" / "gaussian_style" : fs::path(render.model);
+    std::vector<NovelViewScore> scores;
+    if (Status s = ScoreNovelViews(common.workspace, model_dir, common.Settings().face_model, truth, out_dir, &scores);
+        !s.ok())
+      return ReportFailure(s);
+    std::printf("| camera | yaw / pitch | views | PSNR / SSIM, head | PSNR, frame |\n|---|---|---|---|---|\n");
+    for (const NovelViewScore& n : scores)
+      std::printf("| %s | %+.0f° / %+.0f° | %d | %.2f dB / %.3f | %.2f dB |\n", n.camera.c_str(), n.yaw_deg,
+                  n.pitch_deg, n.views, n.psnr_masked, n.ssim_masked, n.psnr_full);
+    return kExitOk;
+  }
   StderrProgress progress;
   AvatarRenderSummary summary;
   if (Status s = RenderAvatarFrames(common.workspace, common.Settings().face_model, render, out_dir, &progress, &summary);

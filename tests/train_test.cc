@@ -207,6 +207,23 @@ TEST_F(TrainStage, RenderDrawsAnyFrameFromAnyCamera) {
   EXPECT_NE(missing.err.find("no frame 500 (the frames run 0-124)"), std::string::npos) << missing.err;
 }
 
+TEST_F(TrainStage, HeldOutFramesAreScoredAgainstTheSimulatorsTruth) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  // The capture the workspace came from: its one camera is the training
+  // camera, which the novel-view scoring must place exactly where training had it.
+  const fs::path out = Scratch("truth");
+  const Result r = Headforge({"render", "--workspace", reference_.string(), "--truth",
+                              SharedSimulation("talking_static", 125).string(), "--out", out.string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("| cam0 | +0° / +0° | 25 |"), std::string::npos) << r.out;
+  EXPECT_EQ(CountFiles(out), 25u);
+  const size_t psnr_at = r.out.find("| 25 | ") + 7;
+  const double psnr = std::stod(r.out.substr(psnr_at));
+  std::printf("held-out frames against the simulator's full frames: %.2f dB over the head\n", psnr);
+  EXPECT_GT(psnr, 15.0);
+  EXPECT_LT(psnr, 60.0);
+}
+
 // Edits `file` (JSON) of `ws` in place.
 void EditJson(const fs::path& file, const std::function<void(nlohmann::json*)>& edit) {
   nlohmann::json j;

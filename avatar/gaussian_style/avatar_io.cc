@@ -130,6 +130,7 @@ Status SaveAvatar(const GaussianStyleAvatar& avatar, const TrainOptions& options
                                  {"frames", data.num_frames},
                                  {"deform", avatar.deform},
                                  {"resolution", options.resolution},
+                                 {"holdout", options.holdout},
                                  {"width", data.width},
                                  {"height", data.height},
                                  {"gaussians", avatar.gaussians.params.size()},
@@ -148,6 +149,7 @@ Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar
     out.deform = config.at("deform").get<bool>();
     if (options) {
       options->resolution = config.at("resolution").get<int>();
+      options->holdout = config.value("holdout", options->holdout);
       options->mesh_riding = out.model->options().mesh_riding;
     }
   } catch (const std::exception& e) {

@@ -140,6 +140,7 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       const TrackedFrame& tracked = tracking.frames[size_t(f.index)];
       AvatarView view;
       view.frame = f.index;
+      view.time_s = f.time_s;
       view.camera = cam.name;
       view.unreliable = tracked.interpolated || tracked.low_confidence;
       if (options.images) {

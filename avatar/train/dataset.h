@@ -21,6 +21,7 @@ namespace headforge {
 
 struct AvatarView {
   int frame = 0;          // output frame index
+  double time_s = 0;      // its time in the capture
   std::string camera;     // its camera's name
   torch::Tensor image;    // [3, H, W] RGB in [0, 1]
   torch::Tensor mask;     // [1, H, W] 1 on the head

@@ -18,6 +18,7 @@
 
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/torch_runtime.h"
+#include "avatar/train/device.h"
 #include "avatar/train/tensor_image.h"
 #include "core/image_io.h"
 #include "core/json_io.h"
@@ -62,13 +63,7 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
                           const fs::path& out_dir, Progress* progress, AvatarRenderSummary* summary) {
   UseTensorThreads();
   torch::Device device = torch::kCPU;
-  try {
-    device = torch::Device(options.device);
-  } catch (const c10::Error&) {
-    return Status::InvalidArgument("render: '" + options.device + "' is not a device (cpu or cuda)");
-  }
-  if (device.is_cuda() && !torch::cuda::is_available())
-    return Status::InvalidArgument("render: this build's LibTorch sees no CUDA device; use --device cpu");
+  HF_RETURN_IF_ERROR(ParseDevice("render", options.device, &device));
   if (options.side_by_side && !options.drive.empty())
     return Status::InvalidArgument("render: --side-by-side shows the avatar's own frames; leave out --drive");
   GaussianStyleAvatar avatar;

@@ -6,6 +6,7 @@
 
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/torch_runtime.h"
+#include "avatar/train/device.h"
 #include "core/log.h"
 
 namespace headforge {
@@ -36,6 +37,8 @@ const Preset kPresets[] = {
 }  // namespace
 
 Status TrainOptions::Check() const {
+  torch::Device parsed = torch::kCPU;
+  HF_RETURN_IF_ERROR(ParseDevice("train", device, &parsed));
   if (model != "gaussian-style" && model != "gan-avatar")
     return Status::InvalidArgument("train: --model must be gaussian-style or gan-avatar, not '" + model + "'");
   if (resolution < 16 || resolution > 4096) return Status::InvalidArgument("train: --resolution must be in [16, 4096]");

@@ -14,6 +14,7 @@
 #include "avatar/metrics/image_metrics.h"
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/adam.h"
+#include "avatar/train/device.h"
 #include "avatar/train/tensor_image.h"
 #include "core/image_io.h"
 #include "core/interrupt.h"
@@ -423,14 +424,7 @@ Status Trainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
 Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
                           const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary) {
   torch::Device device = torch::kCPU;
-  try {
-    device = torch::Device(options.device);
-  } catch (const c10::Error&) {
-    return Status::InvalidArgument("train: '" + options.device + "' is not a device (cpu or cuda)");
-  }
-  if (device.is_cuda() && !torch::cuda::is_available())
-    return Status::InvalidArgument("train: --device " + options.device +
-                                   ": this build's LibTorch sees no CUDA device; use --device cpu");
+  HF_RETURN_IF_ERROR(ParseDevice("train", options.device, &device));
   const fs::path checkpoint = out_dir / "checkpoint.pt";
   Trainer trainer(options, data, device);
   HF_RETURN_IF_ERROR(trainer.Start(model, checkpoint, stats));

@@ -10,6 +10,7 @@
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/adam.h"
 #include "avatar/train/checkpoint.h"
+#include "avatar/train/device.h"
 #include "core/interrupt.h"
 #include "core/log.h"
 
@@ -51,28 +52,7 @@ std::vector<PosedImage> OnDevice(const std::vector<PosedImage>& views, torch::De
 }  // namespace
 
 Status ParseSplatFitDevice(const std::string& name, torch::Device* device) {
-  try {
-    *device = torch::Device(name);
-  } catch (const c10::Error&) {
-    return Status::InvalidArgument("splat-fit: '" + name + "' is not a device (try cpu or cuda)");
-  }
-  if (device->is_cpu()) return Status::Ok();
-  if (!device->is_cuda()) {
-    return Status::InvalidArgument("splat-fit: no kernels for device " + name + " (cpu or cuda)");
-  }
-  if (!torch::cuda::is_available()) {
-    return Status::InvalidArgument(
-        "splat-fit: device " + name +
-        ": LibTorch sees no CUDA device (this build's LibTorch may be CPU-only; `headforge info` "
-        "says which); use --device cpu");
-  }
-  if (!device->has_index()) device->set_index(0);
-  if (device->index() >= int(torch::cuda::device_count())) {
-    return Status::InvalidArgument("splat-fit: device " + name + ": only " +
-                                   std::to_string(torch::cuda::device_count()) +
-                                   " CUDA device(s) are visible");
-  }
-  return Status::Ok();
+  return ParseDevice("splat-fit", name, device);
 }
 
 bool SplatFitOptions::Check(std::string* why) const {

@@ -32,8 +32,8 @@ struct TrainOptions {
   double ssim_weight = 0.2;     // loss = (1 - w) L1 + w (1 - SSIM)
   double holdout = 0.2;         // the last fraction of the frames, never trained on
   int init_gaussians = 20000;   // sampled on the tracked mesh
-  int64_t max_gaussians = 60000;
-  int densify_from = 300, densify_until = 4000, densify_every = 100;
+  int64_t max_gaussians = 40000;
+  int densify_from = 300, densify_until = 3000, densify_every = 100;
   double grad_threshold = 0.0002;
   double lr_network = 5e-4;     // Adam for the networks and latents (the paper: 1e-4)
   double lr_means = 1.6e-4, lr_quats = 1e-3, lr_scales = 5e-3, lr_opacity = 5e-2, lr_features = 2.5e-3;

@@ -49,11 +49,8 @@ Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const s
   loading->min_train_frames = 1;
   loading->holdout = trained->holdout;
   HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, *model, *loading, data).WithContext("render"));
-  if (trained->mesh_riding) {
-    avatar->neutral = ComputeTriangleFrames(data->identity_vertices, data->triangles);
-    TriangleFrames& n = avatar->neutral;
-    for (torch::Tensor* t : {&n.origin, &n.rotation, &n.quat, &n.scale}) *t = t->to(device);
-  }
+  if (trained->mesh_riding)
+    avatar->neutral = ComputeTriangleFrames(data->identity_vertices, data->triangles).To(device);
   return Status::Ok();
 }
 
@@ -170,14 +167,18 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
   nlohmann::json gt;
   HF_RETURN_IF_ERROR(ReadJson(truth / "ground_truth.json", &gt));
   if (data.test.empty()) return Status::DataError("novel views: the workspace has no held-out frames");
+  if (!write_dir.empty()) HF_RETURN_IF_ERROR(EnsureDirectory(write_dir));
   const std::string trained_on = data.test.front().camera;
-  const double fps = gt.at("fps").get<double>();
-  const nlohmann::json& frames = gt.at("frames");
   const torch::Tensor background = torch::full({3}, 0.5);
   std::vector<NovelViewScore> out;
+  std::vector<std::vector<ViewScores>> per_camera;
   try {
-    for (const nlohmann::json& cam : gt.at("cameras")) {
-      const std::string name = cam.at("name");
+    const double fps = gt.at("fps").get<double>();
+    const nlohmann::json& frames = gt.at("frames");
+    const nlohmann::json& cameras = gt.at("cameras");
+    // Each truth camera's intrinsics at the training resolution.
+    std::vector<SplatCamera> lenses;
+    for (const nlohmann::json& cam : cameras) {
       const double scale = double(loading.resolution) / std::max(cam.at("width").get<int>(), cam.at("height").get<int>());
       SplatCamera lens;
       lens.width = int(std::lround(cam.at("width").get<int>() * scale));
@@ -186,66 +187,62 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
       lens.fy = cam.at("fy").get<double>() * scale;
       lens.cx = (cam.at("cx").get<double>() + 0.5) * scale - 0.5;
       lens.cy = (cam.at("cy").get<double>() + 0.5) * scale - 0.5;
-      std::vector<ViewScores> per_view;
-      NovelViewScore row;
-      row.camera = name;
-      for (const AvatarView& view : data.test) {
-        if (view.camera != trained_on) continue;
-        const int index = int(std::lround(view.time_s * fps));
-        if (index < 0 || index >= int(frames.size()) ||
-            std::abs(frames[size_t(index)].at("time_s").get<double>() - view.time_s) > 0.5 / fps)
-          return Status::DataError("novel views: " + truth.string() + " has no frame at " +
-                                   std::to_string(view.time_s) + " s; simulate the scene the workspace came from");
-        const nlohmann::json& views = frames[size_t(index)].at("views");
-        if (!views.contains(trained_on))
-          return Status::DataError("novel views: " + truth.string() + " has no camera " + trained_on +
-                                   ", the camera the avatar was trained on");
-        // The head frame in truth's world, through the training camera.
-        Eigen::Isometry3d cam_from_head = Eigen::Isometry3d::Identity();
-        for (int i = 0; i < 3; ++i)
-          for (int j = 0; j < 4; ++j) cam_from_head.matrix()(i, j) = view.view.cam_from_world[size_t(4 * i + j)];
-        const Eigen::Isometry3d world_from_head = IsometryFromJson(views.at(trained_on).at("cam_from_world")).inverse() *
-                                                  cam_from_head;
-        const Eigen::Isometry3d novel = IsometryFromJson(views.at(name).at("cam_from_world"));
+      lenses.push_back(lens);
+      out.emplace_back();
+      out.back().camera = cam.at("name").get<std::string>();
+    }
+    per_camera.resize(lenses.size());
+    for (const AvatarView& view : data.test) {
+      if (view.camera != trained_on) continue;
+      const int index = int(std::lround(view.time_s * fps));
+      if (index < 0 || index >= int(frames.size()) ||
+          std::abs(frames[size_t(index)].at("time_s").get<double>() - view.time_s) > 0.5 / fps)
+        return Status::DataError("novel views: " + truth.string() + " has no frame at " + std::to_string(view.time_s) +
+                                 " s; simulate the scene the workspace came from");
+      const nlohmann::json& views = frames[size_t(index)].at("views");
+      if (!views.contains(trained_on))
+        return Status::DataError("novel views: " + truth.string() + " has no camera " + trained_on +
+                                 ", the camera the avatar was trained on");
+      // The head frame in truth's world, through the training camera.
+      const Eigen::Isometry3d training_camera = IsometryFromJson(views.at(trained_on).at("cam_from_world"));
+      const Eigen::Isometry3d world_from_head = training_camera.inverse() * CameraPose(view.view);
+      const auto [azimuth0, elevation0] = AzimuthElevation(training_camera);
+      const PosedGaussians posed = avatar.Pose(data, view.condition, 0, avatar.deform);
+      char file[32];
+      std::snprintf(file, sizeof(file), "%06d.png", index);
+      for (size_t k = 0; k < lenses.size(); ++k) {
+        const nlohmann::json& cam = cameras[k];
+        const Eigen::Isometry3d novel = IsometryFromJson(views.at(out[k].camera).at("cam_from_world"));
         const auto [azimuth, elevation] = AzimuthElevation(novel);
-        const auto [azimuth0, elevation0] = AzimuthElevation(IsometryFromJson(views.at(trained_on).at("cam_from_world")));
-        row.yaw_deg = azimuth - azimuth0;
-        row.pitch_deg = elevation - elevation0;
-        SplatCamera camera = lens;
-        const Eigen::Isometry3d novel_from_head = novel * world_from_head;
-        for (int i = 0; i < 3; ++i)
-          for (int j = 0; j < 4; ++j) camera.cam_from_world[size_t(4 * i + j)] = novel_from_head.matrix()(i, j);
-        const torch::Tensor render =
-            RenderRgb(avatar.Pose(data, view.condition, 0, avatar.deform), camera, background).clamp(0, 1);
-        char file[32];
-        std::snprintf(file, sizeof(file), "%06d.png", index);
+        out[k].yaw_deg = azimuth - azimuth0;
+        out[k].pitch_deg = elevation - elevation0;
+        SplatCamera camera = lenses[k];
+        SetCameraPose(novel * world_from_head, &camera);
+        const torch::Tensor render = RenderRgb(posed, camera, background).clamp(0, 1);
         const fs::path image_path = truth / cam.at("input").get<std::string>() / file;
-        const fs::path mask_path = truth / "masks" / name / file;
+        const fs::path mask_path = truth / "masks" / out[k].camera / file;
         cv::Mat image = cv::imread(image_path.string(), cv::IMREAD_COLOR);
         cv::Mat mask = cv::imread(mask_path.string(), cv::IMREAD_GRAYSCALE);
         if (image.empty() || mask.empty())
           return Status::DataError("novel views: cannot read " + image_path.string() + " or its mask");
-        cv::resize(image, image, cv::Size(lens.width, lens.height), 0, 0, cv::INTER_AREA);
-        cv::resize(mask, mask, cv::Size(lens.width, lens.height), 0, 0, cv::INTER_AREA);
+        cv::resize(image, image, cv::Size(camera.width, camera.height), 0, 0, cv::INTER_AREA);
+        cv::resize(mask, mask, cv::Size(camera.width, camera.height), 0, 0, cv::INTER_AREA);
         const torch::Tensor target = ImageToTensor(image), cover = MaskToTensor(mask);
-        per_view.push_back(ScoreRender(render, target, cover, background));
-        if (!write_dir.empty()) {
-          HF_RETURN_IF_ERROR(EnsureDirectory(write_dir));
-          const torch::Tensor shown = target * cover + 0.5 * (1 - cover);
-          const torch::Tensor error = ((render - shown).abs() * 4).clamp(0, 1);
-          HF_RETURN_IF_ERROR(WriteImageAtomic(write_dir / (name + "_" + file),
-                                              TensorToImage(torch::cat({render, shown, error}, 2))));
-        }
+        per_camera[k].push_back(ScoreRender(render, target, cover, background));
+        if (!write_dir.empty())
+          HF_RETURN_IF_ERROR(WriteImageAtomic(write_dir / (out[k].camera + "_" + file),
+                                              TensorToImage(ComparisonStrip(render, target, cover, 0.5))));
       }
-      const ViewScores mean = MeanScores(per_view);
-      row.views = int(per_view.size());
-      row.psnr_masked = mean.psnr_masked;
-      row.ssim_masked = mean.ssim_masked;
-      row.psnr_full = mean.psnr_full;
-      out.push_back(row);
     }
   } catch (const nlohmann::json::exception& e) {
     return Status::DataError("novel views: " + (truth / "ground_truth.json").string() + " is damaged: " + e.what());
+  }
+  for (size_t k = 0; k < out.size(); ++k) {
+    const ViewScores mean = MeanScores(per_camera[k]);
+    out[k].views = int(per_camera[k].size());
+    out[k].psnr_masked = mean.psnr_masked;
+    out[k].ssim_masked = mean.ssim_masked;
+    out[k].psnr_full = mean.psnr_full;
   }
   *scores = std::move(out);
   return Status::Ok();

@@ -55,6 +55,13 @@ ViewScores ScoreRender(const torch::Tensor& render, const torch::Tensor& image, 
   return s;
 }
 
+torch::Tensor ComparisonStrip(const torch::Tensor& render, const torch::Tensor& image, const torch::Tensor& mask,
+                              double background) {
+  const torch::Tensor shown = image * mask + background * (1 - mask);
+  const torch::Tensor error = ((render - shown).abs() * 4).clamp(0, 1);
+  return torch::cat({render, shown, error}, 2);
+}
+
 ViewScores MeanScores(const std::vector<ViewScores>& scores) {
   ViewScores mean;
   const double heads = double(std::count_if(scores.begin(), scores.end(), [](const ViewScores& s) { return s.has_head; }));

@@ -14,6 +14,10 @@ struct TriangleFrames {
   torch::Tensor rotation;  // [T, 3, 3] columns: edge, normal x edge, normal
   torch::Tensor quat;      // [T, 4] the rotation as a unit quaternion
   torch::Tensor scale;     // [T] mean edge length, at least 1e-6
+
+  TriangleFrames To(torch::Device device) const {
+    return {origin.to(device), rotation.to(device), quat.to(device), scale.to(device)};
+  }
 };
 
 // vertices [V, 3], triangles [T, 3] (int64 vertex indices). A degenerate

@@ -117,10 +117,7 @@ Status Trainer::Start(const FaceModel& model, const fs::path& checkpoint, StatsL
   if (options_.mesh_riding) avatar_.neutral = ComputeTriangleFrames(data_.identity_vertices, data_.triangles);
   HF_RETURN_IF_ERROR(InitGaussians(data_, model, options_, avatar_, &avatar_.gaussians));
   avatar_.model->to(device_);
-  if (options_.mesh_riding) {
-    TriangleFrames& n = avatar_.neutral;
-    for (torch::Tensor* t : {&n.origin, &n.rotation, &n.quat, &n.scale}) *t = t->to(device_);
-  }
+  if (options_.mesh_riding) avatar_.neutral = avatar_.neutral.To(device_);
   GaussianParams& p = avatar_.gaussians.params;
   for (torch::Tensor* t : p.All()) *t = t->to(device_).requires_grad_(true);
   if (avatar_.gaussians.binding.defined()) avatar_.gaussians.binding = avatar_.gaussians.binding.to(device_);
@@ -236,11 +233,10 @@ std::vector<ViewScores> Trainer::Evaluate(int stride, const fs::path& write_dir,
     s.camera = view.camera;
     scores.push_back(s);
     if (write_dir.empty()) continue;
-    const torch::Tensor target = view.image * view.mask + kEvalBackground * (1 - view.mask);
-    const torch::Tensor error = ((render - target).abs() * 4).clamp(0, 1);
     char name[64];
     std::snprintf(name, sizeof(name), "%s_%06d.png", view.camera.c_str(), view.frame);
-    WriteImageAtomic(write_dir / name, TensorToImage(torch::cat({render, target, error}, 2))).ok();
+    WriteImageAtomic(write_dir / name, TensorToImage(ComparisonStrip(render, view.image, view.mask, kEvalBackground)))
+        .ok();
   }
   return scores;
 }

@@ -48,6 +48,10 @@ struct ViewScores {
 // image's background set to `background` [3] (the render's own).
 ViewScores ScoreRender(const torch::Tensor& render, const torch::Tensor& image, const torch::Tensor& mask,
                        const torch::Tensor& background);
+// render | image (grey `background` outside `mask`) | error x 4, side by
+// side: [3, H, 3W], for the images a person checks.
+torch::Tensor ComparisonStrip(const torch::Tensor& render, const torch::Tensor& image, const torch::Tensor& mask,
+                              double background);
 // Means over views; the masked figures over the views with a head.
 ViewScores MeanScores(const std::vector<ViewScores>& scores);
 

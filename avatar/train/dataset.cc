@@ -79,18 +79,11 @@ SplatCamera OrbitCamera(const SplatCamera& camera, double yaw_deg, double pitch_
   const Eigen::Matrix3d o = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()) *
                              Eigen::AngleAxisd(-pitch, Eigen::Vector3d::UnitX()))
                                 .toRotationMatrix();
-  Eigen::Matrix3d r;
-  Eigen::Vector3d t;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) r(i, j) = camera.cam_from_world[4 * i + j];
-    t[i] = camera.cam_from_world[4 * i + 3];
-  }
-  const Eigen::Matrix3d turned = r * o.transpose();
+  // Turning the camera about the origin keeps its translation.
+  Eigen::Isometry3d turned = CameraPose(camera);
+  turned.linear() = turned.linear() * o.transpose();
   SplatCamera out = camera;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) out.cam_from_world[4 * i + j] = turned(i, j);
-    out.cam_from_world[4 * i + 3] = t[i];
-  }
+  SetCameraPose(turned, &out);
   return out;
 }
 
@@ -153,13 +146,10 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       const Eigen::Isometry3d pose = cameras.mode == "head-pose" ? cam_from_canonical : tracked.head_motion;
       double rotation[9], translation[3];
       for (int i = 0; i < 3; ++i) {
-        for (int j = 0; j < 3; ++j) {
-          rotation[3 * i + j] = pose.linear()(i, j);
-          view.view.cam_from_world[4 * i + j] = cam_from_canonical.linear()(i, j);
-        }
+        for (int j = 0; j < 3; ++j) rotation[3 * i + j] = pose.linear()(i, j);
         translation[i] = pose.translation()[i];
-        view.view.cam_from_world[4 * i + 3] = cam_from_canonical.translation()[i];
       }
+      SetCameraPose(cam_from_canonical, &view.view);
       view.view.fx = lens->fx * scale;
       view.view.fy = (lens->fy > 0 ? lens->fy : lens->fx) * scale;
       view.view.cx = (lens->cx + 0.5) * scale - 0.5;

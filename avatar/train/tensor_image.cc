@@ -30,12 +30,7 @@ cv::Mat TensorToImage(const torch::Tensor& rgb) {
 
 SplatCamera ToSplatCamera(const PinholeCamera& camera) {
   SplatCamera out;
-  const Eigen::Matrix3d r = camera.cam_from_world.linear();
-  const Eigen::Vector3d t = camera.cam_from_world.translation();
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) out.cam_from_world[4 * i + j] = r(i, j);
-    out.cam_from_world[4 * i + 3] = t[i];
-  }
+  SetCameraPose(camera.cam_from_world, &out);
   out.fx = camera.fx;
   out.fy = camera.fy;
   out.cx = camera.cx;
@@ -43,6 +38,18 @@ SplatCamera ToSplatCamera(const PinholeCamera& camera) {
   out.width = camera.width;
   out.height = camera.height;
   return out;
+}
+
+Eigen::Isometry3d CameraPose(const SplatCamera& camera) {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 4; ++j) pose.matrix()(i, j) = camera.cam_from_world[size_t(4 * i + j)];
+  return pose;
+}
+
+void SetCameraPose(const Eigen::Isometry3d& cam_from_world, SplatCamera* camera) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 4; ++j) camera->cam_from_world[size_t(4 * i + j)] = cam_from_world.matrix()(i, j);
 }
 
 }  // namespace headforge

@@ -1,9 +1,12 @@
 // Between OpenCV's 8-bit BGR images and [3, H, W] float RGB tensors in [0, 1],
-// and from the project's pinhole camera to the rasterizer's.
+// the project's pinhole camera to the rasterizer's, and the rasterizer
+// camera's pose as an isometry.
 #pragma once
 
 #include <opencv2/core.hpp>
 #include <torch/types.h>
+
+#include <Eigen/Geometry>
 
 #include "avatar/splat/splat_camera.h"
 #include "core/mesh_renderer.h"
@@ -14,5 +17,7 @@ torch::Tensor ImageToTensor(const cv::Mat& bgr);       // CV_8UC3 -> [3, H, W]
 torch::Tensor MaskToTensor(const cv::Mat& mask);       // CV_8U (0 / 255) -> [1, H, W] in {0, 1}
 cv::Mat TensorToImage(const torch::Tensor& rgb);       // [3, H, W] (clamped to [0, 1]) -> CV_8UC3
 SplatCamera ToSplatCamera(const PinholeCamera& camera);
+Eigen::Isometry3d CameraPose(const SplatCamera& camera);                 // its cam_from_world
+void SetCameraPose(const Eigen::Isometry3d& cam_from_world, SplatCamera* camera);
 
 }  // namespace headforge

@@ -38,22 +38,6 @@ std::vector<const AvatarView*> AllViews(const AvatarDataset& data) {
   return views;
 }
 
-// The avatar in `model_dir` and the workspace's views at `resolution` (0:
-// the training resolution), ready to pose.
-Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
-                   torch::Device device, int resolution, DatasetOptions* loading, GaussianStyleAvatar* avatar,
-                   TrainOptions* trained, FaceModel* model, AvatarDataset* data) {
-  HF_RETURN_IF_ERROR(LoadAvatar(model_dir, device, avatar, trained));
-  HF_RETURN_IF_ERROR(FaceModel::Load(face_model, model));
-  loading->resolution = resolution > 0 ? resolution : trained->resolution;
-  loading->min_train_frames = 1;
-  loading->holdout = trained->holdout;
-  HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, *model, *loading, data).WithContext("render"));
-  if (trained->mesh_riding)
-    avatar->neutral = ComputeTriangleFrames(data->identity_vertices, data->triangles).To(device);
-  return Status::Ok();
-}
-
 }  // namespace
 
 Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_model, const AvatarRenderOptions& options,
@@ -61,8 +45,10 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
   UseTensorThreads();
   torch::Device device = torch::kCPU;
   HF_RETURN_IF_ERROR(ParseDevice("render", options.device, &device));
-  if (options.side_by_side && !options.drive.empty())
-    return Status::InvalidArgument("render: --side-by-side shows the avatar's own frames; leave out --drive");
+  if ((options.side_by_side || options.held_out) && !options.drive.empty())
+    return Status::InvalidArgument("render: --side-by-side and --held-out show the avatar's own frames; leave out --drive");
+  if (options.orbit_deg < 0 || options.orbit_deg > 180 || options.orbit_steps < 2)
+    return Status::InvalidArgument("render: --orbit takes a yaw in (0, 180] degrees and at least 2 steps");
   GaussianStyleAvatar avatar;
   TrainOptions trained;
   FaceModel model;
@@ -83,14 +69,24 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
   for (const AvatarView* v : drivers) by_frame.emplace(v->frame, v);
   std::vector<int> frames = options.frames;
   if (frames.empty())
-    for (const auto& [frame, view] : by_frame) frames.push_back(frame);
+    for (const auto& [frame, view] : by_frame)
+      if (!options.held_out || frame >= own.first_test_frame) frames.push_back(frame);
+  // An orbit: one frame, the camera swung from 0 to +orbit, to -orbit and back to 0.
+  std::vector<double> yaws(frames.size(), options.yaw_deg);
+  if (options.orbit_deg > 0) {
+    frames.assign(size_t(options.orbit_steps), frames.empty() ? 0 : frames.front());
+    yaws.clear();
+    for (int i = 0; i < options.orbit_steps; ++i)
+      yaws.push_back(options.yaw_deg + options.orbit_deg * std::sin(2 * M_PI * i / options.orbit_steps));
+  }
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   const torch::Tensor background = torch::full({3}, options.background, torch::TensorOptions().device(device));
   const int64_t expressions = int64_t(own.expression_names.size());
   cv::VideoWriter video;
   double posing = 0;
   progress->Start("render", int64_t(frames.size()));
-  for (int frame : frames) {
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const int frame = frames[i];
     const auto found = by_frame.find(frame);
     if (found == by_frame.end())
       return Status::InvalidArgument("render: no frame " + std::to_string(frame) + " (the frames run 0-" +
@@ -100,7 +96,7 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     const AvatarView& own_view = options.drive.empty() ? driver : *own_views.front();
     torch::Tensor condition = own_view.condition.clone();
     condition.slice(0, 0, expressions).copy_(driver.condition.slice(0, 0, expressions));
-    const SplatCamera camera = OrbitCamera(own_view.view, options.yaw_deg, options.pitch_deg);
+    const SplatCamera camera = OrbitCamera(own_view.view, yaws[i], options.pitch_deg);
     const auto start = std::chrono::steady_clock::now();
     torch::Tensor render;
     {
@@ -108,15 +104,15 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
       render = RenderRgb(avatar.Pose(own, condition, 0, avatar.deform), camera, background).clamp(0, 1).cpu();
     }
     posing += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (options.side_by_side) {
-      const torch::Tensor target = driver.image * driver.mask + options.background * (1 - driver.mask);
-      render = torch::cat({render, target}, 2);
-    }
+    if (options.side_by_side) render = ComparisonStrip(render, driver.image, driver.mask, options.background);
     const cv::Mat image = TensorToImage(render);
     if (options.video) {
       if (!video.isOpened()) {
-        const fs::path path = out_dir / "render.mp4";
-        video.open(path.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('m', 'p', '4', 'v'), 25, image.size());
+        const fs::path path = out_dir / options.video_name;
+        // H.264, which browsers play; MPEG-4 part 2 where the FFmpeg build has no H.264 encoder.
+        video.open(path.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('a', 'v', 'c', '1'), options.fps, image.size());
+        if (!video.isOpened())
+          video.open(path.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('m', 'p', '4', 'v'), options.fps, image.size());
         if (!video.isOpened()) return Status::IoError("render: cannot open " + path.string() + " for writing");
         summary->files.push_back(path.filename().string());
       }

@@ -20,8 +20,13 @@ struct AvatarRenderOptions {
   double pitch_deg = 0;         // ... and up
   int resolution = 0;           // the longer side in pixels (0: as trained)
   std::string device = "cpu";
-  bool video = false;           // one render.mp4 instead of a PNG per frame
-  bool side_by_side = false;    // the frame beside its render (own frames only)
+  bool held_out = false;        // the frames training never saw (own frames only)
+  double orbit_deg = 0;         // > 0: frames[0] (or the first frame) from a camera swinging to +-this yaw and back
+  int orbit_steps = 60;         // renders in an orbit
+  bool video = false;           // one H.264 video (video_name) instead of a PNG per frame
+  std::string video_name = "render.mp4";
+  double fps = 25;
+  bool side_by_side = false;    // render | frame | error x 4 (own frames only)
   double background = 1.0;      // grey level behind the head
 };
 

@@ -39,54 +39,16 @@ bool InsidePolygon(const Eigen::Vector2f& p, const std::vector<Eigen::Vector2f>&
   return inside;
 }
 
-// Where a texel lies on the shape: triangle and barycentrics.
-struct TexelHit {
-  int triangle = -1;
-  Eigen::Vector3f bary;
-};
-
 // Rasterises the UV triangles of `triangles` into a map of `size` texels,
 // where the texture spans u in [u0, u0 + u_span] and v in [0, 1].
 std::vector<TexelHit> RasteriseUv(const FaceModel& model, const std::vector<int>& triangles, cv::Size size,
                                   float u0, float u_span) {
-  std::vector<TexelHit> hits(static_cast<size_t>(size.area()));
-  for (int t : triangles) {
-    Eigen::Vector2f c[3];
-    for (int k = 0; k < 3; ++k) {
-      const Eigen::Vector2f uv = model.uv_coords().col(model.uv_triangles()(k, t));
-      c[k] = Eigen::Vector2f((uv.x() - u0) / u_span * size.width - 0.5f, (1.0f - uv.y()) * size.height - 0.5f);
-    }
-    const float area = (c[1] - c[0]).x() * (c[2] - c[0]).y() - (c[2] - c[0]).x() * (c[1] - c[0]).y();
-    if (std::abs(area) < 1e-12f) continue;
-    const int x0 = std::max(0, static_cast<int>(std::floor(std::min({c[0].x(), c[1].x(), c[2].x()}))));
-    const int x1 = std::min(size.width - 1, static_cast<int>(std::ceil(std::max({c[0].x(), c[1].x(), c[2].x()}))));
-    const int y0 = std::max(0, static_cast<int>(std::floor(std::min({c[0].y(), c[1].y(), c[2].y()}))));
-    const int y1 = std::min(size.height - 1, static_cast<int>(std::ceil(std::max({c[0].y(), c[1].y(), c[2].y()}))));
-    for (int y = y0; y <= y1; ++y) {
-      for (int x = x0; x <= x1; ++x) {
-        const Eigen::Vector2f p(static_cast<float>(x), static_cast<float>(y));
-        const float l1 = ((p - c[0]).x() * (c[2] - c[0]).y() - (c[2] - c[0]).x() * (p - c[0]).y()) / area;
-        const float l2 = ((c[1] - c[0]).x() * (p - c[0]).y() - (p - c[0]).x() * (c[1] - c[0]).y()) / area;
-        const float l0 = 1 - l1 - l2;
-        constexpr float kEps = -0.02f;  // a little overlap closes seams between triangles
-        if (l0 < kEps || l1 < kEps || l2 < kEps) continue;
-        hits[static_cast<size_t>(y) * size.width + x] = TexelHit{t, Eigen::Vector3f(l0, l1, l2)};
-      }
-    }
+  Eigen::Matrix2Xf texels(2, model.uv_coords().cols());
+  for (int i = 0; i < texels.cols(); ++i) {
+    const Eigen::Vector2f uv = model.uv_coords().col(i);
+    texels.col(i) = Eigen::Vector2f((uv.x() - u0) / u_span * size.width - 0.5f, (1.0f - uv.y()) * size.height - 0.5f);
   }
-  return hits;
-}
-
-// Fills empty texels from their neighbours so bilinear lookups at UV seams do not
-// pick up black.
-void PadSeams(cv::Mat* image, cv::Mat* filled, int iterations) {
-  for (int i = 0; i < iterations; ++i) {
-    cv::Mat grown, grown_mask;
-    cv::dilate(*image, grown, cv::Mat());
-    cv::dilate(*filled, grown_mask, cv::Mat());
-    grown.copyTo(*image, ~*filled & grown_mask);
-    *filled = grown_mask;
-  }
+  return RasteriseTexels(texels, model.uv_triangles(), triangles, size);
 }
 
 std::vector<int> RegionTriangles(const FaceModel& model, const std::string& name) {

@@ -10,7 +10,8 @@ if(NOT HEADFORGE_SPLAT_ONLY)
 
   find_package(Boost 1.74 REQUIRED COMPONENTS program_options)
   find_package(OpenCV 4 REQUIRED COMPONENTS
-    core imgproc imgcodecs videoio video dnn calib3d features2d quality)
+    core imgproc imgcodecs videoio video dnn calib3d features2d quality photo)
+  find_package(TinyGLTF REQUIRED)
   find_package(dlib REQUIRED)
   find_package(HDF5 REQUIRED COMPONENTS C CXX)
   find_package(Ceres 2 REQUIRED)

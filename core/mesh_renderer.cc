@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 
+#include <opencv2/imgproc.hpp>
+
 #include "core/parallel.h"
 #include "core/status.h"
 
@@ -89,6 +91,43 @@ Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector
   const double denom = 1.0 / (va + vb + vc);
   const double v = vb * denom, w = vc * denom;
   return {1 - v - w, v, w};
+}
+
+std::vector<TexelHit> RasteriseTexels(const Eigen::Matrix2Xf& texel_coords, const Eigen::Matrix3Xi& uv_triangles,
+                                      const std::vector<int>& triangles, cv::Size size) {
+  std::vector<TexelHit> hits(static_cast<size_t>(size.area()));
+  for (int t : triangles) {
+    Eigen::Vector2f c[3];
+    for (int k = 0; k < 3; ++k) c[k] = texel_coords.col(uv_triangles(k, t));
+    const float area = (c[1] - c[0]).x() * (c[2] - c[0]).y() - (c[2] - c[0]).x() * (c[1] - c[0]).y();
+    if (std::abs(area) < 1e-12f) continue;
+    const int x0 = std::max(0, static_cast<int>(std::floor(std::min({c[0].x(), c[1].x(), c[2].x()}))));
+    const int x1 = std::min(size.width - 1, static_cast<int>(std::ceil(std::max({c[0].x(), c[1].x(), c[2].x()}))));
+    const int y0 = std::max(0, static_cast<int>(std::floor(std::min({c[0].y(), c[1].y(), c[2].y()}))));
+    const int y1 = std::min(size.height - 1, static_cast<int>(std::ceil(std::max({c[0].y(), c[1].y(), c[2].y()}))));
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        const Eigen::Vector2f p(static_cast<float>(x), static_cast<float>(y));
+        const float l1 = ((p - c[0]).x() * (c[2] - c[0]).y() - (c[2] - c[0]).x() * (p - c[0]).y()) / area;
+        const float l2 = ((c[1] - c[0]).x() * (p - c[0]).y() - (p - c[0]).x() * (c[1] - c[0]).y()) / area;
+        const float l0 = 1 - l1 - l2;
+        constexpr float kEps = -0.02f;  // a little overlap closes seams between triangles
+        if (l0 < kEps || l1 < kEps || l2 < kEps) continue;
+        hits[static_cast<size_t>(y) * size.width + x] = TexelHit{t, Eigen::Vector3f(l0, l1, l2)};
+      }
+    }
+  }
+  return hits;
+}
+
+void PadSeams(cv::Mat* image, cv::Mat* filled, int iterations) {
+  for (int i = 0; i < iterations; ++i) {
+    cv::Mat grown, grown_mask;
+    cv::dilate(*image, grown, cv::Mat());
+    cv::dilate(*filled, grown_mask, cv::Mat());
+    grown.copyTo(*image, ~*filled & grown_mask);
+    *filled = grown_mask;
+  }
 }
 
 Eigen::Matrix3Xf VertexNormals(const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& triangles) {

@@ -98,6 +98,25 @@ struct RenderOutput {
   cv::Mat coverage;  // CV_32F fraction of a pixel's samples on face or hair
 };
 
+// Where a texel of a texture lies on a mesh: its triangle (-1: none) and
+// barycentric coordinates.
+struct TexelHit {
+  int triangle = -1;
+  Eigen::Vector3f bary = Eigen::Vector3f::Zero();
+};
+
+// Rasterises the UV triangles `triangles` (columns of `uv_triangles`, whose
+// entries index `texel_coords`, given in texel units: x right, y down, texel
+// centres at integers) into a map of `size` texels; triangles overlap their
+// edges a little so no texel along a seam between two is missed.
+std::vector<TexelHit> RasteriseTexels(const Eigen::Matrix2Xf& texel_coords, const Eigen::Matrix3Xi& uv_triangles,
+                                      const std::vector<int>& triangles, cv::Size size);
+
+// Fills the texels of `image` not set in `filled` (CV_8U) from their set
+// neighbours, `iterations` texels deep, so bilinear lookups along UV seams do
+// not pick up the empty colour; `filled` grows accordingly.
+void PadSeams(cv::Mat* image, cv::Mat* filled, int iterations);
+
 // Renders `meshes` (drawn with one shared z-buffer) through `camera`.
 void RenderMeshes(const std::vector<const Mesh*>& meshes, const PinholeCamera& camera,
                   const RenderOptions& options, RenderOutput* output);

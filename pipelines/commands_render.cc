@@ -23,7 +23,13 @@ int RenderCommand(const std::vector<std::string>& args) {
   options.Add("render.drive", &render.drive,
               "Another tracked workspace whose expressions drive this avatar (cross-reenactment).", "drive");
   options.Add("render.video", &render.video, "Write render.mp4 instead of one PNG per frame.", "video");
-  options.Add("render.side_by_side", &render.side_by_side, "Put each frame beside its render.", "side-by-side");
+  options.Add("render.side_by_side", &render.side_by_side,
+              "Each render beside its frame and the error between them (x4): render | frame | error.", "side-by-side");
+  options.Add("render.held_out", &render.held_out, "Only the frames training held out.", "held-out");
+  options.Add("render.orbit", &render.orbit_deg,
+              "Swing the camera to +DEG and -DEG yaw round the head on the first frame (--orbit-steps renders).",
+              "orbit");
+  options.Add("render.orbit_steps", &render.orbit_steps, "Renders in an --orbit.", "orbit-steps");
   options.Add("render.background", &render.background, "Grey level behind the head, in [0, 1].", "background");
   options.Add("render.device", &render.device, "cpu, or cuda with a CUDA LibTorch.", "device");
   options.Add("render.model", &render.model, "The model folder (default: WORKSPACE/models/gaussian_style).", "model");

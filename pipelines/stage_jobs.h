@@ -13,5 +13,6 @@ std::unique_ptr<StageJob> MakeCalibrateJob();
 std::unique_ptr<StageJob> MakeAlignJob();
 std::unique_ptr<StageJob> MakeTrackJob();
 std::unique_ptr<StageJob> MakeTrainJob();
+std::unique_ptr<StageJob> MakeExportJob();
 
 }  // namespace headforge

@@ -80,11 +80,17 @@ const std::vector<StageEntry>& StageTable() {
     t[5].upstream = {"ingest", "calibrate", "align", "track", "train"};
     t[5].summary = "Export the avatar: PLY, glTF, weights, videos and a report.";
     t[5].usage = "headforge export --workspace DIR [options]";
-    t[5].description = "Writes the trained avatar in the formats other tools open, with videos and a report.";
-    t[5].reads = {"models/<model>/", "tracking.json", "cameras_head.json"};
-    t[5].writes = {"export/"};
+    t[5].description =
+        "Writes the avatar in the formats other tools open: the mesh avatar as glTF (the tracked\n"
+        "identity's mesh, the 53 blendshapes as morph targets with ARKit-style names, the tracked\n"
+        "sequence as an animation, a texture baked from the frames), the Gaussians of one pose as\n"
+        "PLY and as glTF with KHR_gaussian_splatting, the networks as safetensors with config.json,\n"
+        "and H.264 videos: the held-out frames beside their renders, an orbit round the head, and a\n"
+        "cross-reenactment when --drive names another tracked workspace.";
+    t[5].reads = {"models/gaussian_style/", "tracking.json", "cameras_head.json", "capture.json", "frames/", "masks/"};
+    t[5].writes = {"export/ (avatar_mesh.glb, gaussians.ply, gaussians.glb, weights/, videos/, export.json)"};
     t[5].uses_face_model = true;
-    t[5].unavailable = "export is not available in this version yet";
+    t[5].make = MakeExportJob;
     return t;
   }();
   return table;

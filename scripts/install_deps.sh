@@ -30,17 +30,21 @@ for p in "${PACKAGES[@]}"; do
   fi
 done
 
-# The Gaussian-splat viewer tool the PLY export is checked against (npm),
-# when node and npm are there.
+# The tools the exports are checked with (npm), when node and npm are there:
+# the Gaussian-splat converter and viewer library, and Khronos' glTF validator.
+NODE_TOOLS=(@playcanvas/splat-transform@3.7.0 gltf-validator@2.0.0-dev.3.10)
 install_node_tools() {
-  local root tools
+  local root tools wanted=()
   root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
   tools="$root/.tools/node"
-  if command -v node >/dev/null && command -v npm >/dev/null && [ ! -x "$tools/node_modules/.bin/splat-transform" ]; then
-    echo "install_deps: installing @playcanvas/splat-transform into .tools/node"
+  command -v node >/dev/null && command -v npm >/dev/null || return 0
+  [ -x "$tools/node_modules/.bin/splat-transform" ] || wanted+=("${NODE_TOOLS[0]}")
+  [ -f "$tools/node_modules/gltf-validator/package.json" ] || wanted+=("${NODE_TOOLS[1]}")
+  if [ ${#wanted[@]} -gt 0 ]; then
+    echo "install_deps: installing ${wanted[*]} into .tools/node"
     mkdir -p "$tools"
-    npm install --prefix "$tools" --no-audit --no-fund --silent @playcanvas/splat-transform@3.7.0 ||
-      echo "install_deps: npm install failed; the PLY viewer test will not be built" >&2
+    npm install --prefix "$tools" --no-audit --no-fund --silent "${wanted[@]}" ||
+      echo "install_deps: npm install failed; the export checks that need it will not be built" >&2
   fi
 }
 

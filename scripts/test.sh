@@ -12,4 +12,8 @@ if [ ! -d "$data/video/grid" ]; then
 fi
 "$root/scripts/build.sh"
 cd "$build"
+# The tests' scratch folders under the build tree, so two checkouts tested at
+# once on one machine do not share /tmp/hf_*.
+export TMPDIR="$build/tmp"
+mkdir -p "$TMPDIR"
 ctest --output-on-failure --parallel "$(nproc)" --timeout 900 "$@"

@@ -5,12 +5,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <map>
 
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/metrics/image_metrics.h"
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/checkpoint.h"
 #include "core/json_io.h"
+#include "core/safetensors.h"
 
 namespace headforge {
 
@@ -120,36 +123,112 @@ GaussianStyleOptions OptionsFromJson(const nlohmann::json& j) {
 
 const char* const kGaussianNames[] = {"means", "quats", "log_scales", "opacity_logits", "features"};
 
+// The avatar's tensors under the names model.pt and weights.safetensors
+// share: "gaussians.<name>" and "model.<parameter path>".
+std::vector<std::pair<std::string, torch::Tensor>> NamedTensors(const GaussianStyleAvatar& avatar) {
+  std::vector<std::pair<std::string, torch::Tensor>> out;
+  GaussianParams p = avatar.gaussians.params;
+  const auto params = p.All();
+  for (size_t i = 0; i < params.size(); ++i) out.emplace_back(std::string("gaussians.") + kGaussianNames[i], *params[i]);
+  if (avatar.gaussians.binding.defined()) out.emplace_back("gaussians.binding", avatar.gaussians.binding);
+  for (const auto& item : avatar.model->named_parameters()) out.emplace_back("model." + item.key(), item.value());
+  return out;
+}
+
+SafeTensor ToSafeTensor(const std::string& name, const torch::Tensor& tensor) {
+  const torch::Tensor t = tensor.detach().cpu().contiguous();
+  SafeTensor out;
+  out.name = name;
+  out.shape.assign(t.sizes().begin(), t.sizes().end());
+  if (t.scalar_type() == torch::kFloat32) {
+    out.dtype = "F32";
+  } else if (t.scalar_type() == torch::kInt64) {
+    out.dtype = "I64";
+  } else if (t.scalar_type() == torch::kFloat64) {
+    out.dtype = "F64";
+  } else {
+    TORCH_CHECK(false, "weights export: ", name, " has a type the writer does not take");
+  }
+  const auto* bytes = static_cast<const uint8_t*>(t.data_ptr());
+  out.bytes.assign(bytes, bytes + t.nbytes());
+  return out;
+}
+
+bool FromSafeTensor(const SafeTensor& s, torch::Tensor* tensor) {
+  const std::map<std::string, torch::ScalarType> types = {
+      {"F32", torch::kFloat32}, {"F64", torch::kFloat64}, {"I64", torch::kInt64}};
+  const auto it = types.find(s.dtype);
+  if (it == types.end()) return false;
+  *tensor = torch::empty(s.shape, torch::TensorOptions().dtype(it->second));
+  if (!s.bytes.empty()) std::memcpy(tensor->data_ptr(), s.bytes.data(), s.bytes.size());
+  return true;
+}
+
 }  // namespace
+
+nlohmann::json ConfigJson(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data) {
+  return {{"version", 1},
+          {"model", "gaussian-style"},
+          {"architecture", OptionsJson(avatar.model->options())},
+          {"frames", data.num_frames},
+          {"deform", avatar.deform},
+          {"resolution", options.resolution},
+          {"holdout", options.holdout},
+          {"width", data.width},
+          {"height", data.height},
+          {"gaussians", avatar.gaussians.params.size()},
+          {"expression_names", data.expression_names}};
+}
+
+Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                   torch::Device device, int resolution, DatasetOptions* loading, GaussianStyleAvatar* avatar,
+                   TrainOptions* trained, FaceModel* model, AvatarDataset* data) {
+  HF_RETURN_IF_ERROR(LoadAvatar(model_dir, device, avatar, trained));
+  HF_RETURN_IF_ERROR(FaceModel::Load(face_model, model));
+  loading->resolution = resolution > 0 ? resolution : trained->resolution;
+  loading->min_train_frames = 1;
+  loading->holdout = trained->holdout;
+  HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, *model, *loading, data).WithContext("render"));
+  if (trained->mesh_riding)
+    avatar->neutral = ComputeTriangleFrames(data->identity_vertices, data->triangles).To(device);
+  return Status::Ok();
+}
 
 Status SaveAvatar(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,
                   const fs::path& dir) {
   Checkpoint c;
-  GaussianParams p = avatar.gaussians.params;
-  const auto params = p.All();
-  for (size_t i = 0; i < params.size(); ++i) c.Put(std::string("gaussians.") + kGaussianNames[i], *params[i]);
-  c.Put("gaussians.binding", avatar.gaussians.binding);
-  for (const auto& item : avatar.model->named_parameters()) c.Put("model." + item.key(), item.value());
+  for (const auto& [name, tensor] : NamedTensors(avatar)) c.Put(name, tensor);
   HF_RETURN_IF_ERROR(c.Save(dir / "model.pt"));
-  const nlohmann::json config = {{"version", 1},
-                                 {"model", "gaussian-style"},
-                                 {"architecture", OptionsJson(avatar.model->options())},
-                                 {"frames", data.num_frames},
-                                 {"deform", avatar.deform},
-                                 {"resolution", options.resolution},
-                                 {"holdout", options.holdout},
-                                 {"width", data.width},
-                                 {"height", data.height},
-                                 {"gaussians", avatar.gaussians.params.size()},
-                                 {"expression_names", data.expression_names}};
+  return WriteJsonAtomic(dir / "config.json", ConfigJson(avatar, options, data), 2);
+}
+
+Status SaveAvatarSafetensors(const GaussianStyleAvatar& avatar, const nlohmann::json& config, const fs::path& dir) {
+  SafeTensorsFile file;
+  file.metadata["format"] = "pt";
+  file.metadata["model"] = "gaussian-style";
+  try {
+    for (const auto& [name, tensor] : NamedTensors(avatar)) file.tensors.push_back(ToSafeTensor(name, tensor));
+  } catch (const c10::Error& e) {
+    return Status::Internal(e.what_without_backtrace());
+  }
+  HF_RETURN_IF_ERROR(WriteSafetensors(dir / "weights.safetensors", file));
   return WriteJsonAtomic(dir / "config.json", config, 2);
 }
 
 Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar* avatar, TrainOptions* options) {
   nlohmann::json config;
   HF_RETURN_IF_ERROR(ReadArtefact(dir / "config.json", 1, "train", &config));
+  // model.pt as train writes it, or weights.safetensors as export does.
   Checkpoint c;
-  HF_RETURN_IF_ERROR(Checkpoint::Load(dir / "model.pt", &c));
+  SafeTensorsFile safe;
+  const bool from_safetensors = !fs::exists(dir / "model.pt") && fs::exists(dir / "weights.safetensors");
+  const fs::path weights = dir / (from_safetensors ? "weights.safetensors" : "model.pt");
+  HF_RETURN_IF_ERROR(from_safetensors ? ReadSafetensors(weights, &safe) : Checkpoint::Load(weights, &c));
+  const auto get = [&](const std::string& name, torch::Tensor* t) {
+    if (!from_safetensors) return c.Get(name, t);
+    const SafeTensor* s = safe.Find(name);
+    return s != nullptr && FromSafeTensor(*s, t);
+  };
   GaussianStyleAvatar out;
   try {
     out.model = GaussianStyle(OptionsFromJson(config.at("architecture")), config.at("frames").get<int64_t>());
@@ -165,18 +244,18 @@ Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar
   torch::NoGradGuard no_grad;
   for (auto& item : out.model->named_parameters()) {
     torch::Tensor value;
-    if (!c.Get("model." + item.key(), &value) || !value.sizes().equals(item.value().sizes()))
-      return Status::DataError((dir / "model.pt").string() + " does not hold " + item.key() +
+    if (!get("model." + item.key(), &value) || !value.sizes().equals(item.value().sizes()))
+      return Status::DataError(weights.string() + " does not hold " + item.key() +
                                " as config.json describes it; run headforge train again");
     item.value().copy_(value);
   }
   out.model->to(device);
   auto params = out.gaussians.params.All();
   for (size_t i = 0; i < params.size(); ++i)
-    if (!c.Get(std::string("gaussians.") + kGaussianNames[i], params[i]))
-      return Status::DataError((dir / "model.pt").string() + " holds no Gaussians; run headforge train again");
+    if (!get(std::string("gaussians.") + kGaussianNames[i], params[i]))
+      return Status::DataError(weights.string() + " holds no Gaussians; run headforge train again");
   for (torch::Tensor* t : params) *t = t->to(device);
-  if (c.Get("gaussians.binding", &out.gaussians.binding)) out.gaussians.binding = out.gaussians.binding.to(device);
+  if (get("gaussians.binding", &out.gaussians.binding)) out.gaussians.binding = out.gaussians.binding.to(device);
   *avatar = std::move(out);
   return Status::Ok();
 }

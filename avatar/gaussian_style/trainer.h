@@ -5,6 +5,8 @@
 
 #include <torch/types.h>
 
+#include <nlohmann/json.hpp>
+
 #include <string>
 #include <vector>
 
@@ -58,7 +60,19 @@ ViewScores MeanScores(const std::vector<ViewScores>& scores);
 // The model file (model.pt + config.json in `dir`).
 Status SaveAvatar(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,
                   const fs::path& dir);
+// The config.json train writes for `avatar`, which export adds to.
+nlohmann::json ConfigJson(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data);
+// The same tensors as weights.safetensors (names as in model.pt) beside `config`.
+Status SaveAvatarSafetensors(const GaussianStyleAvatar& avatar, const nlohmann::json& config, const fs::path& dir);
+// From model.pt, or from weights.safetensors where there is no model.pt.
 Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar* avatar, TrainOptions* options);
+
+// The avatar in `model_dir` and `workspace`'s views at `resolution` (0: the
+// training resolution), ready to pose; loading->images says whether the
+// frames are read too.
+Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                   torch::Device device, int resolution, DatasetOptions* loading, GaussianStyleAvatar* avatar,
+                   TrainOptions* trained, FaceModel* model, AvatarDataset* data);
 
 // Stages 1 and 2 into `out_dir` (checkpoint.pt between attempts; a run that
 // finds one continues from it).

@@ -1,0 +1,39 @@
+// What `headforge export` takes from a trained avatar, for callers that do
+// not use LibTorch: one frame's Gaussians as plain arrays, and the networks as
+// weights.safetensors + config.json.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/fs.h"
+#include "core/status.h"
+
+namespace headforge {
+
+// Gaussians in the avatar's head frame (metres, +y up, the face toward +z).
+struct AvatarSplats {
+  std::vector<float> means;      // [N, 3]
+  std::vector<float> rotations;  // [N, 4] unit quaternions w, x, y, z
+  std::vector<float> scales;     // [N, 3] standard deviations along the rotated axes, metres
+  std::vector<float> opacities;  // [N] in [0, 1]
+  std::vector<float> colours;    // [N, 3] RGB in [0, 1] (sRGB, as trained)
+  size_t size() const { return opacities.size(); }
+};
+
+// The pose export calls canonical: every expression weight 0, frame 0's head pose.
+constexpr int kNeutralFrame = -1;
+
+// The Gaussians the avatar trained in `model_dir` shows at `frame` of
+// `workspace` (its tracked expression and head pose), or at kNeutralFrame.
+Status PoseAvatarSplats(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                        int frame, AvatarSplats* splats);
+
+// The avatar's Gaussians and networks as `out_dir`/weights.safetensors and
+// `out_dir`/config.json: the training config plus what a reader needs to
+// drive it (the face model's identity, the condition's layout, the tensors'
+// names). LoadAvatar and `headforge render --model` read the folder back.
+Status ExportAvatarWeights(const fs::path& workspace, const fs::path& model_dir, const fs::path& out_dir,
+                           std::vector<std::string>* files);
+
+}  // namespace headforge

@@ -1,0 +1,168 @@
+#include "export/export.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "avatar/avatar_export.h"
+#include "avatar/avatar_render.h"
+#include "core/face_model.h"
+#include "core/json_io.h"
+#include "core/log.h"
+#include "export/gaussian_glb.h"
+#include "export/gaussian_ply.h"
+#include "export/mesh_avatar.h"
+
+namespace headforge {
+namespace {
+
+const char* const kFormats[] = {"mesh", "gaussians", "weights", "videos"};
+
+bool Wants(const ExportOptions& options, const std::string& format) {
+  return std::find(options.formats.begin(), options.formats.end(), format) != options.formats.end() ||
+         std::find(options.formats.begin(), options.formats.end(), "all") != options.formats.end();
+}
+
+// The splats as 3D Gaussian Splatting's PLY: log scales, logit opacity, and
+// the colour as the degree-0 coefficient.
+GaussianCloud ToCloud(const AvatarSplats& s) {
+  constexpr float kShC0 = 0.28209479177387814f;
+  GaussianCloud cloud;
+  cloud.means = s.means;
+  cloud.rotations = s.rotations;
+  for (size_t i = 0; i < s.size(); ++i) {
+    const float o = std::clamp(s.opacities[i], 1e-6f, 1 - 1e-6f);
+    cloud.opacities.push_back(std::log(o / (1 - o)));
+    for (int c = 0; c < 3; ++c) {
+      cloud.log_scales.push_back(std::log(std::max(s.scales[3 * i + c], 1e-9f)));
+      cloud.sh_dc.push_back((s.colours[3 * i + c] - 0.5f) / kShC0);
+    }
+  }
+  return cloud;
+}
+
+Status RenderVideo(const fs::path& workspace, const std::string& face_model, AvatarRenderOptions render,
+                   const fs::path& dir, const std::string& name, Progress* progress, std::vector<std::string>* files) {
+  render.video = true;
+  render.video_name = name;
+  AvatarRenderSummary summary;
+  HF_RETURN_IF_ERROR(RenderAvatarFrames(workspace, face_model, render, dir, progress, &summary));
+  files->push_back("videos/" + name);
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status ExportOptions::Check() const {
+  for (const std::string& f : formats)
+    if (f != "all" && std::find(std::begin(kFormats), std::end(kFormats), f) == std::end(kFormats))
+      return Status::InvalidArgument("export: unknown format '" + f + "' (the formats: mesh, gaussians, weights, videos, all)");
+  if (formats.empty()) return Status::InvalidArgument("export: --formats names nothing to write");
+  if (texture_size < 16 || texture_size > 8192)
+    return Status::InvalidArgument("export: --texture-size must lie in [16, 8192]");
+  if (bake_views < 1) return Status::InvalidArgument("export: --bake-views must be at least 1");
+  if (!(orbit_deg > 0 && orbit_deg <= 180)) return Status::InvalidArgument("export: --orbit-deg must lie in (0, 180]");
+  if (splat_frame < -1) return Status::InvalidArgument("export: --splat-frame is a frame number, or -1 for the neutral pose");
+  return Status::Ok();
+}
+
+void AddExportOptions(OptionSet* o, ExportOptions* e) {
+  o->Add("export.formats", &e->formats,
+         "What to write: mesh (glTF avatar with blendshapes, animation, texture), gaussians (PLY and "
+         "KHR_gaussian_splatting GLB), weights (safetensors + config.json), videos; or all.",
+         "formats");
+  o->Add("export.splat_frame", &e->splat_frame,
+         "The frame whose Gaussians are written (-1: every expression weight 0, frame 0's head pose).", "splat-frame");
+  o->Add("export.texture_size", &e->texture_size,
+         "The mesh avatar's texture: texels per side of the skin's square (the atlas is twice it on each side).",
+         "texture-size");
+  o->Add("export.bake_views", &e->bake_views, "Views, spread over the capture, baked into the texture.", "bake-views");
+  o->Add("export.orbit_deg", &e->orbit_deg, "The orbit video swings the camera this many degrees each way.",
+         "orbit-deg");
+  o->Add("export.drive", &e->drive,
+         "A tracked workspace whose expressions drive this avatar in a cross-reenactment video.", "drive");
+  o->Add("export.device", &e->device, "cpu, or cuda with a CUDA LibTorch (renders the videos).", "export-device",
+         OptionSet::Effect::kRuntime);
+}
+
+std::string ExportSummary::OneLine() const {
+  char text[96];
+  std::snprintf(text, sizeof(text), "%zu files in %.1f s", files.size(), seconds);
+  return text;
+}
+
+Status RunExport(const ExportOptions& options, const fs::path& workspace, const std::string& face_model,
+                 const fs::path& out_dir, Progress* progress, ExportSummary* summary) {
+  HF_RETURN_IF_ERROR(options.Check());
+  const auto start = std::chrono::steady_clock::now();
+  HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
+  const fs::path model_dir = workspace / "models" / "gaussian_style";
+  const bool trained = fs::exists(model_dir / "config.json");
+  ExportSummary out;
+  if (Wants(options, "mesh")) {
+    FaceModel model;
+    HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+    MeshAvatarOptions mesh_options;
+    mesh_options.texture_size = options.texture_size;
+    mesh_options.bake_views = options.bake_views;
+    MeshAvatar mesh;
+    HF_RETURN_IF_ERROR(BuildMeshAvatar(workspace, model, mesh_options, progress, &mesh).WithContext("export mesh"));
+    HF_RETURN_IF_ERROR(WriteMeshAvatarGlb(out_dir / "avatar_mesh.glb", mesh));
+    out.files.push_back("avatar_mesh.glb");
+  }
+  const bool needs_model = Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos");
+  if (needs_model && !trained)
+    return Status::NotFound("export: no trained avatar in " + model_dir.string() +
+                            " (run headforge train first, or export --formats mesh alone)");
+  if (Wants(options, "gaussians")) {
+    AvatarSplats splats;
+    HF_RETURN_IF_ERROR(PoseAvatarSplats(workspace, model_dir, face_model, options.splat_frame, &splats));
+    HF_RETURN_IF_ERROR(WriteGaussianPly(out_dir / "gaussians.ply", ToCloud(splats)));
+    HF_RETURN_IF_ERROR(WriteGaussianGlb(out_dir / "gaussians.glb", splats));
+    out.files.push_back("gaussians.ply");
+    out.files.push_back("gaussians.glb");
+  }
+  if (Wants(options, "weights")) {
+    std::vector<std::string> files;
+    HF_RETURN_IF_ERROR(ExportAvatarWeights(workspace, model_dir, out_dir / "weights", &files));
+    for (const std::string& f : files) out.files.push_back("weights/" + f);
+  }
+  if (Wants(options, "videos")) {
+    const fs::path videos = out_dir / "videos";
+    AvatarRenderOptions render;
+    render.device = options.device;
+    render.model = model_dir.string();
+    render.held_out = true;
+    render.side_by_side = true;
+    HF_RETURN_IF_ERROR(RenderVideo(workspace, face_model, render, videos, "self_reenactment.mp4", progress, &out.files));
+    render = AvatarRenderOptions();
+    render.device = options.device;
+    render.model = model_dir.string();
+    render.orbit_deg = options.orbit_deg;
+    render.orbit_steps = 72;
+    HF_RETURN_IF_ERROR(RenderVideo(workspace, face_model, render, videos, "orbit.mp4", progress, &out.files));
+    if (!options.drive.empty()) {
+      render = AvatarRenderOptions();
+      render.device = options.device;
+      render.model = model_dir.string();
+      render.drive = options.drive;
+      HF_RETURN_IF_ERROR(
+          RenderVideo(workspace, face_model, render, videos, "cross_reenactment.mp4", progress, &out.files));
+    }
+  }
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const nlohmann::json record = {{"version", 1},
+                                 {"files", out.files},
+                                 {"formats", options.formats},
+                                 {"splat_frame", options.splat_frame},
+                                 {"texture_size", options.texture_size},
+                                 {"seconds", out.seconds}};
+  HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "export.json", record, 2));
+  out.files.push_back("export.json");
+  *summary = std::move(out);
+  return Status::Ok();
+}
+
+}  // namespace headforge

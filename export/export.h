@@ -1,0 +1,45 @@
+// The export stage: a trained workspace in the formats other tools open.
+//   export/avatar_mesh.glb         the mesh avatar (glTF: morph targets, the tracked animation, a baked texture)
+//   export/gaussians.ply           the Gaussians of one pose (3D Gaussian Splatting's PLY)
+//   export/gaussians.glb           the same as glTF with KHR_gaussian_splatting
+//   export/weights/                weights.safetensors + config.json
+//   export/videos/                 self-reenactment (render | frame | error), orbit, cross-reenactment
+//   export/export.json             what was written, and the options
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/fs.h"
+#include "core/options.h"
+#include "core/progress.h"
+#include "core/status.h"
+
+namespace headforge {
+
+struct ExportOptions {
+  std::vector<std::string> formats = {"mesh", "gaussians", "weights", "videos"};
+  int splat_frame = -1;      // the frame whose Gaussians are written (-1: neutral expression, frame 0's pose)
+  int texture_size = 512;    // the mesh avatar's texture: texels per side of the skin's square
+  int bake_views = 24;       // views baked into it
+  double orbit_deg = 45;     // the orbit video swings the camera this far each way
+  std::string drive;         // a tracked workspace whose expressions drive a cross-reenactment video
+  std::string device = "cpu";
+
+  Status Check() const;
+};
+
+void AddExportOptions(OptionSet* options, ExportOptions* exported);
+
+struct ExportSummary {
+  std::vector<std::string> files;  // relative to the output folder
+  double seconds = 0;
+  std::string OneLine() const;
+};
+
+// Writes into `out_dir` what options.formats asks for from `workspace`
+// (tracked; trained for the Gaussians, weights and videos).
+Status RunExport(const ExportOptions& options, const fs::path& workspace, const std::string& face_model,
+                 const fs::path& out_dir, Progress* progress, ExportSummary* summary);
+
+}  // namespace headforge

@@ -21,6 +21,8 @@ PACKAGES=(
   # LibTorch's matrix products go through the system BLAS: OpenBLAS (OpenMP, as
   # LibTorch) is several times faster than the reference or ATLAS builds.
   libopenblas0-openmp
+  # The viewers the exports are checked in (three.js, PlayCanvas), headless.
+  chromium
 )
 
 missing=()
@@ -31,15 +33,21 @@ for p in "${PACKAGES[@]}"; do
 done
 
 # The tools the exports are checked with (npm), when node and npm are there:
-# the Gaussian-splat converter and viewer library, and Khronos' glTF validator.
-NODE_TOOLS=(@playcanvas/splat-transform@3.7.0 gltf-validator@2.0.0-dev.3.10)
+# the Gaussian-splat converter, Khronos' glTF validator, the viewers' engines
+# (three.js; PlayCanvas, which reads KHR_gaussian_splatting) and the driver of
+# headless Chromium.
+NODE_TOOLS=(@playcanvas/splat-transform@3.7.0 gltf-validator@2.0.0-dev.3.10 three@0.187.0 playcanvas@2.23.3
+            puppeteer-core@25.16.0)
 install_node_tools() {
   local root tools wanted=()
   root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
   tools="$root/.tools/node"
   command -v node >/dev/null && command -v npm >/dev/null || return 0
-  [ -x "$tools/node_modules/.bin/splat-transform" ] || wanted+=("${NODE_TOOLS[0]}")
-  [ -f "$tools/node_modules/gltf-validator/package.json" ] || wanted+=("${NODE_TOOLS[1]}")
+  local spec name
+  for spec in "${NODE_TOOLS[@]}"; do
+    name="${spec%@*}"
+    [ -f "$tools/node_modules/$name/package.json" ] || wanted+=("$spec")
+  done
   if [ ${#wanted[@]} -gt 0 ]; then
     echo "install_deps: installing ${wanted[*]} into .tools/node"
     mkdir -p "$tools"

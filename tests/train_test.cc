@@ -378,6 +378,129 @@ TEST_F(ExportStage, TheBakedMeshAvatarRedrawsTheFrames) {
   }
 }
 
+#ifdef HEADFORGE_BROWSER_CHECKS
+// three.js in headless Chromium plays the exported mesh avatar: its glTF
+// camera, the animation set to frame k, the baked texture; the picture must
+// match core's mesh renderer drawing the same avatar at frame k through a
+// pinhole with the glTF camera's field of view (glTF has no principal-point
+// offset, so the pinhole is centred).
+TEST_F(ExportStage, ThreeJsPlaysTheMeshAvatarAsTheMeshRendererDrawsIt) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  FaceModel model;
+  ASSERT_TRUE(FaceModel::Load(DefaultDataDir() + "/ict_facekit/ict_face_model.h5", &model).ok());
+  MeshAvatarOptions options;
+  options.texture_size = 128;
+  options.bake_views = 8;
+  MeshAvatar avatar;
+  NullProgress quiet;
+  ASSERT_TRUE(BuildMeshAvatar(reference_, model, options, &quiet, &avatar).ok());
+  Texture texture;
+  avatar.texture.convertTo(texture.image, CV_32FC3, 1.0 / 255);
+  Mesh mesh;
+  mesh.triangles = avatar.triangles;
+  mesh.uvs = avatar.texcoords;
+  mesh.uvs.row(1) = 1.0f - avatar.texcoords.row(1).array();
+  Material material;
+  material.texture = &texture;
+  material.lit = false;
+  mesh.materials = {material};
+  PinholeCamera camera;
+  camera.width = 320;
+  camera.height = 320;
+  camera.fy = camera.fx = 0.5 * camera.height / std::tan(0.5 * avatar.yfov);
+  camera.cx = camera.cy = 0.5 * camera.width - 0.5;
+  camera.cam_from_world = avatar.cam_from_world;
+  std::map<int, cv::Mat> shots, drawings;
+  std::map<int, double> psnrs;
+  const auto psnr_of = [](const cv::Mat& a, const cv::Mat& b, const cv::Mat& mask) {
+    const double mse = cv::norm(a, b, cv::NORM_L2SQR, mask) / (3.0 * cv::countNonZero(mask));
+    return 10 * std::log10(255.0 * 255.0 / std::max(mse, 1e-9));
+  };
+  cv::Mat inside;
+  for (int frame : {20, 90}) {
+    const fs::path shot = Scratch("three_" + std::to_string(frame) + ".png");
+    const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
+                                "/scripts/web/screenshot.cjs' --page mesh_frame.html --file '" +
+                                (reference_ / "export" / "avatar_mesh.glb").string() + "' --query frame=" +
+                                std::to_string(frame) + " --width 320 --height 320 --out '" + shot.string() +
+                                "' --chromium '" + HEADFORGE_CHROMIUM + "'";
+    ASSERT_EQ(std::system(command.c_str()), 0) << command;
+    const cv::Mat three = cv::imread(shot.string());
+    ASSERT_EQ(three.size(), cv::Size(320, 320));
+    mesh.vertices = MeshAvatarVertices(avatar, frame);
+    RenderOutput drawn;
+    RenderMeshes({&mesh}, camera, RenderOptions(), &drawn);
+    cv::Mat ours;
+    drawn.color.convertTo(ours, CV_8UC3, 255, 0.5);
+    cv::erode(drawn.coverage > 0.999, inside, cv::Mat(), cv::Point(-1, -1), 2);
+    ASSERT_GT(cv::countNonZero(inside), 5000) << frame;
+    psnrs[frame] = psnr_of(ours, three, inside);
+    std::printf("three.js against the mesh renderer at frame %d: %.2f dB over %d px\n", frame, psnrs[frame],
+                cv::countNonZero(inside));
+    EXPECT_GE(psnrs[frame], 30.0) << frame;
+    shots[frame] = three;
+    drawings[frame] = ours;
+  }
+  // The other frame's picture agrees less: the animation, not a still pose, was played.
+  const double crossed = psnr_of(drawings[90], shots[20], inside);
+  std::printf("three.js at frame 20 against the mesh renderer at frame 90: %.2f dB\n", crossed);
+  EXPECT_LT(crossed, std::min(psnrs[20], psnrs[90]) - 3.0);
+}
+
+// PlayCanvas, which implements KHR_gaussian_splatting and reads 3D Gaussian
+// Splatting's PLY, draws the exported Gaussians of frame 0 through frame 0's
+// camera as `headforge render` does.
+TEST_F(ExportStage, PlayCanvasDrawsTheGaussianGlbAsHeadForgeRendersIt) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path ws = CopyOf(reference_, Scratch("playcanvas"));
+  const Result e = Headforge({"export", "--workspace", ws.string(), "--formats", "gaussians", "--splat-frame", "0"});
+  ASSERT_EQ(e.code, 0) << e.err;
+  const int size = 128;
+  const fs::path ours = Scratch("playcanvas_ours");
+  const Result r = Headforge({"render", "--workspace", ws.string(), "--frames", "0", "--background", "0",
+                              "--resolution", std::to_string(size), "--out", ours.string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  // Frame 0's camera in the head frame: its view times the tracked head motion, at `size` pixels.
+  nlohmann::json cameras, tracking;
+  ASSERT_TRUE(ReadJson(ws / "cameras_head.json", &cameras).ok());
+  ASSERT_TRUE(ReadJson(ws / "tracking.json", &tracking).ok());
+  Eigen::Isometry3d view = Eigen::Isometry3d::Identity();
+  for (const auto& v : cameras["views"])
+    if (v["frame"] == 0) view = PoseFromJson(v["cam_from_world"]);
+  const Eigen::Isometry3d pose = view * PoseFromJson(tracking["frames"][0]["head_motion"]);
+  const nlohmann::json& lens = cameras["cameras"][0];
+  const double scale = double(size) / std::max(lens["width"].get<int>(), lens["height"].get<int>());
+  char query[2048];
+  int at = std::snprintf(query, sizeof(query), "fx=%.9g&fy=%.9g&cx=%.9g&cy=%.9g&pose=",
+                         lens["fx"].get<double>() * scale, lens["fy"].get<double>() * scale,
+                         (lens["cx"].get<double>() + 0.5) * scale - 0.5, (lens["cy"].get<double>() + 0.5) * scale - 0.5);
+  for (int i = 0; i < 16; ++i)
+    at += std::snprintf(query + at, sizeof(query) - size_t(at), "%s%.12g", i ? "," : "", pose.matrix()(i / 4, i % 4));
+  const cv::Mat mine = cv::imread((ours / "frame_000000.png").string());
+  cv::Mat mask = cv::imread((ws / "masks" / "cam0" / "000000.png").string(), cv::IMREAD_GRAYSCALE), head;
+  cv::resize(mask, mask, mine.size(), 0, 0, cv::INTER_AREA);
+  cv::erode(mask > 128, head, cv::Mat(), cv::Point(-1, -1), 1);
+  ASSERT_GT(cv::countNonZero(head), 500);
+  // The glTF, and the PLY the same engine reads as 3D Gaussian Splatting's layout.
+  for (const char* file : {"gaussians.glb", "gaussians.ply"}) {
+    const fs::path shot = Scratch(std::string("playcanvas_") + file + ".png");
+    const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
+                                "/scripts/web/screenshot.cjs' --page splat_view.html --file '" +
+                                (ws / "export" / file).string() + "' --query '" + query + "' --width " +
+                                std::to_string(size) + " --height " + std::to_string(size) + " --out '" +
+                                shot.string() + "' --chromium '" + HEADFORGE_CHROMIUM + "'";
+    ASSERT_EQ(std::system(command.c_str()), 0) << command;
+    const cv::Mat theirs = cv::imread(shot.string());
+    ASSERT_EQ(theirs.size(), mine.size());
+    const double mse = cv::norm(theirs, mine, cv::NORM_L2SQR, head) / (3.0 * cv::countNonZero(head));
+    const double psnr = 10 * std::log10(255.0 * 255.0 / std::max(mse, 1e-9));
+    std::printf("PlayCanvas (%s) against headforge render, frame 0 at %d px: %.2f dB over %d px of head\n", file,
+                size, psnr, cv::countNonZero(head));
+    EXPECT_GE(psnr, 30.0) << file;
+  }
+}
+#endif
+
 // Edits `file` (JSON) of `ws` in place.
 void EditJson(const fs::path& file, const std::function<void(nlohmann::json*)>& edit) {
   nlohmann::json j;

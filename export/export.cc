@@ -14,11 +14,12 @@
 #include "export/gaussian_glb.h"
 #include "export/gaussian_ply.h"
 #include "export/mesh_avatar.h"
+#include "export/report.h"
 
 namespace headforge {
 namespace {
 
-const char* const kFormats[] = {"mesh", "gaussians", "weights", "videos"};
+const char* const kFormats[] = {"mesh", "gaussians", "weights", "videos", "report"};
 
 bool Wants(const ExportOptions& options, const std::string& format) {
   return std::find(options.formats.begin(), options.formats.end(), format) != options.formats.end() ||
@@ -55,10 +56,12 @@ Status RenderVideo(const fs::path& workspace, const std::string& face_model, Ava
 
 }  // namespace
 
+const char* const ExportOptions::kDefaultChartJs = HEADFORGE_CHART_JS;
+
 Status ExportOptions::Check() const {
   for (const std::string& f : formats)
     if (f != "all" && std::find(std::begin(kFormats), std::end(kFormats), f) == std::end(kFormats))
-      return Status::InvalidArgument("export: unknown format '" + f + "' (the formats: mesh, gaussians, weights, videos, all)");
+      return Status::InvalidArgument("export: unknown format '" + f + "' (the formats: mesh, gaussians, weights, videos, report, all)");
   if (formats.empty()) return Status::InvalidArgument("export: --formats names nothing to write");
   if (texture_size < 16 || texture_size > 8192)
     return Status::InvalidArgument("export: --texture-size must lie in [16, 8192]");
@@ -71,7 +74,7 @@ Status ExportOptions::Check() const {
 void AddExportOptions(OptionSet* o, ExportOptions* e) {
   o->Add("export.formats", &e->formats,
          "What to write: mesh (glTF avatar with blendshapes, animation, texture), gaussians (PLY and "
-         "KHR_gaussian_splatting GLB), weights (safetensors + config.json), videos; or all.",
+         "KHR_gaussian_splatting GLB), weights (safetensors + config.json), videos, report (report.html); or all.",
          "formats");
   o->Add("export.splat_frame", &e->splat_frame,
          "The frame whose Gaussians are written (-1: every expression weight 0, frame 0's head pose).", "splat-frame");
@@ -83,6 +86,8 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "orbit-deg");
   o->Add("export.drive", &e->drive,
          "A tracked workspace whose expressions drive this avatar in a cross-reenactment video.", "drive");
+  o->Add("export.chart_js", &e->chart_js, "Chart.js's UMD build, inlined into report.html for its plots.",
+         "chart-js", OptionSet::Effect::kRuntime);
   o->Add("export.device", &e->device, "cpu, or cuda with a CUDA LibTorch (renders the videos).", "export-device",
          OptionSet::Effect::kRuntime);
 }
@@ -151,6 +156,15 @@ Status RunExport(const ExportOptions& options, const fs::path& workspace, const 
       HF_RETURN_IF_ERROR(
           RenderVideo(workspace, face_model, render, videos, "cross_reenactment.mp4", progress, &out.files));
     }
+  }
+  if (Wants(options, "report")) {
+    ReportOptions report;
+    report.chart_js = options.chart_js;
+    report.exported = out.files;
+    std::string note;
+    HF_RETURN_IF_ERROR(WriteReport(workspace, out_dir, report, &note));
+    if (!note.empty()) HF_LOG(Warning) << "export: report.html: " << note;
+    out.files.push_back("report.html");
   }
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const nlohmann::json record = {{"version", 1},

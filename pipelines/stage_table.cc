@@ -1,7 +1,9 @@
 #include "pipelines/stage_table.h"
 
 #include <algorithm>
+#include <cstdio>
 
+#include "core/json_io.h"
 #include "core/log.h"
 #include "pipelines/commands.h"
 #include "pipelines/stage_jobs.h"
@@ -210,6 +212,15 @@ int RunCommand(const std::vector<std::string>& args) {
     if (entry.name == until) break;
   }
   HF_LOG(Info) << "run: results are in " << common.workspace << " (headforge status " << common.workspace << ")";
+  // Where the exports are, as export.json lists them (the report first).
+  nlohmann::json exported;
+  const fs::path out = fs::path(common.workspace) / "export";
+  if (last == "export" && ReadJson(out / "export.json", &exported).ok()) {
+    std::vector<std::string> files = exported.value("files", std::vector<std::string>());
+    std::stable_partition(files.begin(), files.end(), [](const std::string& f) { return f == "report.html"; });
+    for (const std::string& f : files)
+      if (f != "export.json") std::printf("%s\n", (out / f).c_str());
+  }
   return kExitOk;
 }
 

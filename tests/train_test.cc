@@ -378,6 +378,29 @@ TEST_F(ExportStage, TheBakedMeshAvatarRedrawsTheFrames) {
   }
 }
 
+// report.html: every file it references (videos beside it) exists, and
+// everything else is inlined.
+TEST_F(ExportStage, TheReportReferencesOnlyFilesThatExist) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path out = reference_ / "export";
+  const std::string html = Slurp(out / "report.html");
+  ASSERT_NE(html.find("<h2>Evaluation</h2>"), std::string::npos);
+  ASSERT_NE(html.find("new Chart("), std::string::npos);  // the charting library is inlined
+  int inlined = 0, beside = 0;
+  for (size_t at = html.find("src=\""); at != std::string::npos; at = html.find("src=\"", at + 5)) {
+    const size_t end = html.find('"', at + 5);
+    const std::string src = html.substr(at + 5, end - at - 5);
+    if (src.rfind("data:", 0) == 0) {
+      ++inlined;
+    } else {
+      ++beside;
+      EXPECT_TRUE(fs::exists(out / src)) << src;
+    }
+  }
+  EXPECT_GE(inlined, 6);  // capture thumbnails and held-out strips
+  EXPECT_EQ(beside, 2);   // the two videos
+}
+
 #ifdef HEADFORGE_BROWSER_CHECKS
 // three.js in headless Chromium plays the exported mesh avatar: its glTF
 // camera, the animation set to frame k, the baked texture; the picture must
@@ -498,6 +521,23 @@ TEST_F(ExportStage, PlayCanvasDrawsTheGaussianGlbAsHeadForgeRendersIt) {
                 size, psnr, cv::countNonZero(head));
     EXPECT_GE(psnr, 30.0) << file;
   }
+}
+
+// report.html opens in headless Chromium: no console error, no request for a
+// missing file, the charts drawn (window.done is set after them). The
+// screenshot stays in the build tree as the test's artefact.
+TEST_F(ExportStage, TheReportOpensInChromiumWithoutErrors) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path shot = fs::path(HEADFORGE_TEST_BINARY_DIR) / "artefacts" / "report.png";
+  fs::create_directories(shot.parent_path());
+  const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
+                              "/scripts/web/screenshot.cjs' --dir '" + (reference_ / "export").string() +
+                              "' --page report.html --width 1100 --height 900 --full-page 1 --out '" + shot.string() +
+                              "' --chromium '" + HEADFORGE_CHROMIUM + "'";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+  const cv::Mat page = cv::imread(shot.string());
+  ASSERT_FALSE(page.empty());
+  EXPECT_GT(page.rows, 2000);  // every section laid out
 }
 #endif
 

@@ -1,10 +1,12 @@
 #!/usr/bin/env node
-// Serves the repository's scripts/web pages, .tools/node/node_modules and one
-// file over HTTP on localhost, opens PAGE?QUERY in headless Chromium
-// (puppeteer-core, software WebGL), waits for the page's window.done and
-// writes a PNG of the viewport. Console errors fail the run.
+// Serves the repository's scripts/web pages (or, with --dir, that folder's
+// files), .tools/node/node_modules and one file over HTTP on localhost, opens
+// PAGE?QUERY in headless Chromium (puppeteer-core, software WebGL), waits for
+// the page's window.done and writes a PNG of the viewport (--full-page 1: the
+// whole page). Console errors and requests for missing files fail the run.
 //   node scripts/web/screenshot.cjs --page mesh_frame.html --file FILE --query 'frame=3&...'
 //        --width W --height H --out PNG [--chromium /usr/bin/chromium]
+//   node scripts/web/screenshot.cjs --dir ws/export --page report.html --width 1200 --height 900 --out PNG
 const fs = require('fs');
 const http = require('http');
 const path = require('path');
@@ -17,15 +19,16 @@ const puppeteer = require(path.join(modules, 'puppeteer-core'));
 const types = { '.html': 'text/html', '.js': 'text/javascript', '.mjs': 'text/javascript', '.glb': 'model/gltf-binary',
                 '.json': 'application/json', '.wasm': 'application/wasm', '.ply': 'application/octet-stream' };
 
+const missing = [];
 const server = http.createServer((request, response) => {
   const url = decodeURIComponent(request.url.split('?')[0]);
   if (url === '/favicon.ico') { response.writeHead(204); response.end(); return; }
   let file = null;
   if (url.startsWith('/node_modules/')) file = path.join(modules, url.slice('/node_modules/'.length));
-  else if (url === '/file' + path.extname(args.file)) file = args.file;
-  else file = path.join(__dirname, url.slice(1));
+  else if (args.file && url === '/file' + path.extname(args.file)) file = args.file;
+  else file = path.join(args.dir || __dirname, url.slice(1));
   fs.readFile(file, (error, data) => {
-    if (error) { console.error(`screenshot: not found: ${url}`); response.writeHead(404); response.end(); return; }
+    if (error) { missing.push(url); response.writeHead(404); response.end(); return; }
     response.writeHead(200, { 'Content-Type': types[path.extname(file)] || 'application/octet-stream' });
     response.end(data);
   });
@@ -48,13 +51,15 @@ server.listen(0, '127.0.0.1', async () => {
     page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
     page.on('pageerror', (e) => errors.push(String(e)));
     await page.setViewport({ width, height, deviceScaleFactor: 1 });
-    const url = `http://127.0.0.1:${port}/${args.page}?file=/file${path.extname(args.file)}&width=${width}` +
-                `&height=${height}&${args.query || ''}`;
+    const fileQuery = args.file ? `file=/file${path.extname(args.file)}&` : '';
+    const url = `http://127.0.0.1:${port}/${args.page}?${fileQuery}width=${width}&height=${height}&${args.query || ''}`;
     await page.goto(url);
     await page.waitForFunction('window.done || window.failed', { timeout: 120000 });
     const failed = await page.evaluate('window.failed');
     if (failed) throw new Error(failed);
-    await page.screenshot({ path: args.out, clip: { x: 0, y: 0, width, height } });
+    if (args['full-page'] === '1') await page.screenshot({ path: args.out, fullPage: true });
+    else await page.screenshot({ path: args.out, clip: { x: 0, y: 0, width, height } });
+    if (missing.length) throw new Error('missing files: ' + missing.join(', '));
     if (errors.length) throw new Error('console errors: ' + errors.join(' | '));
   } catch (error) {
     console.error(`screenshot: ${error.message || error}`);

@@ -1,0 +1,330 @@
+#include "export/report.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "capture/capture_io.h"
+#include "core/camera_set.h"
+#include "core/json_io.h"
+#include "reconstruction/tracking_io.h"
+
+namespace headforge {
+namespace {
+
+std::string Escape(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+std::string Base64(const std::vector<unsigned char>& bytes) {
+  static const char* kAlphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  for (size_t i = 0; i < bytes.size(); i += 3) {
+    const uint32_t n = (uint32_t(bytes[i]) << 16) | (i + 1 < bytes.size() ? uint32_t(bytes[i + 1]) << 8 : 0) |
+                       (i + 2 < bytes.size() ? uint32_t(bytes[i + 2]) : 0);
+    out += kAlphabet[(n >> 18) & 63];
+    out += kAlphabet[(n >> 12) & 63];
+    out += i + 1 < bytes.size() ? kAlphabet[(n >> 6) & 63] : '=';
+    out += i + 2 < bytes.size() ? kAlphabet[n & 63] : '=';
+  }
+  return out;
+}
+
+// An <img> holding `image` as an inlined JPEG, `width` pixels wide at most.
+std::string InlineImage(const cv::Mat& image, int width, const std::string& caption) {
+  cv::Mat shown = image;
+  if (image.cols > width) cv::resize(image, shown, cv::Size(width, image.rows * width / image.cols), 0, 0, cv::INTER_AREA);
+  std::vector<unsigned char> jpeg;
+  cv::imencode(".jpg", shown, jpeg, {cv::IMWRITE_JPEG_QUALITY, 85});
+  return "<figure><img src=\"data:image/jpeg;base64," + Base64(jpeg) + "\" alt=\"" + Escape(caption) +
+         "\"><figcaption>" + Escape(caption) + "</figcaption></figure>";
+}
+
+std::string Number(double value, int digits) {
+  char text[64];
+  std::snprintf(text, sizeof(text), "%.*f", digits, value);
+  return text;
+}
+
+// JSON safe to put inside <script>: no "</" can close the element.
+std::string ScriptJson(const nlohmann::json& data) {
+  std::string text = data.dump();
+  std::string out;
+  for (size_t i = 0; i < text.size(); ++i) {
+    if (text[i] == '<' && i + 1 < text.size() && text[i + 1] == '/') {
+      out += "<\\/";
+      ++i;
+    } else {
+      out += text[i];
+    }
+  }
+  return out;
+}
+
+std::vector<nlohmann::json> JsonLines(const fs::path& path) {
+  std::vector<nlohmann::json> lines;
+  std::ifstream in(path);
+  for (std::string line; std::getline(in, line);) {
+    if (line.empty()) continue;
+    try {
+      lines.push_back(nlohmann::json::parse(line));
+    } catch (const nlohmann::json::exception&) {
+      // A line cut short by a kill: the rest of the log is still worth showing.
+    }
+  }
+  return lines;
+}
+
+std::string StagesSection(const fs::path& workspace) {
+  nlohmann::json manifest;
+  std::string html = "<h2>Stages</h2>";
+  if (!ReadJson(workspace / "workspace.json", &manifest).ok()) return html + "<p>No workspace.json.</p>";
+  html += "<table><tr><th>stage</th><th>status</th><th>wall time</th><th>summary</th></tr>";
+  for (const auto& stage : manifest.value("stages", nlohmann::json::array())) {
+    const std::string name = stage.value("name", "");
+    if (name == "export") {
+      html += "<tr><td>export</td><td>writing this report</td><td></td><td></td></tr>";
+      continue;
+    }
+    html += "<tr><td>" + Escape(name) + "</td><td>" + Escape(stage.value("status", "")) +
+            "</td><td class=\"num\">" + Number(stage.value("wall_time_s", 0.0), 1) + " s</td><td>" +
+            Escape(stage.value("message", "")) + "</td></tr>";
+  }
+  return html + "</table>";
+}
+
+// Six frames spread over the first camera, with their landmarks and the mask's outline.
+std::string CaptureSection(const IngestedCapture& capture) {
+  std::string html = "<h2>Capture</h2><p>" + std::to_string(capture.cameras.size()) + " camera(s), " +
+                     std::to_string(capture.num_frames()) + " frames each; landmarks in green, the head mask's " +
+                     "outline in yellow.</p><div class=\"row\">";
+  if (capture.cameras.empty()) return html + "</div>";
+  const IngestedCamera& cam = capture.cameras.front();
+  const int n = std::min<int>(6, int(cam.frames.size()));
+  for (int k = 0; k < n; ++k) {
+    const IngestedFrame& f = cam.frames[size_t(k) * cam.frames.size() / size_t(n)];
+    cv::Mat image = cv::imread(capture.FramePath(cam.name, f.index).string(), cv::IMREAD_COLOR);
+    const cv::Mat mask = cv::imread(capture.MaskPath(cam.name, f.index).string(), cv::IMREAD_GRAYSCALE);
+    if (image.empty()) continue;
+    const int thick = std::max(1, image.cols / 256);
+    if (!mask.empty()) {
+      std::vector<std::vector<cv::Point>> outline;
+      cv::findContours(mask > 128, outline, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+      cv::drawContours(image, outline, -1, cv::Scalar(0, 220, 255), thick);
+    }
+    if (f.landmarks)
+      for (const cv::Point2f& p : *f.landmarks) cv::circle(image, p, thick + 1, cv::Scalar(60, 220, 60), cv::FILLED);
+    html += InlineImage(image, 200, cam.name + " frame " + std::to_string(f.index));
+  }
+  return html + "</div>";
+}
+
+}  // namespace
+
+Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const ReportOptions& options,
+                   std::string* note) {
+  IngestedCapture capture;
+  HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace, &capture));
+  nlohmann::json data = nlohmann::json::object();
+  std::vector<std::string> lacks;
+
+  // Cameras: every registered view's centre in the head frame.
+  CameraSet cameras;
+  if (CameraSet::Read(workspace / "cameras_head.json", &cameras).ok()) {
+    nlohmann::json points = nlohmann::json::array();
+    for (const CameraView& v : cameras.views)
+      if (v.registered) {
+        const Eigen::Vector3d c = v.Centre();
+        points.push_back({{"x", c.x()}, {"y", c.y()}, {"z", c.z()}, {"camera", v.camera}, {"frame", v.frame}});
+      }
+    data["cameras"] = {{"mode", cameras.mode}, {"points", points}};
+  }
+  // Tracking: residuals, and the six blendshapes that move most.
+  TrackingFile tracking;
+  if (ReadTracking(workspace / "tracking.json", &tracking).ok() && !tracking.frames.empty()) {
+    nlohmann::json residual = nlohmann::json::array();
+    for (const TrackedFrame& f : tracking.frames) residual.push_back({{"x", f.frame}, {"y", f.residual_px}});
+    const size_t e = tracking.expression_names.size();
+    std::vector<std::pair<double, size_t>> spread;
+    for (size_t k = 0; k < e; ++k) {
+      double sum = 0, sq = 0;
+      for (const TrackedFrame& f : tracking.frames) sum += f.expression[Eigen::Index(k)], sq += std::pow(f.expression[Eigen::Index(k)], 2);
+      const double mean = sum / double(tracking.frames.size());
+      spread.emplace_back(sq / double(tracking.frames.size()) - mean * mean, k);
+    }
+    std::sort(spread.rbegin(), spread.rend());
+    nlohmann::json curves = nlohmann::json::array();
+    for (size_t i = 0; i < std::min<size_t>(6, spread.size()); ++i) {
+      nlohmann::json points = nlohmann::json::array();
+      for (const TrackedFrame& f : tracking.frames) points.push_back({{"x", f.frame}, {"y", f.expression[Eigen::Index(spread[i].second)]}});
+      curves.push_back({{"name", tracking.expression_names[spread[i].second]}, {"points", points}});
+    }
+    data["tracking"] = {{"residual", residual}, {"curves", curves}};
+  }
+  // Training: the loss and the held-out PSNR against wall time.
+  const fs::path model = workspace / "models" / "gaussian_style";
+  nlohmann::json eval;
+  const bool trained = ReadJson(model / "eval.json", &eval).ok();
+  if (trained) {
+    nlohmann::json loss = nlohmann::json::array(), held = nlohmann::json::array();
+    for (const nlohmann::json& line : JsonLines(model / "stats.jsonl")) {
+      if (line.contains("loss")) loss.push_back({{"x", line.value("seconds", 0.0) / 60}, {"y", line["loss"]}});
+      if (line.contains("test_psnr_masked"))
+        held.push_back({{"x", line.value("seconds", 0.0) / 60}, {"y", line["test_psnr_masked"]}});
+    }
+    data["training"] = {{"loss", loss}, {"held_out", held}};
+  } else {
+    lacks.push_back("no trained model (run headforge train): no training or evaluation sections");
+  }
+  // Accuracy against time: the rows `headforge bench train` left in the workspace.
+  nlohmann::json bench = nlohmann::json::array();
+  if (fs::is_directory(workspace / "bench_train"))
+    for (const auto& entry : fs::directory_iterator(workspace / "bench_train")) {
+      nlohmann::json saved;
+      if (ReadJson(entry.path() / "bench.json", &saved).ok() && saved.contains("row")) bench.push_back(saved["row"]);
+    }
+  data["bench"] = bench;
+
+  // The page.
+  std::string html = R"(<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>HeadForge report</title>
+<style>
+body { font: 14px/1.45 system-ui, sans-serif; margin: 24px auto; max-width: 1100px; color: #222; padding: 0 16px; }
+h1 { font-size: 22px; } h2 { font-size: 18px; margin-top: 32px; border-bottom: 1px solid #ddd; }
+table { border-collapse: collapse; margin: 8px 0; } td, th { border: 1px solid #ddd; padding: 3px 8px; text-align: left; vertical-align: top; }
+td.num { text-align: right; white-space: nowrap; }
+.row { display: flex; flex-wrap: wrap; gap: 8px; } figure { margin: 0; } figcaption { font-size: 12px; color: #555; }
+.chart { position: relative; height: 280px; max-width: 1000px; } .note { color: #8a5a00; }
+video { max-width: 100%; }
+</style>
+)";
+  std::string chart_js;
+  if (!options.chart_js.empty() && ReadFileToString(options.chart_js, &chart_js).ok() && !chart_js.empty()) {
+    html += "<script>" + chart_js + "</script>\n";
+  } else {
+    chart_js.clear();
+    lacks.push_back("no charting library (scripts/install_deps.sh installs Chart.js): tables and images only");
+  }
+  html += "<script id=\"data\" type=\"application/json\">" + ScriptJson(data) + "</script>\n</head><body>\n";
+  html += "<h1>HeadForge report: " + Escape(workspace.filename().string()) + "</h1>";
+  if (!lacks.empty()) {
+    html += "<p class=\"note\">";
+    for (const std::string& l : lacks) html += Escape(l) + ". ";
+    html += "</p>";
+  }
+  html += StagesSection(workspace);
+  html += CaptureSection(capture);
+  html += "<h2>Cameras</h2><p>Each view's camera centre in the head frame (metres; the face looks toward +z), "
+          "seen from above.</p><div class=\"chart\"><canvas id=\"cameras\"></canvas></div>";
+  html += "<h2>Tracking</h2><p>The median landmark residual per frame (pixels), and the six blendshapes that "
+          "move most.</p><div class=\"chart\"><canvas id=\"residual\"></canvas></div>"
+          "<div class=\"chart\"><canvas id=\"curves\"></canvas></div>";
+  if (trained) {
+    html += "<h2>Training</h2><p>The training loss and the held-out PSNR over the head against wall time.</p>"
+            "<div class=\"chart\"><canvas id=\"training\"></canvas></div>";
+    const nlohmann::json mean = eval.value("mean", nlohmann::json::object());
+    html += "<h2>Evaluation</h2><p>Held out: " + Escape(eval.value("held_out_frames", std::string("?"))) +
+            " frames, background " + Number(eval.value("background", 0.5), 1) + ".</p><table>"
+            "<tr><th></th><th>PSNR</th><th>SSIM</th><th>L1</th></tr>"
+            "<tr><td>held-out, over the head</td><td class=\"num\">" + Number(mean.value("psnr_masked", 0.0), 2) +
+            " dB</td><td class=\"num\">" + Number(mean.value("ssim_masked", 0.0), 3) + "</td><td class=\"num\">" +
+            Number(mean.value("l1_masked", 0.0), 4) + "</td></tr><tr><td>held-out, whole frame</td><td class=\"num\">" +
+            Number(mean.value("psnr", 0.0), 2) + " dB</td><td class=\"num\">" + Number(mean.value("ssim", 0.0), 3) +
+            "</td><td></td></tr></table><p>LPIPS is not computed: it needs ImageNet-pretrained weights, which are "
+            "not available here.</p>";
+    std::vector<nlohmann::json> views = eval.value("views", std::vector<nlohmann::json>());
+    std::sort(views.begin(), views.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
+      return a.value("psnr_masked", 0.0) > b.value("psnr_masked", 0.0);
+    });
+    if (!views.empty()) {
+      html += "<p>Best and worst held-out frames (render | frame | error ×4):</p><div class=\"row\">";
+      std::vector<size_t> picks = {0, 1, views.size() - 2, views.size() - 1};
+      picks.erase(std::unique(picks.begin(), picks.end()), picks.end());
+      for (size_t i : picks) {
+        if (i >= views.size()) continue;
+        char name[64];
+        std::snprintf(name, sizeof(name), "%s_%06d.png", views[i].value("camera", std::string("cam0")).c_str(),
+                      views[i].value("frame", 0));
+        const cv::Mat strip = cv::imread((model / "held_out" / name).string(), cv::IMREAD_COLOR);
+        if (!strip.empty())
+          html += InlineImage(strip, 520, "frame " + std::to_string(views[i].value("frame", 0)) + ": " +
+                                              Number(views[i].value("psnr_masked", 0.0), 2) + " dB");
+      }
+      html += "</div>";
+    }
+  }
+  html += "<h2>Accuracy against time</h2>";
+  if (bench.empty()) {
+    html += "<p>No <code>headforge bench train</code> results in this workspace; the training curve above is this "
+            "run's own.</p>";
+  } else {
+    html += "<p>Held-out PSNR over the head against training time for each variant <code>headforge bench train"
+            "</code> trained on this workspace.</p><div class=\"chart\"><canvas id=\"bench\"></canvas></div>";
+  }
+  // Videos and files export wrote beside the page.
+  std::string videos, files;
+  for (const std::string& f : options.exported) {
+    files += "<li><code>" + Escape(f) + "</code></li>";
+    if (f.size() > 4 && f.compare(f.size() - 4, 4, ".mp4") == 0)
+      videos += "<figure><video controls muted preload=\"metadata\" src=\"" + Escape(f) + "\"></video><figcaption>" +
+                Escape(f) + "</figcaption></figure>";
+  }
+  if (!videos.empty()) html += "<h2>Videos</h2><div class=\"row\">" + videos + "</div>";
+  if (!files.empty()) html += "<h2>Exported files</h2><ul>" + files + "</ul>";
+
+  html += R"(<script>
+(function () {
+  const data = JSON.parse(document.getElementById('data').textContent);
+  if (typeof Chart === 'undefined') { window.done = true; return; }
+  Chart.defaults.animation = false;
+  Chart.defaults.maintainAspectRatio = false;
+  const chart = (id, config) => { const c = document.getElementById(id); if (c) new Chart(c, config); };
+  const axes = (x, y) => ({ x: { type: 'linear', title: { display: true, text: x } },
+                            y: { title: { display: true, text: y } } });
+  if (data.cameras) chart('cameras', { type: 'scatter', data: { datasets: [
+      { label: 'camera centres (x, z)', data: data.cameras.points.map(p => ({ x: p.x, y: p.z })) },
+      { label: 'head', data: [{ x: 0, y: 0 }], pointRadius: 8 }] }, options: { scales: axes('x (m)', 'z (m)') } });
+  if (data.tracking) {
+    chart('residual', { type: 'line', data: { datasets: [{ label: 'median landmark residual (px)',
+        data: data.tracking.residual, pointRadius: 0 }] }, options: { scales: axes('frame', 'pixels') } });
+    chart('curves', { type: 'line', data: { datasets: data.tracking.curves.map(c => ({ label: c.name,
+        data: c.points, pointRadius: 0 })) }, options: { scales: axes('frame', 'weight') } });
+  }
+  if (data.training) chart('training', { type: 'line', data: { datasets: [
+      { label: 'training loss', data: data.training.loss, yAxisID: 'y', pointRadius: 0 },
+      { label: 'held-out PSNR, head (dB)', data: data.training.held_out, yAxisID: 'y1' }] },
+      options: { scales: { x: { type: 'linear', title: { display: true, text: 'minutes' } },
+                           y: { type: 'logarithmic', title: { display: true, text: 'loss' } },
+                           y1: { position: 'right', title: { display: true, text: 'dB' } } } } });
+  if (data.bench.length) chart('bench', { type: 'scatter', data: { datasets: data.bench.map(r => ({
+      label: r.variant, data: [{ x: r.seconds / 60, y: r.psnr_masked }], pointRadius: 6 })) },
+      options: { scales: axes('training time (minutes)', 'held-out PSNR, head (dB)') } });
+  window.done = true;
+})();
+</script>
+</body></html>
+)";
+  HF_RETURN_IF_ERROR(WriteFileAtomic(out_dir / "report.html", html));
+  note->clear();
+  for (const std::string& l : lacks) *note += (note->empty() ? "" : "; ") + l;
+  return Status::Ok();
+}
+
+}  // namespace headforge

@@ -15,11 +15,12 @@
 #include "export/gaussian_ply.h"
 #include "export/mesh_avatar.h"
 #include "export/report.h"
+#include "export/viewer.h"
 
 namespace headforge {
 namespace {
 
-const char* const kFormats[] = {"mesh", "gaussians", "weights", "videos", "report"};
+const char* const kFormats[] = {"mesh", "gaussians", "weights", "videos", "viewer", "report"};
 
 bool Wants(const ExportOptions& options, const std::string& format) {
   return std::find(options.formats.begin(), options.formats.end(), format) != options.formats.end() ||
@@ -56,12 +57,13 @@ Status RenderVideo(const fs::path& workspace, const std::string& face_model, Ava
 
 }  // namespace
 
-const char* const ExportOptions::kDefaultChartJs = HEADFORGE_CHART_JS;
+const char* const ExportOptions::kDefaultChartJs = HEADFORGE_WEB_TOOLS "/chart.js/dist/chart.umd.min.js";
+const char* const ExportOptions::kDefaultPlayCanvasJs = HEADFORGE_WEB_TOOLS "/playcanvas/build/playcanvas.min.js";
 
 Status ExportOptions::Check() const {
   for (const std::string& f : formats)
     if (f != "all" && std::find(std::begin(kFormats), std::end(kFormats), f) == std::end(kFormats))
-      return Status::InvalidArgument("export: unknown format '" + f + "' (the formats: mesh, gaussians, weights, videos, report, all)");
+      return Status::InvalidArgument("export: unknown format '" + f + "' (the formats: mesh, gaussians, weights, videos, viewer, report, all)");
   if (formats.empty()) return Status::InvalidArgument("export: --formats names nothing to write");
   if (texture_size < 16 || texture_size > 8192)
     return Status::InvalidArgument("export: --texture-size must lie in [16, 8192]");
@@ -74,7 +76,8 @@ Status ExportOptions::Check() const {
 void AddExportOptions(OptionSet* o, ExportOptions* e) {
   o->Add("export.formats", &e->formats,
          "What to write: mesh (glTF avatar with blendshapes, animation, texture), gaussians (PLY and "
-         "KHR_gaussian_splatting GLB), weights (safetensors + config.json), videos, report (report.html); or all.",
+         "KHR_gaussian_splatting GLB), weights (safetensors + config.json), videos, viewer (viewer/index.html), "
+         "report (report.html); or all.",
          "formats");
   o->Add("export.splat_frame", &e->splat_frame,
          "The frame whose Gaussians are written (-1: every expression weight 0, frame 0's head pose).", "splat-frame");
@@ -88,6 +91,8 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "A tracked workspace whose expressions drive this avatar in a cross-reenactment video.", "drive");
   o->Add("export.chart_js", &e->chart_js, "Chart.js's UMD build, inlined into report.html for its plots.",
          "chart-js", OptionSet::Effect::kRuntime);
+  o->Add("export.playcanvas_js", &e->playcanvas_js, "PlayCanvas's UMD build, inlined into viewer/index.html.",
+         "playcanvas-js", OptionSet::Effect::kRuntime);
   o->Add("export.device", &e->device, "cpu, or cuda with a CUDA LibTorch (renders the videos).", "export-device",
          OptionSet::Effect::kRuntime);
 }
@@ -156,6 +161,14 @@ Status RunExport(const ExportOptions& options, const fs::path& workspace, const 
       HF_RETURN_IF_ERROR(
           RenderVideo(workspace, face_model, render, videos, "cross_reenactment.mp4", progress, &out.files));
     }
+  }
+  if (Wants(options, "viewer")) {
+    ViewerOptions viewer;
+    viewer.playcanvas_js = options.playcanvas_js;
+    if (fs::exists(out_dir / "avatar_mesh.glb")) viewer.mesh_glb = out_dir / "avatar_mesh.glb";
+    if (fs::exists(out_dir / "gaussians.glb")) viewer.gaussians_glb = out_dir / "gaussians.glb";
+    HF_RETURN_IF_ERROR(WriteViewer(out_dir / "viewer", viewer));
+    out.files.push_back("viewer/index.html");
   }
   if (Wants(options, "report")) {
     ReportOptions report;

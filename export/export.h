@@ -4,6 +4,7 @@
 //   export/gaussians.glb           the same as glTF with KHR_gaussian_splatting
 //   export/weights/                weights.safetensors + config.json
 //   export/videos/                 self-reenactment (render | frame | error), orbit, cross-reenactment
+//   export/viewer/index.html       the avatars in a page that opens offline (PlayCanvas)
 //   export/report.html             one self-contained page about the run
 //   export/export.json             what was written, and the options
 #pragma once
@@ -19,16 +20,18 @@
 namespace headforge {
 
 struct ExportOptions {
-  std::vector<std::string> formats = {"mesh", "gaussians", "weights", "videos", "report"};
+  std::vector<std::string> formats = {"mesh", "gaussians", "weights", "videos", "viewer", "report"};
   int splat_frame = -1;      // the frame whose Gaussians are written (-1: neutral expression, frame 0's pose)
   int texture_size = 512;    // the mesh avatar's texture: texels per side of the skin's square
   int bake_views = 24;       // views baked into it
   double orbit_deg = 45;     // the orbit video swings the camera this far each way
   std::string drive;         // a tracked workspace whose expressions drive a cross-reenactment video
   std::string device = "cpu";
-  std::string chart_js = kDefaultChartJs;  // inlined into report.html
+  std::string chart_js = kDefaultChartJs;            // inlined into report.html
+  std::string playcanvas_js = kDefaultPlayCanvasJs;  // inlined into viewer/index.html
 
   static const char* const kDefaultChartJs;
+  static const char* const kDefaultPlayCanvasJs;
   Status Check() const;
 };
 

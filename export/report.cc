@@ -13,39 +13,11 @@
 #include "capture/capture_io.h"
 #include "core/camera_set.h"
 #include "core/json_io.h"
+#include "export/html_util.h"
 #include "reconstruction/tracking_io.h"
 
 namespace headforge {
 namespace {
-
-std::string Escape(const std::string& text) {
-  std::string out;
-  for (char c : text) {
-    switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
-    }
-  }
-  return out;
-}
-
-std::string Base64(const std::vector<unsigned char>& bytes) {
-  static const char* kAlphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  std::string out;
-  out.reserve((bytes.size() + 2) / 3 * 4);
-  for (size_t i = 0; i < bytes.size(); i += 3) {
-    const uint32_t n = (uint32_t(bytes[i]) << 16) | (i + 1 < bytes.size() ? uint32_t(bytes[i + 1]) << 8 : 0) |
-                       (i + 2 < bytes.size() ? uint32_t(bytes[i + 2]) : 0);
-    out += kAlphabet[(n >> 18) & 63];
-    out += kAlphabet[(n >> 12) & 63];
-    out += i + 1 < bytes.size() ? kAlphabet[(n >> 6) & 63] : '=';
-    out += i + 2 < bytes.size() ? kAlphabet[n & 63] : '=';
-  }
-  return out;
-}
 
 // An <img> holding `image` as an inlined JPEG, `width` pixels wide at most.
 std::string InlineImage(const cv::Mat& image, int width, const std::string& caption) {
@@ -53,8 +25,8 @@ std::string InlineImage(const cv::Mat& image, int width, const std::string& capt
   if (image.cols > width) cv::resize(image, shown, cv::Size(width, image.rows * width / image.cols), 0, 0, cv::INTER_AREA);
   std::vector<unsigned char> jpeg;
   cv::imencode(".jpg", shown, jpeg, {cv::IMWRITE_JPEG_QUALITY, 85});
-  return "<figure><img src=\"data:image/jpeg;base64," + Base64(jpeg) + "\" alt=\"" + Escape(caption) +
-         "\"><figcaption>" + Escape(caption) + "</figcaption></figure>";
+  return "<figure><img src=\"data:image/jpeg;base64," + Base64(jpeg) + "\" alt=\"" + HtmlEscape(caption) +
+         "\"><figcaption>" + HtmlEscape(caption) + "</figcaption></figure>";
 }
 
 std::string Number(double value, int digits) {
@@ -63,20 +35,8 @@ std::string Number(double value, int digits) {
   return text;
 }
 
-// JSON safe to put inside <script>: no "</" can close the element.
-std::string ScriptJson(const nlohmann::json& data) {
-  std::string text = data.dump();
-  std::string out;
-  for (size_t i = 0; i < text.size(); ++i) {
-    if (text[i] == '<' && i + 1 < text.size() && text[i + 1] == '/') {
-      out += "<\\/";
-      ++i;
-    } else {
-      out += text[i];
-    }
-  }
-  return out;
-}
+// JSON safe to put inside <script>.
+std::string ScriptJson(const nlohmann::json& data) { return InlineScriptText(data.dump()); }
 
 std::vector<nlohmann::json> JsonLines(const fs::path& path) {
   std::vector<nlohmann::json> lines;
@@ -103,9 +63,9 @@ std::string StagesSection(const fs::path& workspace) {
       html += "<tr><td>export</td><td>writing this report</td><td></td><td></td></tr>";
       continue;
     }
-    html += "<tr><td>" + Escape(name) + "</td><td>" + Escape(stage.value("status", "")) +
+    html += "<tr><td>" + HtmlEscape(name) + "</td><td>" + HtmlEscape(stage.value("status", "")) +
             "</td><td class=\"num\">" + Number(stage.value("wall_time_s", 0.0), 1) + " s</td><td>" +
-            Escape(stage.value("message", "")) + "</td></tr>";
+            HtmlEscape(stage.value("message", "")) + "</td></tr>";
   }
   return html + "</table>";
 }
@@ -217,16 +177,16 @@ video { max-width: 100%; }
 )";
   std::string chart_js;
   if (!options.chart_js.empty() && ReadFileToString(options.chart_js, &chart_js).ok() && !chart_js.empty()) {
-    html += "<script>" + chart_js + "</script>\n";
+    html += "<script>" + InlineScriptText(chart_js) + "</script>\n";
   } else {
     chart_js.clear();
     lacks.push_back("no charting library (scripts/install_deps.sh installs Chart.js): tables and images only");
   }
   html += "<script id=\"data\" type=\"application/json\">" + ScriptJson(data) + "</script>\n</head><body>\n";
-  html += "<h1>HeadForge report: " + Escape(workspace.filename().string()) + "</h1>";
+  html += "<h1>HeadForge report: " + HtmlEscape(workspace.filename().string()) + "</h1>";
   if (!lacks.empty()) {
     html += "<p class=\"note\">";
-    for (const std::string& l : lacks) html += Escape(l) + ". ";
+    for (const std::string& l : lacks) html += HtmlEscape(l) + ". ";
     html += "</p>";
   }
   html += StagesSection(workspace);
@@ -240,7 +200,7 @@ video { max-width: 100%; }
     html += "<h2>Training</h2><p>The training loss and the held-out PSNR over the head against wall time.</p>"
             "<div class=\"chart\"><canvas id=\"training\"></canvas></div>";
     const nlohmann::json mean = eval.value("mean", nlohmann::json::object());
-    html += "<h2>Evaluation</h2><p>Held out: " + Escape(eval.value("held_out_frames", std::string("?"))) +
+    html += "<h2>Evaluation</h2><p>Held out: " + HtmlEscape(eval.value("held_out_frames", std::string("?"))) +
             " frames, background " + Number(eval.value("background", 0.5), 1) + ".</p><table>"
             "<tr><th></th><th>PSNR</th><th>SSIM</th><th>L1</th></tr>"
             "<tr><td>held-out, over the head</td><td class=\"num\">" + Number(mean.value("psnr_masked", 0.0), 2) +
@@ -281,10 +241,10 @@ video { max-width: 100%; }
   // Videos and files export wrote beside the page.
   std::string videos, files;
   for (const std::string& f : options.exported) {
-    files += "<li><code>" + Escape(f) + "</code></li>";
+    files += "<li><code>" + HtmlEscape(f) + "</code></li>";
     if (f.size() > 4 && f.compare(f.size() - 4, 4, ".mp4") == 0)
-      videos += "<figure><video controls muted preload=\"metadata\" src=\"" + Escape(f) + "\"></video><figcaption>" +
-                Escape(f) + "</figcaption></figure>";
+      videos += "<figure><video controls muted preload=\"metadata\" src=\"" + HtmlEscape(f) + "\"></video><figcaption>" +
+                HtmlEscape(f) + "</figcaption></figure>";
   }
   if (!videos.empty()) html += "<h2>Videos</h2><div class=\"row\">" + videos + "</div>";
   if (!files.empty()) html += "<h2>Exported files</h2><ul>" + files + "</ul>";

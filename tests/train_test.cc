@@ -255,7 +255,8 @@ TEST_F(ExportStage, WritesEveryFormatAndEachReadsBack) {
   ASSERT_EQ(exported_.code, 0) << exported_.err;
   const fs::path out = reference_ / "export";
   for (const char* file : {"avatar_mesh.glb", "gaussians.ply", "gaussians.glb", "weights/weights.safetensors",
-                           "weights/config.json", "videos/self_reenactment.mp4", "videos/orbit.mp4", "export.json"})
+                           "weights/config.json", "videos/self_reenactment.mp4", "videos/orbit.mp4",
+                           "viewer/index.html", "report.html", "export.json"})
     EXPECT_TRUE(fs::exists(out / file)) << file;
   // H.264 videos: the 25 held-out frames, and a 72-step orbit.
   EXPECT_EQ(CountVideoFrames(out / "videos" / "self_reenactment.mp4"), 25);
@@ -399,6 +400,7 @@ TEST_F(ExportStage, TheReportReferencesOnlyFilesThatExist) {
   }
   EXPECT_GE(inlined, 6);  // capture thumbnails and held-out strips
   EXPECT_EQ(beside, 2);   // the two videos
+  EXPECT_NE(html.find("<code>viewer/index.html</code>"), std::string::npos);
 }
 
 #ifdef HEADFORGE_BROWSER_CHECKS
@@ -538,6 +540,30 @@ TEST_F(ExportStage, TheReportOpensInChromiumWithoutErrors) {
   const cv::Mat page = cv::imread(shot.string());
   ASSERT_FALSE(page.empty());
   EXPECT_GT(page.rows, 2000);  // every section laid out
+}
+
+// viewer/index.html, a file opened from disk, shows both avatars: no console
+// error, and the page's left and right halves hold a head each (pixels away
+// from the background's colour).
+TEST_F(ExportStage, TheViewerPageShowsBothAvatars) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path shot = fs::path(HEADFORGE_TEST_BINARY_DIR) / "artefacts" / "viewer.png";
+  fs::create_directories(shot.parent_path());
+  const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
+                              "/scripts/web/screenshot.cjs' --dir '" + (reference_ / "export" / "viewer").string() +
+                              "' --page index.html --width 640 --height 400 --out '" + shot.string() +
+                              "' --chromium '" + HEADFORGE_CHROMIUM + "'";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+  const cv::Mat page = cv::imread(shot.string());
+  ASSERT_EQ(page.size(), cv::Size(640, 400));
+  const cv::Vec3b background = page.at<cv::Vec3b>(390, 5);
+  for (const cv::Rect half : {cv::Rect(0, 40, 320, 360), cv::Rect(320, 40, 320, 360)}) {
+    int head = 0;
+    for (int y = half.y; y < half.br().y; ++y)
+      for (int x = half.x; x < half.br().x; ++x)
+        head += cv::norm(cv::Vec3i(page.at<cv::Vec3b>(y, x)) - cv::Vec3i(background)) > 40 ? 1 : 0;
+    EXPECT_GT(head, 5000) << "x from " << half.x;
+  }
 }
 #endif
 

@@ -1,6 +1,7 @@
 #include "export/gltf_builder.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <sstream>
 
@@ -43,6 +44,41 @@ int GltfBuilder::Floats(const std::vector<float>& values, int components, bool b
     }
     if (values.empty()) accessor.minValues.assign(size_t(components), 0), accessor.maxValues.assign(size_t(components), 0);
   }
+  model_.accessors.push_back(accessor);
+  return int(model_.accessors.size()) - 1;
+}
+
+int GltfBuilder::SparseVec3(const std::vector<float>& values, float epsilon) {
+  std::vector<uint32_t> indices;
+  std::vector<float> kept;
+  tinygltf::Accessor accessor;
+  accessor.minValues.assign(3, 0.0);
+  accessor.maxValues.assign(3, 0.0);
+  for (size_t i = 0; i + 2 < values.size(); i += 3) {
+    const float* v = &values[i];
+    if (std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])}) <= epsilon) continue;
+    indices.push_back(uint32_t(i / 3));
+    kept.insert(kept.end(), v, v + 3);
+    for (int c = 0; c < 3; ++c) {
+      accessor.minValues[size_t(c)] = std::min(accessor.minValues[size_t(c)], double(v[c]));
+      accessor.maxValues[size_t(c)] = std::max(accessor.maxValues[size_t(c)], double(v[c]));
+    }
+  }
+  if (indices.empty()) {  // the specification wants at least one sparse element
+    indices.push_back(0);
+    kept.assign(3, 0.0f);
+  }
+  accessor.bufferView = -1;  // every element zero but the sparse ones
+  accessor.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+  accessor.type = TINYGLTF_TYPE_VEC3;
+  accessor.count = values.size() / 3;
+  accessor.sparse.isSparse = true;
+  accessor.sparse.count = int(indices.size());
+  accessor.sparse.indices.bufferView = View(indices.data(), indices.size() * sizeof(uint32_t));
+  accessor.sparse.indices.byteOffset = 0;
+  accessor.sparse.indices.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+  accessor.sparse.values.bufferView = View(kept.data(), kept.size() * sizeof(float));
+  accessor.sparse.values.byteOffset = 0;
   model_.accessors.push_back(accessor);
   return int(model_.accessors.size()) - 1;
 }

@@ -23,6 +23,10 @@ class GltfBuilder {
   // A float accessor of `count` elements of `components` floats (1, 2, 3 or
   // 4: SCALAR, VEC2, VEC3, VEC4); with `bounds`, min and max per component.
   int Floats(const std::vector<float>& values, int components, bool bounds, int target = 0);
+  // A VEC3 float accessor stored sparsely: zero except the elements whose
+  // largest component exceeds `epsilon` in magnitude (morph targets, which
+  // move a part of the mesh). Bounds over every element.
+  int SparseVec3(const std::vector<float>& values, float epsilon);
   // An unsigned 32-bit index accessor.
   int Indices(const std::vector<uint32_t>& indices);
   // An image stored in the buffer (PNG bytes).

@@ -26,14 +26,25 @@ tinygltf::Model Load(const fs::path& path) {
   return model;
 }
 
-// The floats an accessor holds (tightly packed float accessors only).
+// The floats an accessor holds (tightly packed float accessors, dense or
+// sparse with uint32 indices), as the specification defines them.
 std::vector<float> Read(const tinygltf::Model& m, int accessor) {
   const tinygltf::Accessor& a = m.accessors[size_t(accessor)];
   EXPECT_EQ(a.componentType, TINYGLTF_COMPONENT_TYPE_FLOAT);
-  const tinygltf::BufferView& v = m.bufferViews[size_t(a.bufferView)];
   const int components = tinygltf::GetNumComponentsInType(uint32_t(a.type));
-  std::vector<float> out(a.count * size_t(components));
-  std::memcpy(out.data(), m.buffers[size_t(v.buffer)].data.data() + v.byteOffset + a.byteOffset, out.size() * 4);
+  std::vector<float> out(a.count * size_t(components), 0.0f);
+  const auto bytes = [&](int view, size_t offset) {
+    const tinygltf::BufferView& v = m.bufferViews[size_t(view)];
+    return m.buffers[size_t(v.buffer)].data.data() + v.byteOffset + offset;
+  };
+  if (a.bufferView >= 0) std::memcpy(out.data(), bytes(a.bufferView, a.byteOffset), out.size() * 4);
+  if (a.sparse.isSparse) {
+    EXPECT_EQ(a.sparse.indices.componentType, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT);
+    const auto* indices = reinterpret_cast<const uint32_t*>(bytes(a.sparse.indices.bufferView, size_t(a.sparse.indices.byteOffset)));
+    const auto* values = reinterpret_cast<const float*>(bytes(a.sparse.values.bufferView, size_t(a.sparse.values.byteOffset)));
+    for (int i = 0; i < a.sparse.count; ++i)
+      for (int c = 0; c < components; ++c) out[size_t(indices[i]) * size_t(components) + size_t(c)] = values[i * components + c];
+  }
   return out;
 }
 
@@ -90,6 +101,8 @@ TEST(MeshAvatarGltf, ReadBackTheAnimationGivesTheTrackedVertices) {
   ASSERT_EQ(m.meshes.size(), 1u);
   const tinygltf::Primitive& p = m.meshes[0].primitives[0];
   ASSERT_EQ(p.targets.size(), 2u);
+  EXPECT_TRUE(m.accessors[size_t(p.targets[0].at("POSITION"))].sparse.isSparse);
+  EXPECT_EQ(m.accessors[size_t(p.targets[0].at("POSITION"))].sparse.count, 1);
   const tinygltf::Value& names = m.meshes[0].extras.Get("targetNames");
   ASSERT_TRUE(names.IsArray());
   EXPECT_EQ(names.Get(0).Get<std::string>(), "jawOpen");

@@ -202,13 +202,17 @@ video { max-width: 100%; }
     const nlohmann::json mean = eval.value("mean", nlohmann::json::object());
     html += "<h2>Evaluation</h2><p>Held out: " + HtmlEscape(eval.value("held_out_frames", std::string("?"))) +
             " frames, background " + Number(eval.value("background", 0.5), 1) + ".</p><table>"
-            "<tr><th></th><th>PSNR</th><th>SSIM</th><th>L1</th></tr>"
+            "<tr><th></th><th>PSNR</th><th>SSIM</th><th>L1</th><th>sharpness, render / frame</th><th>SD</th></tr>"
             "<tr><td>held-out, over the head</td><td class=\"num\">" + Number(mean.value("psnr_masked", 0.0), 2) +
             " dB</td><td class=\"num\">" + Number(mean.value("ssim_masked", 0.0), 3) + "</td><td class=\"num\">" +
-            Number(mean.value("l1_masked", 0.0), 4) + "</td></tr><tr><td>held-out, whole frame</td><td class=\"num\">" +
-            Number(mean.value("psnr", 0.0), 2) + " dB</td><td class=\"num\">" + Number(mean.value("ssim", 0.0), 3) +
-            "</td><td></td></tr></table><p>LPIPS is not computed: it needs ImageNet-pretrained weights, which are "
-            "not available here.</p>";
+            Number(mean.value("l1_masked", 0.0), 4) + "</td><td class=\"num\">" +
+            Number(mean.value("sharpness", 0.0), 2) + " / " + Number(mean.value("sharpness_truth", 0.0), 2) +
+            "</td><td class=\"num\">" + Number(mean.value("sd", 0.0), 2) +
+            "</td></tr><tr><td>held-out, whole frame</td><td class=\"num\">" + Number(mean.value("psnr", 0.0), 2) +
+            " dB</td><td class=\"num\">" + Number(mean.value("ssim", 0.0), 3) +
+            "</td><td></td><td></td><td></td></tr></table><p>Sharpness: the mean gradient magnitude over the head, "
+            "in grey levels per pixel; SD, the render's minus the frame's (negative: blurrier). LPIPS is not "
+            "computed: it needs ImageNet-pretrained weights, which are not available here.</p>";
     std::vector<nlohmann::json> views = eval.value("views", std::vector<nlohmann::json>());
     std::sort(views.begin(), views.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
       return a.value("psnr_masked", 0.0) > b.value("psnr_masked", 0.0);

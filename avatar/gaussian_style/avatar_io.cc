@@ -55,6 +55,9 @@ ViewScores ScoreRender(const torch::Tensor& render, const torch::Tensor& image, 
   const torch::Tensor map = SsimMap(r.unsqueeze(0), target.unsqueeze(0))[0].mean(0, true);  // [1, H, W]
   s.ssim_masked = (map * m).sum().item<double>() / inside;
   s.ssim_full = map.mean().item<double>();
+  s.sharpness = 255 * Sharpness(r, m);
+  s.sharpness_truth = 255 * Sharpness(target, m);
+  s.sd = s.sharpness - s.sharpness_truth;
   return s;
 }
 
@@ -74,6 +77,9 @@ ViewScores MeanScores(const std::vector<ViewScores>& scores) {
       mean.psnr_masked += s.psnr_masked / heads;
       mean.ssim_masked += s.ssim_masked / heads;
       mean.l1_masked += s.l1_masked / heads;
+      mean.sharpness += s.sharpness / heads;
+      mean.sharpness_truth += s.sharpness_truth / heads;
+      mean.sd += s.sd / heads;
     }
     mean.psnr_full += s.psnr_full / double(scores.size());
     mean.ssim_full += s.ssim_full / double(scores.size());

@@ -390,14 +390,16 @@ Status Trainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   for (const ViewScores& s : scores)
     views.push_back({{"frame", s.frame}, {"camera", s.camera}, {"psnr_masked", s.psnr_masked},
                      {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full}, {"ssim", s.ssim_full},
-                     {"l1_masked", s.l1_masked}});
+                     {"l1_masked", s.l1_masked}, {"sharpness", s.sharpness}, {"sharpness_truth", s.sharpness_truth},
+                     {"sd", s.sd}});
   const nlohmann::json eval = {
       {"held_out_frames", "the last " + std::to_string(data_.num_frames - data_.first_test_frame) + " of " +
                               std::to_string(data_.num_frames)},
       {"background", kEvalBackground},
       {"latent_frame", 0},
       {"mean", {{"psnr_masked", mean.psnr_masked}, {"ssim_masked", mean.ssim_masked}, {"psnr", mean.psnr_full},
-                {"ssim", mean.ssim_full}, {"l1_masked", mean.l1_masked}}},
+                {"ssim", mean.ssim_full}, {"l1_masked", mean.l1_masked}, {"sharpness", mean.sharpness},
+                {"sharpness_truth", mean.sharpness_truth}, {"sd", mean.sd}}},
       {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
       {"views", views}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "eval.json", eval, 1));

@@ -44,6 +44,9 @@ struct ViewScores {
   int frame = 0;
   std::string camera;
   double psnr_masked = 0, ssim_masked = 0, psnr_full = 0, ssim_full = 0, l1_masked = 0;
+  // Mean gradient magnitude over the head (grey levels per pixel, x 255) of
+  // the render and of the frame; SD = render's - frame's (negative: blurrier).
+  double sharpness = 0, sharpness_truth = 0, sd = 0;
   bool has_head = true;  // false: the mask is empty and the masked figures mean nothing
 };
 // `render` [3, H, W] against `image` [3, H, W] on `mask` [1, H, W], the

@@ -39,4 +39,26 @@ double Psnr(const torch::Tensor& a, const torch::Tensor& b) {
   return mse > 0 ? -10.0 * std::log10(mse) : INFINITY;
 }
 
+torch::Tensor GradientMagnitude(const torch::Tensor& image) {
+  const torch::Tensor x = (image.dim() == 3 ? image.unsqueeze(0) : image).mean(1, true);
+  const int64_t h = x.size(2), w = x.size(3);
+  TORCH_CHECK(h >= 2 && w >= 2, "GradientMagnitude: the image must be at least 2x2");
+  // Central differences inside, one-sided at the first and last column / row.
+  torch::Tensor dx = torch::empty_like(x), dy = torch::empty_like(x);
+  dx.slice(3, 1, w - 1) = (x.slice(3, 2, w) - x.slice(3, 0, w - 2)) / 2;
+  dx.slice(3, 0, 1) = x.slice(3, 1, 2) - x.slice(3, 0, 1);
+  dx.slice(3, w - 1, w) = x.slice(3, w - 1, w) - x.slice(3, w - 2, w - 1);
+  dy.slice(2, 1, h - 1) = (x.slice(2, 2, h) - x.slice(2, 0, h - 2)) / 2;
+  dy.slice(2, 0, 1) = x.slice(2, 1, 2) - x.slice(2, 0, 1);
+  dy.slice(2, h - 1, h) = x.slice(2, h - 1, h) - x.slice(2, h - 2, h - 1);
+  return (dx * dx + dy * dy).sqrt();
+}
+
+double Sharpness(const torch::Tensor& image, const torch::Tensor& mask) {
+  const torch::Tensor g = GradientMagnitude(image.to(torch::kFloat64))[0];  // [1, H, W]
+  const torch::Tensor m = (mask.to(torch::kFloat64) > 0.5).to(torch::kFloat64);
+  const double count = m.sum().item<double>();
+  return count > 0 ? (g * m).sum().item<double>() / count : 0.0;
+}
+
 }  // namespace headforge

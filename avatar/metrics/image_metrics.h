@@ -15,4 +15,14 @@ torch::Tensor SsimMap(const torch::Tensor& a, const torch::Tensor& b);
 // Peak signal-to-noise ratio in dB for a peak of 1.
 double Psnr(const torch::Tensor& a, const torch::Tensor& b);
 
+// The gradient magnitude [B, 1, H, W] of an image's grey level (the mean of
+// its channels): sqrt(dx^2 + dy^2) with central differences, one-sided at
+// the borders; in grey levels per pixel.
+torch::Tensor GradientMagnitude(const torch::Tensor& image);
+// Sharpness: the mean gradient magnitude over `mask` [1, H, W] (> 0.5) of
+// `image` [3, H, W]. The sharpness difference (SD) of a render is its
+// sharpness minus the ground truth's over the same mask: negative when the
+// render is blurrier.
+double Sharpness(const torch::Tensor& image, const torch::Tensor& mask);
+
 }  // namespace headforge

@@ -42,5 +42,40 @@ TEST(ImageMetrics, SsimMatchesADirectEvaluation) {
   EXPECT_NEAR(SsimMap(a, b)[0][0][5][5].item<double>(), expect, 1e-12);
 }
 
+// A ramp rising s per pixel along x and t along y has gradient magnitude
+// sqrt(s^2 + t^2) everywhere, borders included (one-sided differences of a
+// linear function are exact); a constant image has none.
+TEST(ImageMetrics, GradientMagnitudeOfARampAndAConstant) {
+  const double s = 0.01, t = 0.005;
+  const torch::Tensor x = torch::arange(20, torch::kFloat64).view({1, 20}).expand({16, 20});
+  const torch::Tensor y = torch::arange(16, torch::kFloat64).view({16, 1}).expand({16, 20});
+  const torch::Tensor ramp = (s * x + t * y).unsqueeze(0).expand({3, 16, 20});
+  const torch::Tensor g = GradientMagnitude(ramp);
+  EXPECT_EQ(g.sizes(), (std::vector<int64_t>{1, 1, 16, 20}));
+  EXPECT_NEAR(g.min().item<double>(), std::hypot(s, t), 1e-12);
+  EXPECT_NEAR(g.max().item<double>(), std::hypot(s, t), 1e-12);
+  EXPECT_EQ(GradientMagnitude(torch::full({3, 8, 8}, 0.3, torch::kFloat64)).abs().max().item<double>(), 0.0);
+}
+
+// Blurring lowers the sharpness; the mask picks where it is measured.
+TEST(ImageMetrics, SharpnessFallsWithBlurAndFollowsTheMask) {
+  torch::manual_seed(3);
+  const torch::Tensor image = torch::rand({3, 32, 32}, torch::kFloat64);
+  const torch::Tensor kernel = torch::full({3, 1, 3, 3}, 1.0 / 9, torch::kFloat64);
+  const torch::Tensor blurred = torch::conv2d(image.unsqueeze(0), kernel, {}, 1, 1, 1, 3)[0];
+  torch::Tensor mask = torch::zeros({1, 32, 32}, torch::kFloat64);
+  mask.slice(1, 4, 28).slice(2, 4, 28) = 1;
+  const double sharp = Sharpness(image, mask), soft = Sharpness(blurred, mask);
+  EXPECT_GT(sharp, 0.0);
+  EXPECT_LT(soft, 0.6 * sharp);
+  // Half of the image flat: a mask over that half measures nothing.
+  torch::Tensor half = image.clone();
+  half.slice(2, 0, 16) = 0.5;
+  torch::Tensor left = torch::zeros({1, 32, 32}, torch::kFloat64);
+  left.slice(1, 2, 30).slice(2, 2, 14) = 1;
+  EXPECT_NEAR(Sharpness(half, left), 0.0, 1e-12);
+  EXPECT_EQ(Sharpness(image, torch::zeros({1, 32, 32})), 0.0);
+}
+
 }  // namespace
 }  // namespace headforge

@@ -234,7 +234,10 @@ class ExportStage : public TrainStage {
  protected:
   static void SetUpTestSuite() {
     TrainStage::SetUpTestSuite();
-    exported_ = Headforge({"export", "--workspace", reference_.string(), "--texture-size", "128", "--bake-views", "8"});
+    // Driven by a tracked workspace too (the same capture's: what is tested
+    // is that another workspace's tracking reaches the avatar).
+    exported_ = Headforge({"export", "--workspace", reference_.string(), "--texture-size", "128", "--bake-views", "8",
+                           "--drive", Tracked().string()});
   }
   static Result exported_;
 };
@@ -261,6 +264,7 @@ TEST_F(ExportStage, WritesEveryFormatAndEachReadsBack) {
   // H.264 videos: the 25 held-out frames, and a 72-step orbit.
   EXPECT_EQ(CountVideoFrames(out / "videos" / "self_reenactment.mp4"), 25);
   EXPECT_EQ(CountVideoFrames(out / "videos" / "orbit.mp4"), 72);
+  EXPECT_EQ(CountVideoFrames(out / "videos" / "cross_reenactment.mp4"), 125);
 #ifdef HEADFORGE_GLTF_VALIDATOR
   const auto validate = [&](const fs::path& file, const std::string& extra) {
     return std::system((std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
@@ -399,7 +403,7 @@ TEST_F(ExportStage, TheReportReferencesOnlyFilesThatExist) {
     }
   }
   EXPECT_GE(inlined, 6);  // capture thumbnails and held-out strips
-  EXPECT_EQ(beside, 2);   // the two videos
+  EXPECT_EQ(beside, 3);   // the three videos
   EXPECT_NE(html.find("<code>viewer/index.html</code>"), std::string::npos);
 }
 

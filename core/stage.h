@@ -22,6 +22,7 @@ struct StageSettings {
   std::string data_dir;    // the shared data folder
   std::string face_model;  // the face model file (Basel-layout HDF5)
   int threads = 1;         // worker threads, resolved (>= 1)
+  std::string workspace;   // the workspace's folder ("" outside a workspace command)
 };
 
 // What a stage's run function is handed besides its staging folder.

@@ -110,6 +110,11 @@ Status RunExport(const ExportOptions& options, const fs::path& workspace, const 
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   const fs::path model_dir = workspace / "models" / "gaussian_style";
   const bool trained = fs::exists(model_dir / "config.json");
+  // Refused before anything is written: the formats that need a trained model.
+  const bool needs_model = Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos");
+  if (needs_model && !trained)
+    return Status::NotFound("no trained avatar in " + model_dir.string() +
+                            " (run headforge train first, or export --formats mesh report alone)");
   ExportSummary out;
   if (Wants(options, "mesh")) {
     FaceModel model;
@@ -122,10 +127,6 @@ Status RunExport(const ExportOptions& options, const fs::path& workspace, const 
     HF_RETURN_IF_ERROR(WriteMeshAvatarGlb(out_dir / "avatar_mesh.glb", mesh));
     out.files.push_back("avatar_mesh.glb");
   }
-  const bool needs_model = Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos");
-  if (needs_model && !trained)
-    return Status::NotFound("export: no trained avatar in " + model_dir.string() +
-                            " (run headforge train first, or export --formats mesh alone)");
   if (Wants(options, "gaussians")) {
     AvatarSplats splats;
     HF_RETURN_IF_ERROR(PoseAvatarSplats(workspace, model_dir, face_model, options.splat_frame, &splats));
@@ -162,7 +163,7 @@ Status RunExport(const ExportOptions& options, const fs::path& workspace, const 
           RenderVideo(workspace, face_model, render, videos, "cross_reenactment.mp4", progress, &out.files));
     }
   }
-  if (Wants(options, "viewer")) {
+  if (Wants(options, "viewer") && (fs::exists(out_dir / "avatar_mesh.glb") || fs::exists(out_dir / "gaussians.glb"))) {
     ViewerOptions viewer;
     viewer.playcanvas_js = options.playcanvas_js;
     if (fs::exists(out_dir / "avatar_mesh.glb")) viewer.mesh_glb = out_dir / "avatar_mesh.glb";

@@ -59,6 +59,7 @@ StageSettings CommonOptions::Settings() const {
   settings.face_model =
       face_model.empty() ? (fs::path(data_dir) / "ict_facekit" / "ict_face_model.h5").string() : face_model;
   settings.threads = threads > 0 ? threads : HardwareThreads();
+  settings.workspace = workspace;
   return settings;
 }
 

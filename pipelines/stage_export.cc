@@ -1,4 +1,5 @@
 // The export stage's job: the trained avatar in the formats other tools open, into export/.
+#include "core/hash.h"
 #include "export/export.h"
 #include "pipelines/stage_jobs.h"
 
@@ -8,8 +9,33 @@ namespace {
 class ExportJob : public StageJob {
  public:
   void AddOptions(OptionSet* options) override { AddExportOptions(options, &options_); }
-  void Resolve(const StageSettings&, const OptionSet&) override {}
+  void Resolve(const StageSettings& settings, const OptionSet&) override {
+    workspace_ = settings.workspace;
+    // --formats mesh,report as well as --formats mesh report.
+    std::vector<std::string> formats;
+    for (const std::string& item : options_.formats) {
+      size_t start = 0;
+      for (size_t comma; (comma = item.find(',', start)) != std::string::npos; start = comma + 1)
+        if (comma > start) formats.push_back(item.substr(start, comma - start));
+      if (start < item.size()) formats.push_back(item.substr(start));
+    }
+    options_.formats = formats;
+  }
   Status Check() const override { return options_.Check(); }
+  // The trained model is not an upstream stage (the mesh avatar and the
+  // report need only tracking), so its files enter the fingerprint here:
+  // training again makes export run again.
+  Status AddInputs(Hasher* hasher) const override {
+    const fs::path model = fs::path(workspace_) / "models" / "gaussian_style";
+    for (const char* file : {"config.json", "model.pt"}) {
+      if (fs::exists(model / file)) {
+        HF_RETURN_IF_ERROR(hasher->AddFileStamp(model / file));
+      } else {
+        hasher->Add(std::string("no ") + file);
+      }
+    }
+    return Status::Ok();
+  }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     ExportSummary summary;
     HF_RETURN_IF_ERROR(RunExport(options_, env.workspace->root(), env.settings->face_model,
@@ -21,6 +47,7 @@ class ExportJob : public StageJob {
 
  private:
   ExportOptions options_;
+  std::string workspace_;
 };
 
 }  // namespace

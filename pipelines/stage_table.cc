@@ -79,7 +79,9 @@ const std::vector<StageEntry>& StageTable() {
     t[4].make = MakeTrainJob;
 
     t[5].name = "export";
-    t[5].upstream = {"ingest", "calibrate", "align", "track", "train"};
+    // Not train: the mesh avatar and the report need only tracking; the
+    // trained model's files enter export's fingerprint as its inputs.
+    t[5].upstream = {"ingest", "calibrate", "align", "track"};
     t[5].summary = "Export the avatar: PLY, glTF, weights, videos and a report.";
     t[5].usage = "headforge export --workspace DIR [options]";
     t[5].description =

@@ -571,6 +571,28 @@ TEST_F(ExportStage, TheViewerPageShowsBothAvatars) {
 }
 #endif
 
+// A tracked workspace without a trained model exports what needs only
+// tracking (the mesh avatar, the report) and says what the rest needs,
+// before writing anything.
+TEST(ExportBadInput, AnUntrainedWorkspaceExportsTheMeshAndTheReportAlone) {
+  const fs::path ws = CopyOf(Tracked(), Scratch("untrained"));
+  const Result all = Headforge({"export", "--workspace", ws.string(), "--texture-size", "64"});
+  EXPECT_EQ(all.code, 1);
+  EXPECT_NE(all.err.find("no trained avatar"), std::string::npos) << all.err;
+  EXPECT_NE(all.err.find("run headforge train first, or export --formats mesh report alone"), std::string::npos)
+      << all.err;
+  EXPECT_FALSE(fs::exists(ws / "export"));
+  const Result some = Headforge({"export", "--workspace", ws.string(), "--formats", "mesh,report", "--texture-size", "64"});
+  ASSERT_EQ(some.code, 0) << some.err;
+  EXPECT_TRUE(fs::exists(ws / "export" / "avatar_mesh.glb"));
+  const std::string html = Slurp(ws / "export" / "report.html");
+  EXPECT_NE(html.find("no trained model"), std::string::npos);
+  EXPECT_EQ(html.find("<h2>Evaluation</h2>"), std::string::npos);
+  const Result bogus = Headforge({"export", "--workspace", ws.string(), "--formats", "mesh,glb"});
+  EXPECT_EQ(bogus.code, 2) << bogus.err;
+  EXPECT_NE(bogus.err.find("unknown format 'glb'"), std::string::npos) << bogus.err;
+}
+
 // Edits `file` (JSON) of `ws` in place.
 void EditJson(const fs::path& file, const std::function<void(nlohmann::json*)>& edit) {
   nlohmann::json j;

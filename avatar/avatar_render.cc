@@ -71,13 +71,16 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
   if (frames.empty())
     for (const auto& [frame, view] : by_frame)
       if (!options.held_out || frame >= own.first_test_frame) frames.push_back(frame);
-  // An orbit: one frame, the camera swung from 0 to +orbit, to -orbit and back to 0.
+  // An orbit: one frame, the camera swung from 0 to +orbit, to -orbit and
+  // back to 0; at 180, turned once all the way round.
   std::vector<double> yaws(frames.size(), options.yaw_deg);
   if (options.orbit_deg > 0) {
     frames.assign(size_t(options.orbit_steps), frames.empty() ? 0 : frames.front());
     yaws.clear();
-    for (int i = 0; i < options.orbit_steps; ++i)
-      yaws.push_back(options.yaw_deg + options.orbit_deg * std::sin(2 * M_PI * i / options.orbit_steps));
+    for (int i = 0; i < options.orbit_steps; ++i) {
+      const double turn = double(i) / options.orbit_steps;
+      yaws.push_back(options.yaw_deg + (options.orbit_deg >= 180 ? 360 * turn : options.orbit_deg * std::sin(2 * M_PI * turn)));
+    }
   }
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   const torch::Tensor background = torch::full({3}, options.background, torch::TensorOptions().device(device));

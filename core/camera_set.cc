@@ -1,5 +1,9 @@
 #include "core/camera_set.h"
 
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
 #include <nlohmann/json.hpp>
 
 #include "core/json_io.h"
@@ -62,6 +66,20 @@ const CameraView* CameraSet::FindView(const std::string& camera, int frame) cons
   for (const auto& v : views)
     if (v.camera == camera && v.frame == frame) return &v;
   return nullptr;
+}
+
+double CameraSet::AzimuthSpreadDeg() const {
+  std::vector<double> azimuths;
+  for (const CameraView& v : views)
+    if (v.registered) {
+      const Eigen::Vector3d c = v.Centre();
+      if (std::hypot(c.x(), c.z()) > 1e-9) azimuths.push_back(std::atan2(c.x(), c.z()) * 180 / M_PI);
+    }
+  if (azimuths.size() < 2) return 0;
+  std::sort(azimuths.begin(), azimuths.end());
+  double widest_gap = 360 - (azimuths.back() - azimuths.front());
+  for (size_t i = 1; i < azimuths.size(); ++i) widest_gap = std::max(widest_gap, azimuths[i] - azimuths[i - 1]);
+  return 360 - widest_gap;
 }
 
 int CameraSet::registered() const {

@@ -53,6 +53,11 @@ struct CameraSet {
   const CameraIntrinsics* FindCamera(const std::string& name) const;
   const CameraView* FindView(const std::string& camera, int frame) const;
   int registered() const;
+  // How far round the head (the frame's origin, +y up) the registered views'
+  // centres spread in azimuth, degrees: 360 minus the widest gap between
+  // neighbouring azimuths (0 for fewer than two views). About 0 for a fixed
+  // camera, 360 for a capture all round the head.
+  double AzimuthSpreadDeg() const;
 
   Status Write(const fs::path& path) const;
   // Reads a file Write wrote, checking its version.

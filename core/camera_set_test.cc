@@ -73,5 +73,37 @@ TEST(CameraSet, RoundTripsAndChecksItsVersion) {
   EXPECT_NE(old.message().find("run headforge align again"), std::string::npos) << old.message();
 }
 
+// Views on a ring round the head at the given azimuths (degrees, 0 = in
+// front, +90 = toward +x), looking at the origin.
+CameraSet Ring(const std::vector<double>& azimuths) {
+  CameraSet set;
+  int frame = 0;
+  for (double a : azimuths) {
+    CameraView v;
+    v.camera = "cam";
+    v.frame = frame++;
+    v.registered = true;
+    const Eigen::Vector3d centre(0.6 * std::sin(a * M_PI / 180), 0.05, 0.6 * std::cos(a * M_PI / 180));
+    v.cam_from_world = Eigen::Translation3d(-centre) * Eigen::Isometry3d::Identity();
+    set.views.push_back(v);
+  }
+  return set;
+}
+
+TEST(CameraSet, AzimuthSpreadMeasuresHowFarRoundTheHeadTheViewsGo) {
+  EXPECT_EQ(Ring({}).AzimuthSpreadDeg(), 0.0);
+  EXPECT_EQ(Ring({10}).AzimuthSpreadDeg(), 0.0);
+  EXPECT_NEAR(Ring({-20, 0, 15}).AzimuthSpreadDeg(), 35.0, 1e-9);
+  // Across the back (+-180): the spread is the short way round.
+  EXPECT_NEAR(Ring({170, -170}).AzimuthSpreadDeg(), 20.0, 1e-9);
+  std::vector<double> all;
+  for (int i = 0; i < 16; ++i) all.push_back(-180 + 22.5 * i);
+  EXPECT_NEAR(Ring(all).AzimuthSpreadDeg(), 337.5, 1e-9);
+  // Unregistered views do not count.
+  CameraSet some = Ring({-90, 0, 90});
+  some.views[2].registered = false;
+  EXPECT_NEAR(some.AzimuthSpreadDeg(), 90.0, 1e-9);
+}
+
 }  // namespace
 }  // namespace headforge

@@ -8,6 +8,7 @@
 
 #include "avatar/avatar_export.h"
 #include "avatar/avatar_render.h"
+#include "core/camera_set.h"
 #include "core/face_model.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -68,7 +69,7 @@ Status ExportOptions::Check() const {
   if (texture_size < 16 || texture_size > 8192)
     return Status::InvalidArgument("export: --texture-size must lie in [16, 8192]");
   if (bake_views < 1) return Status::InvalidArgument("export: --bake-views must be at least 1");
-  if (!(orbit_deg > 0 && orbit_deg <= 180)) return Status::InvalidArgument("export: --orbit-deg must lie in (0, 180]");
+  if (!(orbit_deg >= 0 && orbit_deg <= 180)) return Status::InvalidArgument("export: --orbit-deg must lie in [0, 180]");
   if (splat_frame < -1) return Status::InvalidArgument("export: --splat-frame is a frame number, or -1 for the neutral pose");
   return Status::Ok();
 }
@@ -85,7 +86,9 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "The mesh avatar's texture: texels per side of the skin's square (the atlas is twice it on each side).",
          "texture-size");
   o->Add("export.bake_views", &e->bake_views, "Views, spread over the capture, baked into the texture.", "bake-views");
-  o->Add("export.orbit_deg", &e->orbit_deg, "The orbit video swings the camera this many degrees each way.",
+  o->Add("export.orbit_deg", &e->orbit_deg,
+         "The orbit video swings the camera this many degrees each way; 180 turns it all the way round; 0 chooses: "
+         "45 for a capture from one side, 180 for one whose cameras go more than half way round the head.",
          "orbit-deg");
   o->Add("export.drive", &e->drive,
          "A tracked workspace whose expressions drive this avatar in a cross-reenactment video.", "drive");
@@ -152,7 +155,12 @@ Status RunExport(const ExportOptions& options, const fs::path& workspace, const 
     render.device = options.device;
     render.model = model_dir.string();
     render.orbit_deg = options.orbit_deg;
-    render.orbit_steps = 72;
+    if (render.orbit_deg == 0) {
+      CameraSet cameras;
+      HF_RETURN_IF_ERROR(CameraSet::Read(workspace / "cameras_head.json", &cameras));
+      render.orbit_deg = cameras.AzimuthSpreadDeg() > 180 ? 180 : 45;
+    }
+    render.orbit_steps = render.orbit_deg >= 180 ? 120 : 72;
     HF_RETURN_IF_ERROR(RenderVideo(workspace, face_model, render, videos, "orbit.mp4", progress, &out.files));
     if (!options.drive.empty()) {
       render = AvatarRenderOptions();

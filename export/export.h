@@ -24,7 +24,10 @@ struct ExportOptions {
   int splat_frame = -1;      // the frame whose Gaussians are written (-1: neutral expression, frame 0's pose)
   int texture_size = 512;    // the mesh avatar's texture: texels per side of the skin's square
   int bake_views = 24;       // views baked into it
-  double orbit_deg = 45;     // the orbit video swings the camera this far each way
+  // The orbit video swings the camera this far each way; 180 turns it all
+  // the way round; 0: 45 for a capture from one side, 180 for one whose
+  // cameras go more than half way round the head.
+  double orbit_deg = 0;
   std::string drive;         // a tracked workspace whose expressions drive a cross-reenactment video
   std::string device = "cpu";
   std::string chart_js = kDefaultChartJs;            // inlined into report.html

@@ -27,7 +27,8 @@ int RenderCommand(const std::vector<std::string>& args) {
               "Each render beside its frame and the error between them (x4): render | frame | error.", "side-by-side");
   options.Add("render.held_out", &render.held_out, "Only the frames training held out.", "held-out");
   options.Add("render.orbit", &render.orbit_deg,
-              "Swing the camera to +DEG and -DEG yaw round the head on the first frame (--orbit-steps renders).",
+              "Swing the camera to +DEG and -DEG yaw round the head on the first frame (--orbit-steps renders); "
+              "180 turns it all the way round.",
               "orbit");
   options.Add("render.orbit_steps", &render.orbit_steps, "Renders in an --orbit.", "orbit-steps");
   options.Add("render.background", &render.background, "Grey level behind the head, in [0, 1].", "background");

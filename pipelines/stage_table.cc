@@ -89,10 +89,12 @@ const std::vector<StageEntry>& StageTable() {
         "identity's mesh, the 53 blendshapes as morph targets with ARKit-style names, the tracked\n"
         "sequence as an animation, a texture baked from the frames), the Gaussians of one pose as\n"
         "PLY and as glTF with KHR_gaussian_splatting, the networks as safetensors with config.json,\n"
-        "and H.264 videos: the held-out frames beside their renders, an orbit round the head, and a\n"
-        "cross-reenactment when --drive names another tracked workspace.";
+        "H.264 videos (the held-out frames beside their renders, an orbit round the head, and a\n"
+        "cross-reenactment when --drive names another tracked workspace), a viewer page and\n"
+        "report.html, both self-contained. The mesh avatar and the report need only tracking.";
     t[5].reads = {"models/gaussian_style/", "tracking.json", "cameras_head.json", "capture.json", "frames/", "masks/"};
-    t[5].writes = {"export/ (avatar_mesh.glb, gaussians.ply, gaussians.glb, weights/, videos/, export.json)"};
+    t[5].writes = {"export/ (avatar_mesh.glb, gaussians.ply, gaussians.glb, weights/, videos/, viewer/index.html, "
+                   "report.html, export.json)"};
     t[5].uses_face_model = true;
     t[5].make = MakeExportJob;
     return t;

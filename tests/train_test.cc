@@ -254,6 +254,44 @@ int CountVideoFrames(const fs::path& video) {
   return std::stoi(text.substr(5));
 }
 
+// Export killed without warning in the middle (the mesh avatar written into
+// its staging folder, the rest not yet) leaves the earlier export whole; run
+// again, it writes the same bytes as an export that was never stopped.
+TEST_F(ExportStage, KilledMidExportRunsAgainToTheSameFiles) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const auto args = [](const fs::path& ws) {
+    return std::vector<std::string>{"export", "--workspace", ws.string(), "--texture-size", "64", "--bake-views", "4",
+                                    "--formats", "mesh", "gaussians", "weights", "videos"};
+  };
+  const fs::path whole = CopyOf(reference_, Scratch("export_whole")), killed = CopyOf(reference_, Scratch("export_killed"));
+  const Result uninterrupted = Headforge(args(whole));
+  ASSERT_EQ(uninterrupted.code, 0) << uninterrupted.err;
+  const fs::path log = Scratch("export_killed.log");
+  const pid_t pid = Spawn(args(killed), log, log);
+  const fs::path staged = killed / ".staging" / "export" / "export" / "avatar_mesh.glb";
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  int status = 0;
+  bool exited = false;
+  while (std::chrono::steady_clock::now() < deadline && !fs::exists(staged)) {
+    if (waitpid(pid, &status, WNOHANG) == pid) {
+      exited = true;
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  ASSERT_FALSE(exited) << "export finished before it could be killed:\n" << Slurp(log);
+  ASSERT_EQ(kill(pid, SIGKILL), 0);
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status));
+  const fs::path out = killed / "export";
+  // The earlier export (the fixture's, copied with the workspace) is left whole.
+  EXPECT_EQ(FileHash(out / "avatar_mesh.glb"), FileHash(reference_ / "export" / "avatar_mesh.glb"));
+  const Result rerun = Headforge(args(killed));
+  ASSERT_EQ(rerun.code, 0) << rerun.err;
+  for (const char* file : {"avatar_mesh.glb", "gaussians.ply", "gaussians.glb", "weights/weights.safetensors"})
+    EXPECT_EQ(FileHash(out / file), FileHash(whole / "export" / file)) << file;
+}
+
 TEST_F(ExportStage, WritesEveryFormatAndEachReadsBack) {
   ASSERT_EQ(exported_.code, 0) << exported_.err;
   const fs::path out = reference_ / "export";

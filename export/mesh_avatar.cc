@@ -5,7 +5,6 @@
 #include <cstdint>
 #include <unordered_map>
 
-#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/photo.hpp>
@@ -112,20 +111,7 @@ struct BakeView {
 
 Status ReadBakeView(const IngestedCapture& capture, const std::string& camera, const CameraIntrinsics& lens, int frame,
                     BakeView* view) {
-  const fs::path image_path = capture.FramePath(camera, frame), mask_path = capture.MaskPath(camera, frame);
-  view->image = cv::imread(image_path.string(), cv::IMREAD_COLOR);
-  view->mask = cv::imread(mask_path.string(), cv::IMREAD_GRAYSCALE);
-  if (view->image.empty()) return Status::DataError("cannot read " + image_path.string() + "; run headforge ingest again");
-  if (view->mask.empty()) return Status::DataError("cannot read " + mask_path.string() + "; run headforge ingest again");
-  if (lens.k1 != 0 || lens.k2 != 0 || lens.p1 != 0 || lens.p2 != 0) {
-    const cv::Mat k = (cv::Mat_<double>(3, 3) << lens.fx, 0, lens.cx, 0, lens.fy > 0 ? lens.fy : lens.fx, lens.cy, 0, 0, 1);
-    const cv::Mat dist = (cv::Mat_<double>(1, 4) << lens.k1, lens.k2, lens.p1, lens.p2);
-    cv::Mat image, mask;
-    cv::undistort(view->image, image, k, dist);
-    cv::undistort(view->mask, mask, k, dist);
-    view->image = image;
-    view->mask = mask;
-  }
+  HF_RETURN_IF_ERROR(ReadUndistortedFrame(capture, camera, lens, frame, &view->image, &view->mask));
   // The mask's edge holds background at grazing angles: keep clear of it.
   const int erode = std::max(1, view->mask.cols / 128);
   cv::erode(view->mask, view->mask, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * erode + 1, 2 * erode + 1)));
@@ -205,14 +191,7 @@ Status BuildMeshAvatar(const fs::path& workspace, const FaceModel& model, const 
   IngestedCapture capture;
   CameraSet cameras;
   TrackingFile tracking;
-  HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace, &capture));
-  HF_RETURN_IF_ERROR(CameraSet::Read(workspace / "cameras_head.json", &cameras));
-  HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", &tracking));
-  if (tracking.expression_names != model.expression_names())
-    return Status::DataError("tracking.json was fitted with another face model (" + tracking.face_model +
-                             "); give that model with --face-model or run headforge track again");
-  if (int(tracking.frames.size()) != capture.num_frames())
-    return Status::DataError("tracking.json and the capture hold different numbers of frames; run headforge track again");
+  HF_RETURN_IF_ERROR(ReadTrackedWorkspace(workspace, model, &capture, &cameras, &tracking));
   Atlas atlas;
   HF_RETURN_IF_ERROR(BuildAtlas(model, options.texture_size, &atlas));
 

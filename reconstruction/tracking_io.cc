@@ -1,6 +1,8 @@
 #include "reconstruction/tracking_io.h"
 
 #include <nlohmann/json.hpp>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "core/json_io.h"
 
@@ -89,6 +91,41 @@ Status ReadTracking(const fs::path& path, TrackingFile* tracking) {
     return Status::DataError(path.string() + " is damaged (" + e.what() + "); run headforge track again");
   }
   *tracking = std::move(t);
+  return Status::Ok();
+}
+
+Status ReadTrackedWorkspace(const fs::path& workspace, const FaceModel& model, IngestedCapture* capture,
+                            CameraSet* cameras, TrackingFile* tracking) {
+  HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace, capture));
+  HF_RETURN_IF_ERROR(CameraSet::Read(workspace / "cameras_head.json", cameras));
+  HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", tracking));
+  const int frames = capture->num_frames();
+  if (int(tracking->frames.size()) != frames)
+    return Status::DataError("tracking.json holds " + std::to_string(tracking->frames.size()) +
+                             " frames and the capture " + std::to_string(frames) +
+                             ": the workspace's stages are out of step; run headforge track again (or headforge run)");
+  if (tracking->expression_names != model.expression_names())
+    return Status::DataError("tracking.json was fitted with another face model (" + tracking->face_model +
+                             "); give that model with --face-model or run headforge track again");
+  return Status::Ok();
+}
+
+Status ReadUndistortedFrame(const IngestedCapture& capture, const std::string& camera, const CameraIntrinsics& lens,
+                            int frame, cv::Mat* image, cv::Mat* mask) {
+  const fs::path image_path = capture.FramePath(camera, frame), mask_path = capture.MaskPath(camera, frame);
+  *image = cv::imread(image_path.string(), cv::IMREAD_COLOR);
+  *mask = cv::imread(mask_path.string(), cv::IMREAD_GRAYSCALE);
+  if (image->empty()) return Status::DataError("cannot read " + image_path.string() + "; run headforge ingest again");
+  if (mask->empty()) return Status::DataError("cannot read " + mask_path.string() + "; run headforge ingest again");
+  if (lens.k1 != 0 || lens.k2 != 0 || lens.p1 != 0 || lens.p2 != 0) {
+    const cv::Mat k = (cv::Mat_<double>(3, 3) << lens.fx, 0, lens.cx, 0, lens.fy > 0 ? lens.fy : lens.fx, lens.cy, 0, 0, 1);
+    const cv::Mat dist = (cv::Mat_<double>(1, 4) << lens.k1, lens.k2, lens.p1, lens.p2);
+    cv::Mat undistorted, undistorted_mask;
+    cv::undistort(*image, undistorted, k, dist);
+    cv::undistort(*mask, undistorted_mask, k, dist);
+    *image = undistorted;
+    *mask = undistorted_mask;
+  }
   return Status::Ok();
 }
 

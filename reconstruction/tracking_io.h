@@ -6,6 +6,11 @@
 #include <string>
 #include <vector>
 
+#include <opencv2/core.hpp>
+
+#include "capture/capture_io.h"
+#include "core/camera_set.h"
+#include "core/face_model.h"
 #include "core/fs.h"
 #include "core/status.h"
 #include "reconstruction/tracker.h"
@@ -38,5 +43,15 @@ Status WriteTracking(const TrackingFile& tracking, const fs::path& path);
 // Reads tracking.json, checking its version and that every frame carries one
 // weight per expression name.
 Status ReadTracking(const fs::path& path, TrackingFile* tracking);
+
+// What the stages after track read of a workspace: the ingested capture, the
+// head-frame cameras and tracking.json, checked to agree with each other and
+// with `model` (the face model tracking was fitted with).
+Status ReadTrackedWorkspace(const fs::path& workspace, const FaceModel& model, IngestedCapture* capture,
+                            CameraSet* cameras, TrackingFile* tracking);
+
+// A frame of `camera` and its head mask, with the lens's distortion removed.
+Status ReadUndistortedFrame(const IngestedCapture& capture, const std::string& camera, const CameraIntrinsics& lens,
+                            int frame, cv::Mat* image, cv::Mat* mask);
 
 }  // namespace headforge

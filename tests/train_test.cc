@@ -243,6 +243,31 @@ class ExportStage : public TrainStage {
 };
 Result ExportStage::exported_;
 
+// The mesh avatar as the fixture's export baked it (texture 128, 8 views),
+// on a core Mesh with its texture, unlit, for the mesh renderer.
+struct BakedMeshAvatar {
+  MeshAvatar avatar;
+  Texture texture;
+  Mesh mesh;  // its material points at `texture`: the struct stays where it was made
+};
+void BakeAsExported(const fs::path& ws, BakedMeshAvatar* baked) {
+  FaceModel model;
+  ASSERT_TRUE(FaceModel::Load(DefaultDataDir() + "/ict_facekit/ict_face_model.h5", &model).ok());
+  MeshAvatarOptions options;
+  options.texture_size = 128;
+  options.bake_views = 8;
+  NullProgress quiet;
+  ASSERT_TRUE(BuildMeshAvatar(ws, model, options, &quiet, &baked->avatar).ok());
+  baked->avatar.texture.convertTo(baked->texture.image, CV_32FC3, 1.0 / 255);
+  baked->mesh.triangles = baked->avatar.triangles;
+  baked->mesh.uvs = baked->avatar.texcoords;
+  baked->mesh.uvs.row(1) = 1.0f - baked->avatar.texcoords.row(1).array();  // the renderer's v runs up
+  Material material;
+  material.texture = &baked->texture;
+  material.lit = false;
+  baked->mesh.materials = {material};
+}
+
 int CountVideoFrames(const fs::path& video) {
   const fs::path out = Scratch("ffprobe.txt");
   const std::string command = "ffprobe -v error -select_streams v:0 -count_frames -show_entries "
@@ -363,26 +388,12 @@ TEST_F(ExportStage, TheExportedWeightsRenderTheSameImages) {
 // over the head mask where the mesh covers it.
 TEST_F(ExportStage, TheBakedMeshAvatarRedrawsTheFrames) {
   ASSERT_EQ(exported_.code, 0) << exported_.err;
-  FaceModel model;
-  ASSERT_TRUE(FaceModel::Load(DefaultDataDir() + "/ict_facekit/ict_face_model.h5", &model).ok());
-  MeshAvatarOptions options;
-  options.texture_size = 128;
-  options.bake_views = 8;
-  MeshAvatar avatar;
-  NullProgress quiet;
-  ASSERT_TRUE(BuildMeshAvatar(reference_, model, options, &quiet, &avatar).ok());
+  BakedMeshAvatar baked;
+  ASSERT_NO_FATAL_FAILURE(BakeAsExported(reference_, &baked));
+  const MeshAvatar& avatar = baked.avatar;
+  Mesh& mesh = baked.mesh;
   EXPECT_EQ(avatar.target_names.size(), 53u);
   EXPECT_EQ(avatar.times.size(), 125u);
-  Texture texture;
-  avatar.texture.convertTo(texture.image, CV_32FC3, 1.0 / 255);
-  Mesh mesh;
-  mesh.triangles = avatar.triangles;
-  mesh.uvs = avatar.texcoords;
-  mesh.uvs.row(1) = 1.0f - avatar.texcoords.row(1).array();  // the renderer's v runs up
-  Material material;
-  material.texture = &texture;
-  material.lit = false;
-  mesh.materials = {material};
   nlohmann::json cameras;
   ASSERT_TRUE(ReadJson(reference_ / "cameras_head.json", &cameras).ok());
   const nlohmann::json& lens = cameras["cameras"][0];
@@ -453,24 +464,10 @@ TEST_F(ExportStage, TheReportReferencesOnlyFilesThatExist) {
 // offset, so the pinhole is centred).
 TEST_F(ExportStage, ThreeJsPlaysTheMeshAvatarAsTheMeshRendererDrawsIt) {
   ASSERT_EQ(exported_.code, 0) << exported_.err;
-  FaceModel model;
-  ASSERT_TRUE(FaceModel::Load(DefaultDataDir() + "/ict_facekit/ict_face_model.h5", &model).ok());
-  MeshAvatarOptions options;
-  options.texture_size = 128;
-  options.bake_views = 8;
-  MeshAvatar avatar;
-  NullProgress quiet;
-  ASSERT_TRUE(BuildMeshAvatar(reference_, model, options, &quiet, &avatar).ok());
-  Texture texture;
-  avatar.texture.convertTo(texture.image, CV_32FC3, 1.0 / 255);
-  Mesh mesh;
-  mesh.triangles = avatar.triangles;
-  mesh.uvs = avatar.texcoords;
-  mesh.uvs.row(1) = 1.0f - avatar.texcoords.row(1).array();
-  Material material;
-  material.texture = &texture;
-  material.lit = false;
-  mesh.materials = {material};
+  BakedMeshAvatar baked;
+  ASSERT_NO_FATAL_FAILURE(BakeAsExported(reference_, &baked));
+  const MeshAvatar& avatar = baked.avatar;
+  Mesh& mesh = baked.mesh;
   PinholeCamera camera;
   camera.width = 320;
   camera.height = 320;

@@ -2,7 +2,6 @@
 
 #include <torch/torch.h>
 
-#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -19,23 +18,10 @@
 namespace headforge {
 namespace {
 
-// The frame and its mask, lens distortion removed, resized by `scale`.
+// The frame and its mask, lens distortion removed, resized to `size`.
 Status ReadView(const IngestedCapture& capture, const IngestedCamera& cam, const CameraIntrinsics& lens, int frame,
                 cv::Size size, cv::Mat* image, cv::Mat* mask) {
-  const fs::path image_path = capture.FramePath(cam.name, frame), mask_path = capture.MaskPath(cam.name, frame);
-  *image = cv::imread(image_path.string(), cv::IMREAD_COLOR);
-  *mask = cv::imread(mask_path.string(), cv::IMREAD_GRAYSCALE);
-  if (image->empty()) return Status::DataError("cannot read " + image_path.string() + "; run headforge ingest again");
-  if (mask->empty()) return Status::DataError("cannot read " + mask_path.string() + "; run headforge ingest again");
-  if (lens.k1 != 0 || lens.k2 != 0 || lens.p1 != 0 || lens.p2 != 0) {
-    const cv::Mat k = (cv::Mat_<double>(3, 3) << lens.fx, 0, lens.cx, 0, lens.fy > 0 ? lens.fy : lens.fx, lens.cy, 0, 0, 1);
-    const cv::Mat dist = (cv::Mat_<double>(1, 4) << lens.k1, lens.k2, lens.p1, lens.p2);
-    cv::Mat undistorted, undistorted_mask;
-    cv::undistort(*image, undistorted, k, dist);
-    cv::undistort(*mask, undistorted_mask, k, dist);
-    *image = undistorted;
-    *mask = undistorted_mask;
-  }
+  HF_RETURN_IF_ERROR(ReadUndistortedFrame(capture, cam.name, lens, frame, image, mask));
   if (image->size() != size) {
     cv::resize(*image, *image, size, 0, 0, cv::INTER_AREA);
     cv::resize(*mask, *mask, size, 0, 0, cv::INTER_AREA);
@@ -92,17 +78,8 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   IngestedCapture capture;
   CameraSet cameras;
   TrackingFile tracking;
-  HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace, &capture));
-  HF_RETURN_IF_ERROR(CameraSet::Read(workspace / "cameras_head.json", &cameras));
-  HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", &tracking));
+  HF_RETURN_IF_ERROR(ReadTrackedWorkspace(workspace, model, &capture, &cameras, &tracking));
   const int frames = capture.num_frames();
-  if (int(tracking.frames.size()) != frames)
-    return Status::DataError("tracking.json holds " + std::to_string(tracking.frames.size()) +
-                             " frames and the capture " + std::to_string(frames) +
-                             ": the workspace's stages are out of step; run headforge track again (or headforge run)");
-  if (tracking.expression_names != model.expression_names())
-    return Status::DataError("tracking.json was fitted with another face model (" + tracking.face_model +
-                             "); give that model with --face-model or run headforge track again");
   if (options.resolution < 16) return Status::InvalidArgument("the training resolution must be at least 16 pixels");
   AvatarDataset out;
   out.num_frames = frames;

@@ -2,7 +2,8 @@
 // LibTorch (the train stage, the benches): options with presets, the run, and
 // what it reports. The gaussian-style model's stages 1 (canonical Gaussians
 // and the triplane generator) and 2 (the attention deformation and the
-// region loss) run here; see docs/avatar.md.
+// region loss), and the gan-avatar model's appearance GAN, run here; see
+// docs/avatar.md.
 #pragma once
 
 #include <cstdint>
@@ -18,8 +19,9 @@ namespace headforge {
 
 struct TrainOptions {
   std::string model = "gaussian-style";
-  // draft: two CPU cores, 256 px, about 15 minutes; standard: one GPU, 512 px;
-  // high: the paper's scale. A preset fills only the options not given.
+  // draft: two CPU cores, about 15 minutes; standard: one GPU; high: the
+  // paper's scale. A preset fills only the options not given; the models
+  // have presets of their own.
   std::string preset = "draft";
   std::string device = "cpu";   // cpu, or cuda (cuda:N) with a CUDA LibTorch
   int resolution = 256;         // the frames' longer side, pixels
@@ -40,6 +42,17 @@ struct TrainOptions {
   int feature_channels = 32;
   int triplane_resolution = 64;
   int latent_dim = 64;
+  // gan-avatar: the volume render's longer side (--resolution is the
+  // super-resolved output's; their ratio a power of two), views per batch,
+  // the discriminator's step, R1's weight and interval, ADA's target and
+  // the samples per ray (stratified, then importance).
+  int render_resolution = 32;
+  int batch = 4;
+  double lr_discriminator = 2e-3;
+  double r1_gamma = 0.2;
+  int r1_every = 4;
+  double ada_target = 0.6;
+  int coarse_samples = 24, fine_samples = 24;
   int log_every = 50, eval_every = 1000, preview_every = 1000, checkpoint_every = 250;
   int seed = 0;
 

@@ -100,9 +100,10 @@ TriplaneGeneratorImpl::TriplaneGeneratorImpl(const TriplaneGeneratorOptions& opt
       "to_planes", ModulatedConv2d(options.channels, 3 * options.plane_channels, 1, options.w_dim, false));
 }
 
-torch::Tensor TriplaneGeneratorImpl::forward(const torch::Tensor& latent) {
-  const int64_t batch = latent.size(0);
-  const torch::Tensor w = mapping_->forward(latent);
+torch::Tensor TriplaneGeneratorImpl::Map(const torch::Tensor& latent) { return mapping_->forward(latent); }
+
+torch::Tensor TriplaneGeneratorImpl::Synthesize(const torch::Tensor& w) {
+  const int64_t batch = w.size(0);
   auto act = [](const torch::Tensor& t) { return F::leaky_relu(t, F::LeakyReLUFuncOptions().negative_slope(0.2)); };
   torch::Tensor x = constant_.expand({batch, -1, -1, -1});
   size_t next = 0;

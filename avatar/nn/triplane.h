@@ -38,7 +38,11 @@ struct TriplaneGeneratorOptions {
 class TriplaneGeneratorImpl : public torch::nn::Module {
  public:
   explicit TriplaneGeneratorImpl(const TriplaneGeneratorOptions& options);
-  torch::Tensor forward(const torch::Tensor& latent);
+  torch::Tensor forward(const torch::Tensor& latent) { return Synthesize(Map(latent)); }
+  // The two halves: the mapping network (latent -> w [B, w_dim]) and the
+  // synthesis (w -> planes).
+  torch::Tensor Map(const torch::Tensor& latent);
+  torch::Tensor Synthesize(const torch::Tensor& w);
   const TriplaneGeneratorOptions& options() const { return options_; }
 
  private:

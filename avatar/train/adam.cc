@@ -13,12 +13,12 @@ void Adam::Add(torch::Tensor* param, double lr, bool rows) {
 void Adam::Step() {
   torch::NoGradGuard no_grad;
   ++t_;
-  const double c1 = 1 - std::pow(kBeta1, t_), c2 = 1 - std::pow(kBeta2, t_);
+  const double c1 = 1 - std::pow(beta1_, t_), c2 = 1 - std::pow(beta2_, t_);
   for (Slot& s : slots_) {
     const torch::Tensor& g = s.param->grad();
     if (!g.defined()) continue;
-    s.m.mul_(kBeta1).add_(g, 1 - kBeta1);
-    s.v.mul_(kBeta2).addcmul_(g, g, 1 - kBeta2);
+    s.m.mul_(beta1_).add_(g, 1 - beta1_);
+    s.v.mul_(beta2_).addcmul_(g, g, 1 - beta2_);
     const torch::Tensor denom = (s.v / c2).sqrt_().add_(kEps);
     s.param->addcdiv_(s.m, denom, -s.lr / c1);
   }

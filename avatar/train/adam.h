@@ -15,6 +15,8 @@ namespace headforge {
 
 class Adam {
  public:
+  // The moments' decay rates (a GAN's networks take beta1 = 0, StyleGAN2's 0 and 0.99).
+  explicit Adam(double beta1 = 0.9, double beta2 = 0.999) : beta1_(beta1), beta2_(beta2) {}
   // `param` must outlive the optimiser (Gaussian parameters are replaced by
   // densification: the optimiser follows the pointer). `rows`: a per-Gaussian
   // parameter that Edit() gathers and extends.
@@ -43,7 +45,8 @@ class Adam {
     bool rows;
     torch::Tensor m, v;
   };
-  static constexpr double kBeta1 = 0.9, kBeta2 = 0.999, kEps = 1e-15;
+  static constexpr double kEps = 1e-15;
+  double beta1_, beta2_;
   std::vector<Slot> slots_;
   int64_t t_ = 0;
 };

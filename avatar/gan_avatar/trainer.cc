@@ -1,0 +1,442 @@
+// The gan-avatar model's GAN training loop (EG3D's recipe at small scale):
+// per step one generator update and one discriminator update on a batch of
+// real views and as many generated ones, rendered from cameras drawn from
+// the training views.
+#include "avatar/gan_avatar/trainer.h"
+
+#include <torch/torch.h>
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "avatar/gaussian_style/trainer.h"
+#include "avatar/nn/augment.h"
+#include "avatar/nn/discriminator.h"
+#include "avatar/train/adam.h"
+#include "avatar/train/checkpoint.h"
+#include "avatar/train/device.h"
+#include "avatar/train/tensor_image.h"
+#include "core/image_io.h"
+#include "core/interrupt.h"
+#include "core/json_io.h"
+#include "core/log.h"
+
+namespace headforge {
+namespace {
+
+namespace F = torch::nn::functional;
+
+// The background of the real images (outside their masks) and of the
+// renders (where the volume is transparent); also the evaluation's.
+constexpr double kBackground = 0.5;
+// Padding of the head's box round the tracked mesh, metres (hair).
+constexpr double kBoxPadding = 0.04;
+// The running mean of w follows the batches' with this weight.
+constexpr double kWAverageRate = 0.01;
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+torch::Tensor Resize(const torch::Tensor& x, int64_t height, int64_t width) {
+  return F::interpolate(x, F::InterpolateFuncOptions()
+                               .size(std::vector<int64_t>{height, width})
+                               .mode(torch::kBilinear)
+                               .align_corners(false));
+}
+
+struct GanState {
+  int step = 0;
+  double loss_g = 0, loss_d = 0, r1 = 0, real_accuracy = 0, fake_accuracy = 0;
+  int64_t count = 0, r1_count = 0;
+  double seconds = 0;
+};
+
+class GanTrainer {
+ public:
+  GanTrainer(const TrainOptions& options, const AvatarDataset& data, torch::Device device)
+      : options_(options), data_(data), device_(device), gen_(at::detail::createCPUGenerator(options.seed)),
+        adam_g_(0.0, 0.99), adam_d_(0.0, 0.99), ada_(options.ada_target) {}
+
+  Status Start(const fs::path& checkpoint, StatsLog* stats);
+  Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
+  Status Finish(const fs::path& out_dir, TrainSummary* summary);
+  int step() const { return state_.step; }
+
+ private:
+  void Step(int step);
+  // The discriminator's input: the image and the raw render brought to its size.
+  torch::Tensor DualImage(const torch::Tensor& image, const torch::Tensor& raw) const {
+    return torch::cat({image, Resize(raw, image.size(2), image.size(3))}, 1);
+  }
+  std::vector<ViewScores> Evaluate(const fs::path& write_dir, int stride);
+  Status WritePreview(const fs::path& dir, int step);
+  Status SaveCheckpoint(const fs::path& path, size_t stats_lines) const;
+  Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
+  SplatCamera RenderCamera(const AvatarView& view) const { return view.view.Downscaled(double(data_.width) / render_w_); }
+  torch::Tensor RenderMean(const std::vector<SplatCamera>& cameras);
+
+  TrainOptions options_;
+  const AvatarDataset& data_;
+  torch::Device device_;
+  at::Generator gen_;
+  GanAvatarOptions arch_;
+  GanGenerator generator_{nullptr};
+  nn::Discriminator discriminator_{nullptr};
+  std::vector<torch::Tensor> g_params_, d_params_;
+  Adam adam_g_, adam_d_;
+  nn::AdaController ada_;
+  torch::Tensor w_average_;               // [w_dim], the running mean of the mapped w
+  torch::Tensor reals_, conditions_;      // [N, 3, H, W] over the background; [N, 16]
+  int render_w_ = 0, render_h_ = 0;
+  GanState state_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+};
+
+Status GanTrainer::Start(const fs::path& checkpoint, StatsLog* stats) {
+  GanRenderSize(options_, data_, &render_w_, &render_h_);
+  arch_ = GanArchitecture(options_, data_);
+  torch::manual_seed(uint64_t(options_.seed));  // the networks' initial weights
+  generator_ = GanGenerator(arch_);
+  nn::DiscriminatorOptions d;
+  d.in_channels = 6;
+  d.resolution = std::max(data_.width, data_.height);
+  d.channels = 32;
+  d.condition_dim = 16;
+  discriminator_ = nn::Discriminator(d);
+  generator_->to(device_);
+  discriminator_->to(device_);
+  g_params_ = generator_->parameters();
+  d_params_ = discriminator_->parameters();
+  for (torch::Tensor& t : g_params_) adam_g_.Add(&t, options_.lr_network, false);
+  for (torch::Tensor& t : d_params_) adam_d_.Add(&t, options_.lr_discriminator, false);
+  w_average_ = torch::zeros({arch_.w_dim}, torch::TensorOptions().device(device_));
+  std::vector<torch::Tensor> reals, conditions;
+  for (const AvatarView& view : data_.train) {
+    reals.push_back(view.image * view.mask + kBackground * (1 - view.mask));
+    conditions.push_back(CameraCondition(view.view));
+  }
+  reals_ = torch::stack(reals).to(device_);
+  conditions_ = torch::stack(conditions).to(device_);
+  std::error_code ec;
+  if (fs::exists(checkpoint, ec)) HF_RETURN_IF_ERROR(LoadCheckpoint(checkpoint, stats));
+  return Status::Ok();
+}
+
+void GanTrainer::Step(int step) {
+  const int64_t batch = options_.batch, views = int64_t(data_.train.size());
+  const torch::Tensor real_index = torch::randint(views, {batch}, gen_, torch::kLong);
+  const torch::Tensor fake_index = torch::randint(views, {batch}, gen_, torch::kLong);
+  const torch::Tensor z = torch::randn({batch, arch_.z_dim}, gen_).to(device_);
+  std::vector<SplatCamera> cameras;
+  for (int64_t b = 0; b < batch; ++b) cameras.push_back(RenderCamera(data_.train[size_t(fake_index[b].item<int64_t>())]));
+  const torch::Tensor fake_c = conditions_.index_select(0, fake_index.to(device_));
+  const double p = ada_.p();
+
+  // Generator: make the discriminator call the renders real.
+  const torch::Tensor w = generator_->Map(z);
+  const GanRender fake = generator_->Render(w, cameras, data_.width, data_.height, kBackground, &gen_);
+  const torch::Tensor fake_dual = DualImage(fake.image, fake.raw);
+  const torch::Tensor loss_g = F::softplus(-discriminator_->forward(nn::Augment(fake_dual, p, 6, gen_), fake_c)).mean();
+  loss_g.backward();
+  adam_g_.Step();
+  adam_g_.ZeroGrad();
+  adam_d_.ZeroGrad();
+
+  // Discriminator: the same renders (detached) as fake, a batch of frames as real.
+  const torch::Tensor real = reals_.index_select(0, real_index.to(device_));
+  const torch::Tensor real_raw = Resize(real, render_h_, render_w_);
+  const torch::Tensor real_c = conditions_.index_select(0, real_index.to(device_));
+  const torch::Tensor fake_logits = discriminator_->forward(nn::Augment(fake_dual.detach(), p, 6, gen_), fake_c);
+  const bool r1_now = options_.r1_gamma > 0 && step % options_.r1_every == 0;
+  torch::Tensor real_in = nn::Augment(DualImage(real, real_raw), p, 6, gen_);
+  if (r1_now) real_in = real_in.detach().requires_grad_(true);
+  const torch::Tensor real_logits = discriminator_->forward(real_in, real_c);
+  torch::Tensor loss_d = F::softplus(fake_logits).mean() + F::softplus(-real_logits).mean();
+  if (r1_now) {
+    // Lazy R1 (StyleGAN2): every r1_every steps, scaled by it.
+    const torch::Tensor grad =
+        torch::autograd::grad({real_logits.sum()}, {real_in}, {}, /*retain_graph=*/true, /*create_graph=*/true)[0];
+    const torch::Tensor r1 = grad.pow(2).sum({1, 2, 3}).mean();
+    loss_d = loss_d + 0.5 * options_.r1_gamma * options_.r1_every * r1;
+    state_.r1 += r1.item<double>();
+    ++state_.r1_count;
+  }
+  loss_d.backward();
+  adam_d_.Step();
+  adam_d_.ZeroGrad();
+  adam_g_.ZeroGrad();
+  ada_.Observe(real_logits);
+  {
+    torch::NoGradGuard no_grad;
+    w_average_.lerp_(w.detach().mean(0), kWAverageRate);
+  }
+  state_.loss_g += loss_g.item<double>();
+  state_.loss_d += loss_d.item<double>();
+  state_.real_accuracy += (real_logits > 0).to(torch::kFloat64).mean().item<double>();
+  state_.fake_accuracy += (fake_logits < 0).to(torch::kFloat64).mean().item<double>();
+  ++state_.count;
+}
+
+torch::Tensor GanTrainer::RenderMean(const std::vector<SplatCamera>& cameras) {
+  const torch::Tensor w = w_average_.unsqueeze(0).expand({int64_t(cameras.size()), -1});
+  return generator_->Render(w, cameras, data_.width, data_.height, kBackground, nullptr).image.clamp(0, 1).cpu();
+}
+
+std::vector<ViewScores> GanTrainer::Evaluate(const fs::path& write_dir, int stride) {
+  torch::NoGradGuard no_grad;
+  const torch::Tensor background = torch::full({3}, kBackground);
+  std::vector<ViewScores> scores;
+  for (size_t i = 0; i < data_.test.size(); i += size_t(std::max(stride, 1))) {
+    const AvatarView& view = data_.test[i];
+    // No expression mapping yet: the mean latent, from the view's camera.
+    const torch::Tensor render = RenderMean({RenderCamera(view)})[0];
+    ViewScores s = ScoreRender(render, view.image, view.mask, background);
+    s.frame = view.frame;
+    s.camera = view.camera;
+    scores.push_back(s);
+    if (write_dir.empty()) continue;
+    char name[64];
+    std::snprintf(name, sizeof(name), "%s_%06d.png", view.camera.c_str(), view.frame);
+    WriteImageAtomic(write_dir / name, TensorToImage(ComparisonStrip(render, view.image, view.mask, kBackground))).ok();
+  }
+  return scores;
+}
+
+Status GanTrainer::WritePreview(const fs::path& dir, int step) {
+  torch::NoGradGuard no_grad;
+  // Four random latents (the same every preview) from four training cameras,
+  // over the mean latent from the same cameras.
+  at::Generator fixed = at::detail::createCPUGenerator(uint64_t(options_.seed) + 7);
+  const int64_t n = 4;
+  std::vector<SplatCamera> cameras;
+  for (int64_t k = 0; k < n; ++k)
+    cameras.push_back(RenderCamera(data_.train[size_t(k * int64_t(data_.train.size()) / n)]));
+  const torch::Tensor z = torch::randn({n, arch_.z_dim}, fixed).to(device_);
+  const torch::Tensor random =
+      generator_->Render(generator_->Map(z), cameras, data_.width, data_.height, kBackground, nullptr).image;
+  const torch::Tensor mean = RenderMean(cameras);
+  const torch::Tensor top = torch::cat(random.clamp(0, 1).cpu().unbind(0), 2);
+  const torch::Tensor bottom = torch::cat(mean.unbind(0), 2);
+  char name[32];
+  std::snprintf(name, sizeof(name), "step_%06d.png", step);
+  HF_RETURN_IF_ERROR(EnsureDirectory(dir));
+  return WriteImageAtomic(dir / name, TensorToImage(torch::cat({top, bottom}, 1)));
+}
+
+Status GanTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
+  Checkpoint c;
+  c.Put("step", int64_t(state_.step));
+  for (const auto& item : generator_->named_parameters()) c.Put("generator." + item.key(), item.value());
+  for (const auto& item : discriminator_->named_parameters()) c.Put("discriminator." + item.key(), item.value());
+  adam_g_.Save("adam_g.", &c);
+  adam_d_.Save("adam_d.", &c);
+  c.Put("ada", torch::tensor(ada_.State(), torch::kFloat64));
+  c.Put("w_average", w_average_);
+  c.Put("generator_state", gen_.get_state());
+  c.Put("sums", torch::tensor({state_.loss_g, state_.loss_d, state_.r1, state_.real_accuracy, state_.fake_accuracy,
+                               double(state_.count), double(state_.r1_count)},
+                              torch::kFloat64));
+  c.Put("seconds", state_.seconds + Seconds(start_));
+  c.Put("stats_lines", int64_t(stats_lines));
+  return c.Save(path);
+}
+
+Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
+  Checkpoint c;
+  HF_RETURN_IF_ERROR(Checkpoint::Load(path, &c));
+  const Status damaged = Status::DataError(path.string() + " is not this training's checkpoint; delete it to start over");
+  int64_t step = 0, lines = 0;
+  torch::Tensor generator_state, ada, sums;
+  if (!c.Get("step", &step) || !c.Get("generator_state", &generator_state) || !c.Get("stats_lines", &lines) ||
+      !c.Get("ada", &ada) || !c.Get("sums", &sums) || !c.Get("seconds", &state_.seconds) ||
+      !c.Get("w_average", &w_average_))
+    return damaged;
+  {
+    torch::NoGradGuard no_grad;
+    auto restore = [&](const std::string& prefix, torch::nn::Module& module) {
+      for (auto& item : module.named_parameters()) {
+        torch::Tensor value;
+        if (!c.Get(prefix + item.key(), &value) || !value.sizes().equals(item.value().sizes())) return false;
+        item.value().copy_(value);
+      }
+      return true;
+    };
+    if (!restore("generator.", *generator_) || !restore("discriminator.", *discriminator_)) return damaged;
+  }
+  if (!adam_g_.Load("adam_g.", c) || !adam_d_.Load("adam_d.", c)) return damaged;
+  ada_.Restore(std::vector<double>(ada.data_ptr<double>(), ada.data_ptr<double>() + ada.numel()));
+  const double* s = sums.data_ptr<double>();
+  state_.loss_g = s[0];
+  state_.loss_d = s[1];
+  state_.r1 = s[2];
+  state_.real_accuracy = s[3];
+  state_.fake_accuracy = s[4];
+  state_.count = int64_t(s[5]);
+  state_.r1_count = int64_t(s[6]);
+  w_average_ = w_average_.to(device_);
+  gen_.set_state(generator_state);
+  state_.step = int(step);
+  HF_LOG(Info) << "train: resuming from the checkpoint at step " << step;
+  return stats->Truncate(size_t(lines));
+}
+
+Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
+  auto elapsed = [&] { return state_.seconds + Seconds(start_); };
+  progress->Start("train: gan-avatar", options_.steps);
+  progress->Advance(state_.step);
+  for (int step = state_.step + 1; step <= options_.steps; ++step) {
+    Step(step);
+    if (!std::isfinite(state_.loss_g) || !std::isfinite(state_.loss_d)) {
+      progress->Finish("diverged");
+      return Status::Internal("train: the GAN's losses became non-finite at step " + std::to_string(step) +
+                              "; lower --lr-network and --lr-discriminator or raise --r1-gamma (a changed option "
+                              "starts training over)");
+    }
+    state_.step = step;
+    progress->Advance();
+    const bool out_of_time = options_.max_minutes > 0 && elapsed() > 60.0 * options_.max_minutes;
+    const bool last = step == options_.steps || out_of_time;
+    if (step % options_.log_every == 0 || last) {
+      const double n = double(std::max<int64_t>(state_.count, 1));
+      stats->Append(nlohmann::json{{"step", step},
+                                   {"loss_g", state_.loss_g / n},
+                                   {"loss_d", state_.loss_d / n},
+                                   {"r1", state_.r1 / double(std::max<int64_t>(state_.r1_count, 1))},
+                                   {"d_real_accuracy", state_.real_accuracy / n},
+                                   {"d_fake_accuracy", state_.fake_accuracy / n},
+                                   {"augment_p", ada_.p()},
+                                   {"ada_rt", ada_.rt()},
+                                   {"seconds", elapsed()}}
+                        .dump());
+      GanState next;
+      next.step = state_.step;
+      next.seconds = state_.seconds;
+      state_ = next;
+    }
+    if (!last && options_.eval_every > 0 && step % options_.eval_every == 0) {
+      const ViewScores s = MeanScores(Evaluate({}, 5));
+      stats->Append(nlohmann::json{{"step", step}, {"test_psnr_masked", s.psnr_masked},
+                                   {"test_ssim_masked", s.ssim_masked}, {"seconds", elapsed()}}
+                        .dump());
+      HF_LOG(Info) << "train: step " << step << ", held-out PSNR of the mean latent " << s.psnr_masked
+                   << " dB over the head (every 5th view), augmentation p " << ada_.p();
+    }
+    if (options_.preview_every > 0 && step % options_.preview_every == 0)
+      HF_RETURN_IF_ERROR(WritePreview(out_dir / "previews", step));
+    if (out_of_time) {
+      HF_LOG(Info) << "train: time limit of " << options_.max_minutes << " min reached at step " << step;
+      break;
+    }
+    const bool stop = InterruptRequested();
+    if (!last && (stop || step % options_.checkpoint_every == 0))
+      HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, stats->size()));
+    if (stop) {
+      progress->Finish("interrupted");
+      return Status::Interrupted("training stopped at step " + std::to_string(step) + " of " +
+                                 std::to_string(options_.steps) +
+                                 "; the checkpoint is saved: run the same command again to resume");
+    }
+  }
+  progress->Finish(std::to_string(state_.step) + " steps");
+  state_.seconds = elapsed();
+  start_ = std::chrono::steady_clock::now();
+  return Status::Ok();
+}
+
+Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
+  HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "held_out"));
+  const std::vector<ViewScores> scores = Evaluate(out_dir / "held_out", 1);
+  const ViewScores mean = MeanScores(scores);
+  nlohmann::json views = nlohmann::json::array();
+  for (const ViewScores& s : scores)
+    views.push_back({{"frame", s.frame}, {"camera", s.camera}, {"psnr_masked", s.psnr_masked},
+                     {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full}, {"ssim", s.ssim_full}});
+  const nlohmann::json eval = {
+      {"held_out_frames", "the last " + std::to_string(data_.num_frames - data_.first_test_frame) + " of " +
+                              std::to_string(data_.num_frames)},
+      {"background", kBackground},
+      {"latent", "the running mean of w: no expression mapping yet, so the held-out expressions are not driven"},
+      {"mean", {{"psnr_masked", mean.psnr_masked}, {"ssim_masked", mean.ssim_masked}, {"psnr", mean.psnr_full},
+                {"ssim", mean.ssim_full}}},
+      {"views", views}};
+  HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "eval.json", eval, 1));
+  // The model: the generator's weights and the mean latent; config.json its architecture.
+  Checkpoint model;
+  for (const auto& item : generator_->named_parameters()) model.Put("generator." + item.key(), item.value());
+  model.Put("w_average", w_average_);
+  HF_RETURN_IF_ERROR(model.Save(out_dir / "model.pt"));
+  const nlohmann::json config = {
+      {"model", "gan-avatar"},
+      {"version", 1},
+      {"architecture",
+       {{"z_dim", arch_.z_dim}, {"w_dim", arch_.w_dim}, {"mapping_layers", arch_.mapping_layers},
+        {"synthesis_channels", arch_.synthesis_channels}, {"plane_resolution", arch_.plane_resolution},
+        {"plane_channels", arch_.plane_channels}, {"decoder_hidden", arch_.decoder_hidden},
+        {"feature_channels", arch_.feature_channels}, {"coarse_samples", arch_.coarse_samples},
+        {"fine_samples", arch_.fine_samples}, {"super_resolution_doublings", arch_.super_resolution_doublings},
+        {"density_scale", arch_.density_scale},
+        {"box_min", arch_.box.min}, {"box_max", arch_.box.max}}},
+      {"render_size", {render_w_, render_h_}},
+      {"output_size", {data_.width, data_.height}},
+      {"background", kBackground},
+      {"training", {{"steps", state_.step}, {"batch", options_.batch}, {"seconds", state_.seconds},
+                    {"seed", options_.seed}, {"preset", options_.preset}}}};
+  HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "config.json", config, 1));
+  summary->steps = state_.step;
+  summary->seconds = state_.seconds;
+  summary->test_views = int(scores.size());
+  summary->psnr_masked = mean.psnr_masked;
+  summary->ssim_masked = mean.ssim_masked;
+  summary->psnr_full = mean.psnr_full;
+  summary->ssim_full = mean.ssim_full;
+  summary->l1_masked = mean.l1_masked;
+  return Status::Ok();
+}
+
+}  // namespace
+
+void GanRenderSize(const TrainOptions& options, const AvatarDataset& data, int* width, int* height) {
+  const double factor = double(options.render_resolution) / std::max(data.width, data.height);
+  *width = std::max(1, int(std::lround(data.width * factor)));
+  *height = std::max(1, int(std::lround(data.height * factor)));
+}
+
+GanAvatarOptions GanArchitecture(const TrainOptions& options, const AvatarDataset& data) {
+  GanAvatarOptions arch;
+  arch.z_dim = options.latent_dim;
+  arch.plane_resolution = options.triplane_resolution;
+  arch.feature_channels = options.feature_channels;
+  arch.coarse_samples = options.coarse_samples;
+  arch.fine_samples = options.fine_samples;
+  arch.super_resolution_doublings =
+      int(std::lround(std::log2(double(options.resolution) / double(options.render_resolution))));
+  const torch::Tensor v = data.identity_vertices.to(torch::kFloat64);
+  const torch::Tensor lo = std::get<0>(v.min(0)), hi = std::get<0>(v.max(0));
+  for (int a = 0; a < 3; ++a) {
+    arch.box.min[size_t(a)] = lo[a].item<double>() - kBoxPadding;
+    arch.box.max[size_t(a)] = hi[a].item<double>() + kBoxPadding;
+  }
+  return arch;
+}
+
+Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const fs::path& out_dir, StatsLog* stats,
+                      Progress* progress, TrainSummary* summary) {
+  torch::Device device = torch::kCPU;
+  HF_RETURN_IF_ERROR(ParseDevice("train", options.device, &device));
+  const fs::path checkpoint = out_dir / "checkpoint.pt";
+  GanTrainer trainer(options, data, device);
+  HF_RETURN_IF_ERROR(trainer.Start(checkpoint, stats));
+  const int resumed_from = trainer.step();
+  HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
+  HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
+  summary->resumed_from = resumed_from;
+  std::error_code ec;
+  fs::remove(checkpoint, ec);
+  return Status::Ok();
+}
+
+}  // namespace headforge

@@ -12,10 +12,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <map>
 
 #include <Eigen/Geometry>
 
+#include "avatar/gan_avatar/avatar_io.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/device.h"
@@ -50,14 +52,36 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
   if (options.orbit_deg < 0 || options.orbit_deg > 180 || options.orbit_steps < 2)
     return Status::InvalidArgument("render: --orbit takes a yaw in (0, 180] degrees and at least 2 steps");
   GaussianStyleAvatar avatar;
+  GanAvatar gan;
   TrainOptions trained;
   FaceModel model;
   DatasetOptions loading;
   loading.images = options.side_by_side;
   AvatarDataset own, drive;
-  const fs::path model_dir = options.model.empty() ? workspace / "models" / "gaussian_style" : fs::path(options.model);
-  HF_RETURN_IF_ERROR(LoadTrained(workspace, model_dir, face_model, device,
-                                 options.resolution, &loading, &avatar, &trained, &model, &own));
+  fs::path model_dir = options.model.empty() ? workspace / "models" / "gaussian_style" : fs::path(options.model);
+  std::error_code ec;
+  if (options.model.empty() && !fs::exists(model_dir / "config.json", ec) &&
+      IsGanAvatarFolder(workspace / "models" / "gan_avatar"))
+    model_dir = workspace / "models" / "gan_avatar";
+  // What draws one image: (condition [E + 9], camera) -> [3, H, W] on the CPU.
+  std::function<torch::Tensor(const torch::Tensor&, const SplatCamera&)> draw;
+  if (IsGanAvatarFolder(model_dir)) {
+    // The gan-avatar model: the tracked expression through its mapping, over its own grey.
+    HF_RETURN_IF_ERROR(LoadGanAvatar(model_dir, device, &gan));
+    HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+    loading.resolution = options.resolution > 0 ? options.resolution : std::max(gan.out_width, gan.out_height);
+    loading.min_train_frames = 1;
+    HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, &own).WithContext("render"));
+    draw = [&](const torch::Tensor& condition, const SplatCamera& camera) { return gan.Draw(condition, camera); };
+  } else {
+    HF_RETURN_IF_ERROR(LoadTrained(workspace, model_dir, face_model, device,
+                                   options.resolution, &loading, &avatar, &trained, &model, &own));
+    const torch::Tensor background = torch::full({3}, options.background, torch::TensorOptions().device(device));
+    draw = [&, background](const torch::Tensor& condition, const SplatCamera& camera) {
+      torch::NoGradGuard no_grad;
+      return RenderRgb(avatar.Pose(own, condition, 0, avatar.deform), camera, background).clamp(0, 1).cpu();
+    };
+  }
   const std::vector<const AvatarView*> own_views = AllViews(own);
   std::vector<const AvatarView*> drivers = own_views;
   if (!options.drive.empty()) {
@@ -83,7 +107,6 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     }
   }
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
-  const torch::Tensor background = torch::full({3}, options.background, torch::TensorOptions().device(device));
   const int64_t expressions = int64_t(own.expression_names.size());
   cv::VideoWriter video;
   double posing = 0;
@@ -101,13 +124,10 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     condition.slice(0, 0, expressions).copy_(driver.condition.slice(0, 0, expressions));
     const SplatCamera camera = OrbitCamera(own_view.view, yaws[i], options.pitch_deg);
     const auto start = std::chrono::steady_clock::now();
-    torch::Tensor render;
-    {
-      torch::NoGradGuard no_grad;
-      render = RenderRgb(avatar.Pose(own, condition, 0, avatar.deform), camera, background).clamp(0, 1).cpu();
-    }
+    torch::Tensor render = draw(condition, camera);
     posing += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (options.side_by_side) render = ComparisonStrip(render, driver.image, driver.mask, options.background);
+    if (options.side_by_side)
+      render = ComparisonStrip(render, driver.image, driver.mask, gan.generator ? gan.background : options.background);
     const cv::Mat image = TensorToImage(render);
     if (options.video) {
       if (!video.isOpened()) {

@@ -13,7 +13,9 @@
 namespace headforge {
 
 struct AvatarRenderOptions {
-  std::string model;            // the model folder ("": WORKSPACE/models/gaussian_style)
+  // The model folder ("": WORKSPACE/models/gaussian_style, or models/gan_avatar
+  // where only that was trained); its config.json says which model it holds.
+  std::string model;
   std::string drive;            // a workspace whose tracked expressions drive the avatar ("": its own)
   std::vector<int> frames;      // frames to render (of `drive` when given); empty: all
   double yaw_deg = 0;           // the camera moved round the head, toward the subject's left
@@ -27,7 +29,7 @@ struct AvatarRenderOptions {
   std::string video_name = "render.mp4";
   double fps = 25;
   bool side_by_side = false;    // render | frame | error x 4 (own frames only)
-  double background = 1.0;      // grey level behind the head
+  double background = 1.0;      // grey level behind the head (gaussian-style; gan-avatar draws its own)
 };
 
 struct AvatarRenderSummary {

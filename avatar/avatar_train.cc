@@ -9,6 +9,7 @@
 #include "avatar/torch_runtime.h"
 #include "avatar/train/device.h"
 #include "core/log.h"
+#include "core/paths.h"
 
 namespace headforge {
 namespace {
@@ -36,8 +37,10 @@ const Preset kPresets[] = {
 };
 
 // The gan-avatar model's presets. draft: a 32 px volume render
-// super-resolved to 64 px on two CPU cores; standard and high: EG3D's
-// render sizes on one GPU (docs/avatar.md). The step sizes are EG3D's
+// super-resolved to 64 px on two CPU cores, every step the reconstruction
+// warm-up (measured: within 15 minutes the adversarial steps cost 4 dB on
+// the held-out frames, docs/benchmarks.md); standard and high: EG3D's render
+// sizes on one GPU, a warm-up and then the GAN (docs/gan_avatar.md). The step sizes are EG3D's
 // 0.0025 over ten: the layers here have no equalised learning rate, so their
 // weights are about ten times smaller and the same step moves them ten
 // times as far (measured: at 2e-3 the discriminator wins within 50 steps).
@@ -46,15 +49,15 @@ struct GanPreset {
   const char* device;
   int resolution, render_resolution, steps;
   double max_minutes;
-  int triplane_resolution, batch;
+  int triplane_resolution, batch, reconstruction_steps;
   double lr_network, lr_discriminator, r1_gamma;
   int eval_every, preview_every;
 };
 
 const GanPreset kGanPresets[] = {
-    {"draft", "cpu", 64, 32, 1800, 15, 64, 4, 2.5e-4, 2.5e-4, 1.0, 300, 300},
-    {"standard", "cuda", 256, 64, 40000, 60, 128, 8, 2.5e-4, 2.5e-4, 1.0, 2000, 2000},
-    {"high", "cuda", 512, 128, 200000, 0, 256, 16, 2.5e-4, 2.5e-4, 1.0, 5000, 5000},
+    {"draft", "cpu", 64, 32, 1800, 15, 64, 4, 1800, 2.5e-4, 2.5e-4, 1.0, 300, 300},
+    {"standard", "cuda", 256, 64, 40000, 60, 128, 8, 10000, 2.5e-4, 2.5e-4, 1.0, 2000, 2000},
+    {"high", "cuda", 512, 128, 200000, 0, 256, 16, 20000, 2.5e-4, 2.5e-4, 1.0, 5000, 5000},
 };
 
 bool IsPowerOfTwo(int v) { return v > 0 && (v & (v - 1)) == 0; }
@@ -89,9 +92,16 @@ Status TrainOptions::Check() const {
       return Status::InvalidArgument("train: --render-resolution must divide --resolution by a power of two (" +
                                      std::to_string(render_resolution) + " into " + std::to_string(resolution) + ")");
     if (batch < 1) return Status::InvalidArgument("train: --batch must be at least 1");
+    if (reconstruction_steps < 0 || adversarial_ramp < 0 || !(recon_weight >= 0))
+      return Status::InvalidArgument(
+          "train: --reconstruction-steps, --adversarial-ramp and --recon-weight must be zero or positive");
     if (!(lr_discriminator >= 0) || !(r1_gamma >= 0) || r1_every < 1)
       return Status::InvalidArgument("train: --lr-discriminator and --r1-gamma must be >= 0, --r1-every >= 1");
     if (!(ada_target > 0 && ada_target < 1)) return Status::InvalidArgument("train: --ada-target must be in (0, 1)");
+    if (mapping_loss != "image" && mapping_loss != "latent")
+      return Status::InvalidArgument("train: --mapping-loss must be image or latent, not '" + mapping_loss + "'");
+    if (mapping_samples < 1 || mapping_steps < 0)
+      return Status::InvalidArgument("train: --mapping-samples must be at least 1 and --mapping-steps at least 0");
     if (coarse_samples < 1 || fine_samples < 0)
       return Status::InvalidArgument("train: --samples must be at least 1 and --fine-samples at least 0");
   }
@@ -125,6 +135,9 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
          "region-weight");
   o->Add("train.ssim_weight", &t->ssim_weight, "Loss = (1 - w) L1 + w (1 - SSIM).", "ssim-weight");
   o->Add("train.holdout", &t->holdout, "The last fraction of the frames, held out for evaluation.", "holdout");
+  o->Add("train.holdout_cameras", &t->holdout_cameras,
+         "Cameras held out whole (every frame of theirs scored, none trained on), comma-separated.",
+         "holdout-cameras");
   o->Add("train.init_gaussians", &t->init_gaussians, "Gaussians sampled on the tracked mesh to start with.",
          "init-gaussians");
   o->Add("train.max_gaussians", &t->max_gaussians, "Densification adds no more beyond this count.", "max-gaussians");
@@ -148,6 +161,17 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
          "gan-avatar: the volume render's longer side; --resolution / this must be a power of two.",
          "render-resolution");
   o->Add("train.batch", &t->batch, "gan-avatar: real and generated views per step.", "batch");
+  o->Add("train.reconstruction_steps", &t->reconstruction_steps,
+         "gan-avatar: the first steps reconstruct the training frames (L1, a latent per frame) before the "
+         "adversarial training: a personal prior in place of pretrained EG3D weights (0: none).",
+         "reconstruction-steps");
+  o->Add("train.recon_weight", &t->recon_weight,
+         "gan-avatar: weight of the reconstruction loss kept beside the adversarial one after the warm-up (0: "
+         "adversarial alone).",
+         "recon-weight");
+  o->Add("train.adversarial_ramp", &t->adversarial_ramp,
+         "gan-avatar: steps after the warm-up over which the generator's adversarial loss rises from 0 to 1.",
+         "adversarial-ramp");
   o->Add("train.lr_discriminator", &t->lr_discriminator, "gan-avatar: Adam step of the discriminator.",
          "lr-discriminator");
   o->Add("train.r1_gamma", &t->r1_gamma, "gan-avatar: weight of the R1 penalty on the real images (0: none).",
@@ -159,6 +183,18 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.coarse_samples", &t->coarse_samples, "gan-avatar: stratified samples per ray.", "samples");
   o->Add("train.fine_samples", &t->fine_samples, "gan-avatar: importance samples per ray (0: none).",
          "fine-samples");
+  o->Add("train.mapping_samples", &t->mapping_samples,
+         "gan-avatar: latents rendered frontally and tracked to train the expression mapping.", "mapping-samples");
+  o->Add("train.mapping_steps", &t->mapping_steps, "gan-avatar: steps of the expression mapping (0: none).",
+         "mapping-steps");
+  o->Add("train.mapping_loss", &t->mapping_loss,
+         "gan-avatar: image (the render of the mapped w against the sampled render, generator frozen) or latent "
+         "(the mapped w against the sampled w).",
+         "mapping-loss");
+  o->Add("train.landmark_model", &t->landmark_model,
+         "gan-avatar: dlib's 68-point landmark model, which reads the renders' landmarks (default: Debian's "
+         "libdlib-data).",
+         "landmark-model", OptionSet::Effect::kRuntime);
   o->Add("train.log_every", &t->log_every, "Steps between lines of stats.jsonl.", "log-every");
   o->Add("train.eval_every", &t->eval_every, "Steps between held-out evaluations (0: only at the end).", "eval-every");
   o->Add("train.preview_every", &t->preview_every, "Steps between preview images (0: none).", "preview-every");
@@ -186,6 +222,7 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* t) {
     fill("train.max_minutes", &t->max_minutes, preset->max_minutes);
     fill("train.triplane_resolution", &t->triplane_resolution, preset->triplane_resolution);
     fill("train.batch", &t->batch, preset->batch);
+    fill("train.reconstruction_steps", &t->reconstruction_steps, preset->reconstruction_steps);
     fill("train.lr_network", &t->lr_network, preset->lr_network);
     fill("train.lr_discriminator", &t->lr_discriminator, preset->lr_discriminator);
     fill("train.r1_gamma", &t->r1_gamma, preset->r1_gamma);
@@ -229,9 +266,12 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
   HF_RETURN_IF_ERROR(options.Check());
   FaceModel model;
   HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+  TrainOptions resolved = options;
+  if (resolved.landmark_model.empty()) resolved.landmark_model = DefaultLandmarkModel();
   DatasetOptions loading;
   loading.resolution = options.resolution;
   loading.holdout = options.holdout;
+  loading.holdout_cameras = options.holdout_cameras;
   AvatarDataset data;
   HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, &data).WithContext("train"));
   HF_LOG(Info) << "train: " << data.train.size() << " training and " << data.test.size() << " held-out views at "
@@ -245,7 +285,7 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
   HF_RETURN_IF_ERROR(StatsLog::Open(out_dir / "stats.jsonl", &stats));
   *summary = TrainSummary();
   if (options.model == "gan-avatar")
-    HF_RETURN_IF_ERROR(TrainGanAvatar(options, data, out_dir, &stats, progress, summary));
+    HF_RETURN_IF_ERROR(TrainGanAvatar(resolved, workspace, data, model, out_dir, &stats, progress, summary));
   else
     HF_RETURN_IF_ERROR(TrainGaussianStyle(options, data, model, out_dir, &stats, progress, summary));
   summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json", "held_out"};

@@ -33,6 +33,7 @@ struct TrainOptions {
   double region_weight = 1.0;   // stage 2's L1 on the eyes' and mouth's crops (0: none)
   double ssim_weight = 0.2;     // loss = (1 - w) L1 + w (1 - SSIM)
   double holdout = 0.2;         // the last fraction of the frames, never trained on
+  std::vector<std::string> holdout_cameras;  // cameras never trained on, scored with the held-out frames
   int init_gaussians = 20000;   // sampled on the tracked mesh
   int64_t max_gaussians = 40000;
   int densify_from = 300, densify_until = 3000, densify_every = 100;
@@ -48,11 +49,21 @@ struct TrainOptions {
   // the samples per ray (stratified, then importance).
   int render_resolution = 32;
   int batch = 4;
+  int reconstruction_steps = 0;  // gan-avatar: the warm-up's steps before the adversarial ones
+  double recon_weight = 1.0;     // gan-avatar: the reconstruction's weight after the warm-up (0: none)
+  int adversarial_ramp = 300;    // gan-avatar: steps over which the adversarial loss comes in
   double lr_discriminator = 2e-3;
   double r1_gamma = 0.2;
   int r1_every = 4;
   double ada_target = 0.6;
   int coarse_samples = 24, fine_samples = 24;
+  // gan-avatar's expression mapping: renders sampled and tracked, steps,
+  // loss ("image": photometric, the paper's; "latent": the ablation), and
+  // the landmark model that reads the renders.
+  int mapping_samples = 256;
+  int mapping_steps = 300;
+  std::string mapping_loss = "image";
+  std::string landmark_model;
   int log_every = 50, eval_every = 1000, preview_every = 1000, checkpoint_every = 250;
   int seed = 0;
 

@@ -106,15 +106,27 @@ std::string ExportSummary::OneLine() const {
   return text;
 }
 
-Status RunExport(const ExportOptions& options, const fs::path& workspace, const std::string& face_model,
+Status RunExport(const ExportOptions& requested, const fs::path& workspace, const std::string& face_model,
                  const fs::path& out_dir, Progress* progress, ExportSummary* summary) {
-  HF_RETURN_IF_ERROR(options.Check());
+  HF_RETURN_IF_ERROR(requested.Check());
+  ExportOptions options = requested;
   const auto start = std::chrono::steady_clock::now();
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   const fs::path model_dir = workspace / "models" / "gaussian_style";
   const bool trained = fs::exists(model_dir / "config.json");
   // Refused before anything is written: the formats that need a trained model.
-  const bool needs_model = Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos");
+  bool needs_model = Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos");
+  if (needs_model && !trained && fs::exists(workspace / "models" / "gan_avatar" / "config.json")) {
+    // A gan-avatar model alone: its Gaussians, weights and videos cannot be
+    // exported yet; the mesh avatar, the viewer and the report can.
+    HF_LOG(Warning) << "export: the gan-avatar model's weights and videos cannot be exported yet; writing the mesh "
+                       "avatar, the viewer and the report without them";
+    std::vector<std::string> kept;
+    for (const char* f : {"mesh", "viewer", "report"})
+      if (Wants(options, f)) kept.push_back(f);
+    options.formats = kept;
+    needs_model = false;
+  }
   if (needs_model && !trained)
     return Status::NotFound("no trained avatar in " + model_dir.string() +
                             " (run headforge train first, or export --formats mesh report alone)");

@@ -11,7 +11,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
+#include <thread>
 
+#include "avatar/gan_avatar/expression_mapping.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/nn/augment.h"
 #include "avatar/nn/discriminator.h"
@@ -36,6 +39,8 @@ constexpr double kBackground = 0.5;
 constexpr double kBoxPadding = 0.04;
 // The running mean of w follows the batches' with this weight.
 constexpr double kWAverageRate = 0.01;
+// Adam's step for the warm-up's per-frame latents.
+constexpr double kCodeLearningRate = 1e-2;
 
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
@@ -50,29 +55,41 @@ torch::Tensor Resize(const torch::Tensor& x, int64_t height, int64_t width) {
 
 struct GanState {
   int step = 0;
-  double loss_g = 0, loss_d = 0, r1 = 0, real_accuracy = 0, fake_accuracy = 0;
+  double loss_g = 0, loss_d = 0, r1 = 0, real_accuracy = 0, fake_accuracy = 0, recon_l1 = 0;
   int64_t count = 0, r1_count = 0;
   double seconds = 0;
 };
 
 class GanTrainer {
  public:
-  GanTrainer(const TrainOptions& options, const AvatarDataset& data, torch::Device device)
-      : options_(options), data_(data), device_(device), gen_(at::detail::createCPUGenerator(options.seed)),
+  GanTrainer(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model, torch::Device device)
+      : options_(options), data_(data), model_(model), device_(device), gen_(at::detail::createCPUGenerator(options.seed)),
         adam_g_(0.0, 0.99), adam_d_(0.0, 0.99), ada_(options.ada_target) {}
 
   Status Start(const fs::path& checkpoint, StatsLog* stats);
   Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
+  Status TrainMapping(const fs::path& workspace, StatsLog* stats, Progress* progress);
   Status Finish(const fs::path& out_dir, TrainSummary* summary);
   int step() const { return state_.step; }
 
  private:
   void Step(int step);
+  // The reconstruction loss of a batch of training views: each view's frame
+  // from its own camera with a latent of its frame's own (L1 on the image
+  // and on the raw render).
+  torch::Tensor ReconstructionLoss();
+  bool reconstructing(int step) const { return step <= options_.reconstruction_steps; }
   // The discriminator's input: the image and the raw render brought to its size.
   torch::Tensor DualImage(const torch::Tensor& image, const torch::Tensor& raw) const {
     return torch::cat({image, Resize(raw, image.size(2), image.size(3))}, 1);
   }
-  std::vector<ViewScores> Evaluate(const fs::path& write_dir, int stride);
+  // Held-out views (or every `stride`-th training view) driven by their
+  // tracked expressions through the mapping, or with the mean latent before
+  // there is one or when `mean_latent`.
+  std::vector<ViewScores> Evaluate(const fs::path& write_dir, int stride, bool mean_latent = false,
+                                   bool training_views = false);
+  // The training view seen most nearly from the front.
+  const AvatarView& FrontalView() const;
   Status WritePreview(const fs::path& dir, int step);
   Status SaveCheckpoint(const fs::path& path, size_t stats_lines) const;
   Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
@@ -81,6 +98,7 @@ class GanTrainer {
 
   TrainOptions options_;
   const AvatarDataset& data_;
+  const FaceModel& model_;
   torch::Device device_;
   at::Generator gen_;
   GanAvatarOptions arch_;
@@ -90,6 +108,10 @@ class GanTrainer {
   Adam adam_g_, adam_d_;
   nn::AdaController ada_;
   torch::Tensor w_average_;               // [w_dim], the running mean of the mapped w
+  torch::Tensor frame_codes_;             // [frames, z_dim]: the warm-up's latent per frame
+  ExpressionMapping mapping_{nullptr};    // after the GAN
+  double mapping_loss_ = 0;               // the mapping's last loss
+  RenderExpressions samples_;
   torch::Tensor reals_, conditions_;      // [N, 3, H, W] over the background; [N, 16]
   int render_w_ = 0, render_h_ = 0;
   GanState state_;
@@ -113,6 +135,8 @@ Status GanTrainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   d_params_ = discriminator_->parameters();
   for (torch::Tensor& t : g_params_) adam_g_.Add(&t, options_.lr_network, false);
   for (torch::Tensor& t : d_params_) adam_d_.Add(&t, options_.lr_discriminator, false);
+  frame_codes_ = torch::randn({data_.num_frames, arch_.z_dim}).to(device_).requires_grad_(true);
+  adam_g_.Add(&frame_codes_, kCodeLearningRate, false);
   w_average_ = torch::zeros({arch_.w_dim}, torch::TensorOptions().device(device_));
   std::vector<torch::Tensor> reals, conditions;
   for (const AvatarView& view : data_.train) {
@@ -126,7 +150,40 @@ Status GanTrainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   return Status::Ok();
 }
 
+torch::Tensor GanTrainer::ReconstructionLoss() {
+  const int64_t batch = options_.batch, views = int64_t(data_.train.size());
+  const torch::Tensor index = torch::randint(views, {batch}, gen_, torch::kLong);
+  std::vector<SplatCamera> cameras;
+  std::vector<int64_t> frames;
+  for (int64_t b = 0; b < batch; ++b) {
+    const AvatarView& view = data_.train[size_t(index[b].item<int64_t>())];
+    cameras.push_back(RenderCamera(view));
+    frames.push_back(view.frame);
+  }
+  const torch::Tensor codes = frame_codes_.index_select(0, torch::tensor(frames, torch::kLong).to(device_));
+  const torch::Tensor w = generator_->Map(codes);
+  const GanRender out = generator_->Render(w, cameras, data_.width, data_.height, kBackground, &gen_);
+  const torch::Tensor real = reals_.index_select(0, index.to(device_));
+  // The super-resolved image and the raw render both: the volume learns the
+  // head's shape and colour directly, not only through the super-resolution.
+  const torch::Tensor l1 = (out.image - real).abs().mean() +
+                           (out.raw - Resize(real, render_h_, render_w_)).abs().mean();
+  {
+    torch::NoGradGuard no_grad;
+    w_average_.lerp_(w.detach().mean(0), kWAverageRate);
+  }
+  state_.recon_l1 += l1.item<double>();
+  return l1;
+}
+
 void GanTrainer::Step(int step) {
+  if (reconstructing(step)) {
+    ReconstructionLoss().backward();
+    adam_g_.Step();
+    adam_g_.ZeroGrad();
+    ++state_.count;
+    return;
+  }
   const int64_t batch = options_.batch, views = int64_t(data_.train.size());
   const torch::Tensor real_index = torch::randint(views, {batch}, gen_, torch::kLong);
   const torch::Tensor fake_index = torch::randint(views, {batch}, gen_, torch::kLong);
@@ -141,7 +198,13 @@ void GanTrainer::Step(int step) {
   const GanRender fake = generator_->Render(w, cameras, data_.width, data_.height, kBackground, &gen_);
   const torch::Tensor fake_dual = DualImage(fake.image, fake.raw);
   const torch::Tensor loss_g = F::softplus(-discriminator_->forward(nn::Augment(fake_dual, p, 6, gen_), fake_c)).mean();
-  loss_g.backward();
+  // After the warm-up the adversarial loss comes in over --adversarial-ramp
+  // steps, while the reconstruction goes on at --recon-weight.
+  const int since = step - options_.reconstruction_steps;
+  const double ramp = options_.adversarial_ramp > 0 ? std::min(1.0, double(since) / options_.adversarial_ramp) : 1.0;
+  torch::Tensor total = ramp * loss_g;
+  if (options_.recon_weight > 0) total = total + options_.recon_weight * ReconstructionLoss();
+  total.backward();
   adam_g_.Step();
   adam_g_.ZeroGrad();
   adam_d_.ZeroGrad();
@@ -186,14 +249,38 @@ torch::Tensor GanTrainer::RenderMean(const std::vector<SplatCamera>& cameras) {
   return generator_->Render(w, cameras, data_.width, data_.height, kBackground, nullptr).image.clamp(0, 1).cpu();
 }
 
-std::vector<ViewScores> GanTrainer::Evaluate(const fs::path& write_dir, int stride) {
+const AvatarView& GanTrainer::FrontalView() const {
+  size_t best = 0;
+  double best_cos = -2;
+  for (size_t i = 0; i < data_.train.size(); ++i) {
+    const auto& m = data_.train[i].view.cam_from_world;
+    // The camera's centre -R^T t in the head frame; the face looks along +z.
+    const double c[3] = {-(m[0] * m[3] + m[4] * m[7] + m[8] * m[11]), -(m[1] * m[3] + m[5] * m[7] + m[9] * m[11]),
+                         -(m[2] * m[3] + m[6] * m[7] + m[10] * m[11])};
+    const double cos = c[2] / std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+    if (cos > best_cos) {
+      best_cos = cos;
+      best = i;
+    }
+  }
+  return data_.train[best];
+}
+
+std::vector<ViewScores> GanTrainer::Evaluate(const fs::path& write_dir, int stride, bool mean_latent,
+                                             bool training_views) {
   torch::NoGradGuard no_grad;
   const torch::Tensor background = torch::full({3}, kBackground);
+  const int64_t expressions = int64_t(data_.expression_names.size());
+  const std::vector<AvatarView>& views = training_views ? data_.train : data_.test;
   std::vector<ViewScores> scores;
-  for (size_t i = 0; i < data_.test.size(); i += size_t(std::max(stride, 1))) {
-    const AvatarView& view = data_.test[i];
-    // No expression mapping yet: the mean latent, from the view's camera.
-    const torch::Tensor render = RenderMean({RenderCamera(view)})[0];
+  for (size_t i = 0; i < views.size(); i += size_t(std::max(stride, 1))) {
+    const AvatarView& view = views[i];
+    torch::Tensor w = w_average_.unsqueeze(0);
+    if (mapping_ && !mean_latent) w = mapping_->forward(view.condition.narrow(0, 0, expressions).unsqueeze(0).to(device_));
+    const torch::Tensor render =
+        generator_->Render(w, {RenderCamera(view)}, data_.width, data_.height, kBackground, nullptr)
+            .image.clamp(0, 1)
+            .cpu()[0];
     ViewScores s = ScoreRender(render, view.image, view.mask, background);
     s.frame = view.frame;
     s.camera = view.camera;
@@ -236,9 +323,10 @@ Status GanTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) cons
   adam_d_.Save("adam_d.", &c);
   c.Put("ada", torch::tensor(ada_.State(), torch::kFloat64));
   c.Put("w_average", w_average_);
+  c.Put("frame_codes", frame_codes_);
   c.Put("generator_state", gen_.get_state());
   c.Put("sums", torch::tensor({state_.loss_g, state_.loss_d, state_.r1, state_.real_accuracy, state_.fake_accuracy,
-                               double(state_.count), double(state_.r1_count)},
+                               double(state_.count), double(state_.r1_count), state_.recon_l1},
                               torch::kFloat64));
   c.Put("seconds", state_.seconds + Seconds(start_));
   c.Put("stats_lines", int64_t(stats_lines));
@@ -252,7 +340,7 @@ Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   int64_t step = 0, lines = 0;
   torch::Tensor generator_state, ada, sums;
   if (!c.Get("step", &step) || !c.Get("generator_state", &generator_state) || !c.Get("stats_lines", &lines) ||
-      !c.Get("ada", &ada) || !c.Get("sums", &sums) || !c.Get("seconds", &state_.seconds) ||
+      !c.Get("ada", &ada) || !c.Get("sums", &sums) || sums.numel() < 8 || !c.Get("seconds", &state_.seconds) ||
       !c.Get("w_average", &w_average_))
     return damaged;
   {
@@ -277,6 +365,13 @@ Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   state_.fake_accuracy = s[4];
   state_.count = int64_t(s[5]);
   state_.r1_count = int64_t(s[6]);
+  state_.recon_l1 = s[7];
+  {
+    torch::NoGradGuard no_grad;
+    torch::Tensor codes;
+    if (!c.Get("frame_codes", &codes) || !codes.sizes().equals(frame_codes_.sizes())) return damaged;
+    frame_codes_.copy_(codes);
+  }
   w_average_ = w_average_.to(device_);
   gen_.set_state(generator_state);
   state_.step = int(step);
@@ -290,7 +385,9 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
   progress->Advance(state_.step);
   for (int step = state_.step + 1; step <= options_.steps; ++step) {
     Step(step);
-    if (!std::isfinite(state_.loss_g) || !std::isfinite(state_.loss_d)) {
+    if (step == options_.reconstruction_steps + 1 && options_.reconstruction_steps > 0)
+      HF_LOG(Info) << "train: gan-avatar: adversarial training from step " << step;
+    if (!std::isfinite(state_.loss_g) || !std::isfinite(state_.loss_d) || !std::isfinite(state_.recon_l1)) {
       progress->Finish("diverged");
       return Status::Internal("train: the GAN's losses became non-finite at step " + std::to_string(step) +
                               "; lower --lr-network and --lr-discriminator or raise --r1-gamma (a changed option "
@@ -303,6 +400,8 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
     if (step % options_.log_every == 0 || last) {
       const double n = double(std::max<int64_t>(state_.count, 1));
       stats->Append(nlohmann::json{{"step", step},
+                                   {"phase", reconstructing(step) ? "reconstruction" : "adversarial"},
+                                   {"recon_l1", state_.recon_l1 / n},
                                    {"loss_g", state_.loss_g / n},
                                    {"loss_d", state_.loss_d / n},
                                    {"r1", state_.r1 / double(std::max<int64_t>(state_.r1_count, 1))},
@@ -342,8 +441,75 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
     }
   }
   progress->Finish(std::to_string(state_.step) + " steps");
+  // The GAN is done: a kill during the expression mapping resumes here.
+  HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, stats->size()));
   state_.seconds = elapsed();
   start_ = std::chrono::steady_clock::now();
+  return Status::Ok();
+}
+
+Status GanTrainer::TrainMapping(const fs::path& workspace, StatsLog* stats, Progress* progress) {
+  if (options_.mapping_steps == 0) return Status::Ok();
+  const auto start = std::chrono::steady_clock::now();
+  TrackingFile tracking;
+  HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", &tracking));
+  for (torch::Tensor& p : g_params_) p.requires_grad_(false);  // the generator is frozen
+  const SplatCamera camera = RenderCamera(FrontalView());
+  RenderExpressionOptions sampling;
+  sampling.samples = options_.mapping_samples;
+  sampling.landmark_model = options_.landmark_model;
+  sampling.background = kBackground;
+  sampling.threads = std::max(1, int(std::thread::hardware_concurrency()));
+  HF_RETURN_IF_ERROR(EstimateRenderExpressions(generator_, camera, data_.width, data_.height, model_, tracking, sampling,
+                                               gen_, progress, &samples_));
+  const int64_t expressions = samples_.expressions.size(1);
+  torch::manual_seed(uint64_t(options_.seed) + 11);
+  mapping_ = ExpressionMapping(expressions, arch_.w_dim);
+  mapping_->to(device_);
+  std::vector<torch::Tensor> params = mapping_->parameters();
+  Adam adam;
+  for (torch::Tensor& t : params) adam.Add(&t, 1e-3, false);
+  const torch::Tensor e_all = samples_.expressions.to(device_), w_all = samples_.w.to(device_),
+                      images = samples_.images.to(device_);
+  const int64_t count = e_all.size(0), batch = std::min<int64_t>(options_.batch, count);
+  progress->Start("train: gan-avatar expression mapping", options_.mapping_steps);
+  double sum = 0;
+  int summed = 0;
+  for (int step = 1; step <= options_.mapping_steps; ++step) {
+    const torch::Tensor index = torch::randint(count, {batch}, gen_, torch::kLong).to(device_);
+    const torch::Tensor w = mapping_->forward(e_all.index_select(0, index));
+    torch::Tensor loss;
+    if (options_.mapping_loss == "latent") {
+      loss = (w - w_all.index_select(0, index)).pow(2).mean();
+    } else {
+      const torch::Tensor render =
+          generator_->Render(w, std::vector<SplatCamera>(size_t(batch), camera), data_.width, data_.height,
+                             kBackground, nullptr)
+              .image;
+      loss = (render - images.index_select(0, index)).abs().mean();
+    }
+    loss.backward();
+    adam.Step();
+    adam.ZeroGrad();
+    mapping_loss_ = loss.item<double>();
+    if (!std::isfinite(mapping_loss_))
+      return Status::Internal("train: the expression mapping's loss became non-finite at its step " +
+                              std::to_string(step));
+    sum += mapping_loss_;
+    ++summed;
+    if (step % options_.log_every == 0 || step == options_.mapping_steps) {
+      stats->Append(nlohmann::json{{"mapping_step", step},
+                                   {"mapping_loss", sum / summed},
+                                   {"mapping_loss_kind", options_.mapping_loss},
+                                   {"seconds", state_.seconds + Seconds(start)}}
+                        .dump());
+      sum = 0;
+      summed = 0;
+    }
+    progress->Advance();
+  }
+  progress->Finish(std::to_string(options_.mapping_steps) + " steps");
+  state_.seconds += Seconds(start);
   return Status::Ok();
 }
 
@@ -351,23 +517,45 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "held_out"));
   const std::vector<ViewScores> scores = Evaluate(out_dir / "held_out", 1);
   const ViewScores mean = MeanScores(scores);
+  // The same frames with the mean latent (what the mapping adds), and every
+  // tenth training view driven the same way (what the held-out frames lose).
+  const ViewScores average = MeanScores(Evaluate({}, 1, /*mean_latent=*/true));
+  const ViewScores fitted = MeanScores(Evaluate({}, 10, false, /*training_views=*/true));
   nlohmann::json views = nlohmann::json::array();
-  for (const ViewScores& s : scores)
+  std::map<std::string, std::vector<ViewScores>> by_camera;
+  for (const ViewScores& s : scores) {
     views.push_back({{"frame", s.frame}, {"camera", s.camera}, {"psnr_masked", s.psnr_masked},
                      {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full}, {"ssim", s.ssim_full}});
+    by_camera[s.camera].push_back(s);
+  }
+  nlohmann::json cameras = nlohmann::json::object();
+  for (const auto& [name, list] : by_camera) {
+    const ViewScores m = MeanScores(list);
+    cameras[name] = {{"views", list.size()}, {"psnr_masked", m.psnr_masked}, {"ssim_masked", m.ssim_masked}};
+  }
   const nlohmann::json eval = {
       {"held_out_frames", "the last " + std::to_string(data_.num_frames - data_.first_test_frame) + " of " +
                               std::to_string(data_.num_frames)},
       {"background", kBackground},
-      {"latent", "the running mean of w: no expression mapping yet, so the held-out expressions are not driven"},
+      {"latent", mapping_ ? "the expression mapping (" + options_.mapping_loss +
+                                 " loss) of each frame's tracked expression"
+                          : std::string("the running mean of w (no expression mapping)")},
       {"mean", {{"psnr_masked", mean.psnr_masked}, {"ssim_masked", mean.ssim_masked}, {"psnr", mean.psnr_full},
                 {"ssim", mean.ssim_full}}},
+      {"by_camera", cameras},
+      {"mean_latent", {{"psnr_masked", average.psnr_masked}, {"ssim_masked", average.ssim_masked}}},
+      {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
+      {"mapping", {{"renders", samples_.rendered}, {"tracked", samples_.w.defined() ? samples_.w.size(0) : 0},
+                   {"flagged", samples_.flagged}, {"median_residual_px", samples_.median_residual_px},
+                   {"loss", options_.mapping_loss}, {"last_loss", mapping_loss_}}},
       {"views", views}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "eval.json", eval, 1));
   // The model: the generator's weights and the mean latent; config.json its architecture.
   Checkpoint model;
   for (const auto& item : generator_->named_parameters()) model.Put("generator." + item.key(), item.value());
   model.Put("w_average", w_average_);
+  if (mapping_)
+    for (const auto& item : mapping_->named_parameters()) model.Put("mapping." + item.key(), item.value());
   HF_RETURN_IF_ERROR(model.Save(out_dir / "model.pt"));
   const nlohmann::json config = {
       {"model", "gan-avatar"},
@@ -380,11 +568,14 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
         {"fine_samples", arch_.fine_samples}, {"super_resolution_doublings", arch_.super_resolution_doublings},
         {"density_scale", arch_.density_scale},
         {"box_min", arch_.box.min}, {"box_max", arch_.box.max}}},
+      {"expression_mapping", {{"expressions", data_.expression_names}, {"hidden", 256}, {"layers", 2},
+                              {"loss", options_.mapping_loss}, {"trained", bool(mapping_)}}},
       {"render_size", {render_w_, render_h_}},
       {"output_size", {data_.width, data_.height}},
       {"background", kBackground},
       {"training", {{"steps", state_.step}, {"batch", options_.batch}, {"seconds", state_.seconds},
-                    {"seed", options_.seed}, {"preset", options_.preset}}}};
+                    {"seed", options_.seed}, {"preset", options_.preset}, {"holdout", options_.holdout},
+                    {"holdout_cameras", options_.holdout_cameras}}}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "config.json", config, 1));
   summary->steps = state_.step;
   summary->seconds = state_.seconds;
@@ -394,6 +585,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   summary->psnr_full = mean.psnr_full;
   summary->ssim_full = mean.ssim_full;
   summary->l1_masked = mean.l1_masked;
+  summary->train_psnr_masked = fitted.psnr_masked;
   return Status::Ok();
 }
 
@@ -423,15 +615,17 @@ GanAvatarOptions GanArchitecture(const TrainOptions& options, const AvatarDatase
   return arch;
 }
 
-Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const fs::path& out_dir, StatsLog* stats,
-                      Progress* progress, TrainSummary* summary) {
+Status TrainGanAvatar(const TrainOptions& options, const fs::path& workspace, const AvatarDataset& data,
+                      const FaceModel& model, const fs::path& out_dir, StatsLog* stats, Progress* progress,
+                      TrainSummary* summary) {
   torch::Device device = torch::kCPU;
   HF_RETURN_IF_ERROR(ParseDevice("train", options.device, &device));
   const fs::path checkpoint = out_dir / "checkpoint.pt";
-  GanTrainer trainer(options, data, device);
+  GanTrainer trainer(options, data, model, device);
   HF_RETURN_IF_ERROR(trainer.Start(checkpoint, stats));
   const int resumed_from = trainer.step();
   HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
+  HF_RETURN_IF_ERROR(trainer.TrainMapping(workspace, stats, progress));
   HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
   summary->resumed_from = resumed_from;
   std::error_code ec;

@@ -2,7 +2,8 @@
 // generator (model.h) against a camera-conditioned discriminator that sees
 // the super-resolved image and the raw volume render together (dual
 // discrimination), non-saturating logistic losses, lazy R1 on the real
-// images, adaptive augmentation; checkpoints, stats.jsonl and previews.
+// images, adaptive augmentation; checkpoints, stats.jsonl and previews; then
+// the expression mapping (expression_mapping.h).
 #pragma once
 
 #include <torch/types.h>
@@ -24,7 +25,10 @@ void GanRenderSize(const TrainOptions& options, const AvatarDataset& data, int* 
 // Trains into `out_dir` (checkpoint.pt between attempts; a run that finds
 // one continues from it); writes model.pt, config.json, eval.json,
 // held_out/ and previews/.
-Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const fs::path& out_dir,
-                      StatsLog* stats, Progress* progress, TrainSummary* summary);
+// Then samples renders, tracks them and trains the expression mapping, and
+// scores the held-out frames driven by their tracked expressions.
+Status TrainGanAvatar(const TrainOptions& options, const fs::path& workspace, const AvatarDataset& data,
+                      const FaceModel& model, const fs::path& out_dir, StatsLog* stats, Progress* progress,
+                      TrainSummary* summary);
 
 }  // namespace headforge

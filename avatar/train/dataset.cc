@@ -99,7 +99,14 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   const Eigen::Matrix3Xi& tris = model.triangles();
   out.triangles = torch::from_blob(const_cast<int*>(tris.data()), {tris.cols(), 3}, torch::kInt32).to(torch::kInt64);
 
+  for (const std::string& name : options.holdout_cameras) {
+    bool known = false;
+    for (const IngestedCamera& cam : capture.cameras) known = known || cam.name == name;
+    if (!known) return Status::InvalidArgument("no camera " + name + " to hold out (see capture.json's cameras)");
+  }
   for (const IngestedCamera& cam : capture.cameras) {
+    const bool held_camera = std::find(options.holdout_cameras.begin(), options.holdout_cameras.end(), cam.name) !=
+                             options.holdout_cameras.end();
     const CameraIntrinsics* lens = cameras.FindCamera(cam.name);
     if (!lens) return Status::DataError("cameras_head.json has no camera " + cam.name + "; run headforge align again");
     const double scale = double(options.resolution) / std::max(cam.width, cam.height);
@@ -137,7 +144,7 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       view.condition = torch::cat({torch::from_blob(const_cast<float*>(expression.data()), {expression.size()}).clone(),
                                    PoseCondition(rotation, translation)});
       if (f.landmarks) RegionBoxes(*f.landmarks, *lens, scale, &view);
-      (f.index < out.first_test_frame ? out.train : out.test).push_back(std::move(view));
+      (f.index < out.first_test_frame && !held_camera ? out.train : out.test).push_back(std::move(view));
       out.width = size.width;
       out.height = size.height;
     }

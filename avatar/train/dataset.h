@@ -3,7 +3,8 @@
 // registered view's frame and mask at the training resolution, its camera in
 // the canonical head frame (the head's tracked motion taken into the camera),
 // the frame's tracked expression and head pose as the condition, and boxes
-// round the eyes and the mouth from its landmarks. The last frames are held out.
+// round the eyes and the mouth from its landmarks. The last frames are held
+// out, and any cameras named to be.
 #pragma once
 
 #include <torch/types.h>
@@ -36,6 +37,9 @@ struct AvatarView {
 struct DatasetOptions {
   int resolution = 256;       // the frames' longer side, pixels
   double holdout = 0.2;       // the last fraction of the frames held out
+  // Cameras held out whole: every frame of theirs is a test view (a 360
+  // capture's views from sides training never saw).
+  std::vector<std::string> holdout_cameras;
   int min_train_frames = 8;   // fewer is refused
   bool images = true;         // false: cameras and conditions only (rendering)
 };

@@ -1,0 +1,81 @@
+#include "avatar/gan_avatar/avatar_io.h"
+
+#include <torch/torch.h>
+
+#include <nlohmann/json.hpp>
+
+#include "avatar/train/checkpoint.h"
+#include "core/json_io.h"
+
+namespace headforge {
+
+bool IsGanAvatarFolder(const fs::path& dir) {
+  nlohmann::json config;
+  return ReadJson(dir / "config.json", &config).ok() && config.value("model", "") == "gan-avatar";
+}
+
+Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avatar) {
+  nlohmann::json config;
+  HF_RETURN_IF_ERROR(ReadJson(dir / "config.json", &config));
+  const Status damaged = Status::DataError(dir.string() + " does not hold a gan-avatar model this version reads; "
+                                                          "run headforge train --model gan-avatar again");
+  if (config.value("model", "") != "gan-avatar" || config.value("version", 0) != 1) return damaged;
+  GanAvatarOptions arch;
+  try {
+    const nlohmann::json& a = config.at("architecture");
+    arch.z_dim = a.at("z_dim");
+    arch.w_dim = a.at("w_dim");
+    arch.mapping_layers = a.at("mapping_layers");
+    arch.synthesis_channels = a.at("synthesis_channels");
+    arch.plane_resolution = a.at("plane_resolution");
+    arch.plane_channels = a.at("plane_channels");
+    arch.decoder_hidden = a.at("decoder_hidden");
+    arch.feature_channels = a.at("feature_channels");
+    arch.coarse_samples = a.at("coarse_samples");
+    arch.fine_samples = a.at("fine_samples");
+    arch.super_resolution_doublings = a.at("super_resolution_doublings");
+    arch.density_scale = a.at("density_scale");
+    arch.box.min = a.at("box_min").get<std::array<double, 3>>();
+    arch.box.max = a.at("box_max").get<std::array<double, 3>>();
+    avatar->render_width = config.at("render_size").at(0);
+    avatar->render_height = config.at("render_size").at(1);
+    avatar->out_width = config.at("output_size").at(0);
+    avatar->out_height = config.at("output_size").at(1);
+    avatar->background = config.at("background");
+    avatar->expressions = int64_t(config.at("expression_mapping").at("expressions").size());
+  } catch (const nlohmann::json::exception& e) {
+    return Status::DataError(dir.string() + "/config.json: " + e.what());
+  }
+  Checkpoint weights;
+  HF_RETURN_IF_ERROR(Checkpoint::Load(dir / "model.pt", &weights));
+  avatar->generator = GanGenerator(arch);
+  torch::NoGradGuard no_grad;
+  auto restore = [&](const std::string& prefix, torch::nn::Module& module) {
+    for (auto& item : module.named_parameters()) {
+      torch::Tensor value;
+      if (!weights.Get(prefix + item.key(), &value) || !value.sizes().equals(item.value().sizes())) return false;
+      item.value().copy_(value);
+    }
+    return true;
+  };
+  if (!restore("generator.", *avatar->generator) || !weights.Get("w_average", &avatar->w_average)) return damaged;
+  if (config.at("expression_mapping").value("trained", false)) {
+    avatar->mapping = ExpressionMapping(avatar->expressions, arch.w_dim);
+    if (!restore("mapping.", *avatar->mapping)) return damaged;
+    avatar->mapping->to(device);
+  }
+  avatar->generator->to(device);
+  avatar->w_average = avatar->w_average.to(device);
+  return Status::Ok();
+}
+
+torch::Tensor GanAvatar::Draw(const torch::Tensor& e, const SplatCamera& camera) {
+  torch::NoGradGuard no_grad;
+  const torch::Device device = w_average.device();
+  torch::Tensor w = w_average.unsqueeze(0);
+  if (mapping && e.defined()) w = mapping->forward(e.narrow(0, 0, expressions).unsqueeze(0).to(device, torch::kFloat32));
+  const SplatCamera small = camera.Downscaled(double(camera.width) / render_width);
+  return generator->Render(w, {small}, camera.width, camera.height, background, nullptr).image.clamp(0, 1).cpu()[0];
+}
+
+}  // namespace headforge

@@ -1,0 +1,34 @@
+// A trained gan-avatar model read back from its folder (model.pt and
+// config.json, as TrainGanAvatar writes them), and drawn: a tracked
+// expression through the expression mapping to w, rendered from a camera.
+#pragma once
+
+#include <torch/types.h>
+
+#include "avatar/gan_avatar/expression_mapping.h"
+#include "avatar/gan_avatar/model.h"
+#include "core/fs.h"
+#include "core/status.h"
+
+namespace headforge {
+
+struct GanAvatar {
+  GanGenerator generator{nullptr};
+  ExpressionMapping mapping{nullptr};  // null when training mapped no expressions
+  torch::Tensor w_average;             // [w_dim]
+  int render_width = 0, render_height = 0, out_width = 0, out_height = 0;
+  double background = 0.5;
+  int64_t expressions = 0;
+
+  // The image [3, H, W] (on the CPU, in [0, 1]) for `expressions` [E] (the
+  // mean latent when undefined or without a mapping) from `camera`, a camera
+  // at the output size (rendered at the volume render's size, then
+  // super-resolved).
+  torch::Tensor Draw(const torch::Tensor& expressions, const SplatCamera& camera);
+};
+
+// True when `dir`'s config.json names the gan-avatar model.
+bool IsGanAvatarFolder(const fs::path& dir);
+Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avatar);
+
+}  // namespace headforge

@@ -127,19 +127,10 @@ TEST_F(CliTest, KilledMidIngestResumesToTheSameOutputs) {
                           log, log);
   // Wait until ingest is writing frames, then kill it without warning.
   const fs::path staging = ws / ".staging" / "ingest" / "frames" / "cam0";
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
   int status = 0;
-  bool exited = false;
-  while (CountFiles(staging) < 3 && std::chrono::steady_clock::now() < deadline) {
-    if (waitpid(pid, &status, WNOHANG) == pid) {
-      exited = true;
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  ASSERT_FALSE(exited) << "ingest finished before it could be interrupted";
-  ASSERT_EQ(kill(pid, SIGKILL), 0);
-  waitpid(pid, &status, 0);
+  const bool killed = SignalWhen(pid, SIGKILL, [&] { return CountFiles(staging) >= 3; }, std::chrono::seconds(120),
+                                 &status, std::chrono::milliseconds(5));
+  ASSERT_TRUE(killed) << "ingest finished before it could be interrupted";
   ASSERT_TRUE(WIFSIGNALED(status));
   EXPECT_FALSE(fs::exists(ws / "capture.json"));  // nothing half-done reached the workspace
 

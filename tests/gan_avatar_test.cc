@@ -19,7 +19,6 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/fs.h"
-#include "core/hash.h"
 #include "core/json_io.h"
 #include "tests/run_headforge.h"
 #include "tests/shared_workspace.h"
@@ -28,8 +27,6 @@ namespace headforge {
 namespace {
 
 const char* const kModelDir = "models/gan_avatar";
-
-fs::path Tracked() { return SharedRun("talking_static_125_run", SimulatedInputs(SharedSimulation("talking_static", 125))); }
 
 fs::path Scratch(const std::string& name) {
   const fs::path dir = fs::temp_directory_path() / ("hf_gan_" + name);
@@ -45,23 +42,10 @@ std::vector<std::string> TrainArgs(const fs::path& ws) {
           "--mapping-samples", "24", "--mapping-steps", "10", "--reconstruction-steps", "20"};
 }
 
-std::string FileHash(const fs::path& path) {
-  Hasher h;
-  EXPECT_TRUE(h.AddFileContents(path).ok()) << path;
-  return h.Hex();
-}
-
-std::vector<nlohmann::json> StatsLines(const fs::path& path) {
-  std::vector<nlohmann::json> lines;
-  std::istringstream in(Slurp(path));
-  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
-  return lines;
-}
-
 class GanAvatarTrain : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    reference_ = CopyOf(Tracked(), Scratch("reference"));
+    reference_ = CopyOf(TrackedTalkingStatic(), Scratch("reference"));
     first_ = Headforge(TrainArgs(reference_));
   }
   static fs::path reference_;
@@ -124,7 +108,7 @@ TEST_F(GanAvatarTrain, TrainsAndWritesItsModel) {
 
 TEST_F(GanAvatarTrain, TheSameSeedGivesTheSameModel) {
   ASSERT_EQ(first_.code, 0) << first_.err;
-  const fs::path again = CopyOf(Tracked(), Scratch("again"));
+  const fs::path again = CopyOf(TrackedTalkingStatic(), Scratch("again"));
   const Result second = Headforge(TrainArgs(again));
   ASSERT_EQ(second.code, 0) << second.err;
   EXPECT_EQ(FileHash(again / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
@@ -137,26 +121,16 @@ TEST_F(GanAvatarTrain, TheSameSeedGivesTheSameModel) {
 
 TEST_F(GanAvatarTrain, KilledMidTrainingResumesToTheSameModel) {
   ASSERT_EQ(first_.code, 0) << first_.err;
-  const fs::path ws = CopyOf(Tracked(), Scratch("killed"));
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("killed"));
   const fs::path log = Scratch("killed.log");
   const pid_t pid = Spawn(TrainArgs(ws), log, log);
   const fs::path staging = ws / ".staging" / "train" / kModelDir;
   // Killed without warning once a checkpoint past step 15 exists.
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(300);
   int status = 0;
-  bool exited = false;
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (waitpid(pid, &status, WNOHANG) == pid) {
-      exited = true;
-      break;
-    }
-    const std::string stats = fs::exists(staging / "checkpoint.pt") ? Slurp(staging / "stats.jsonl") : "";
-    if (std::count(stats.begin(), stats.end(), '\n') >= 3) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
-  }
-  ASSERT_FALSE(exited) << "training finished before it could be killed:\n" << Slurp(log);
-  ASSERT_EQ(kill(pid, SIGKILL), 0);
-  waitpid(pid, &status, 0);
+  const bool killed = SignalWhen(pid, SIGKILL, [&] {
+    return fs::exists(staging / "checkpoint.pt") && CountLines(staging / "stats.jsonl") >= 3;
+  }, std::chrono::seconds(300), &status);
+  ASSERT_TRUE(killed) << "training finished before it could be killed:\n" << Slurp(log);
   ASSERT_TRUE(WIFSIGNALED(status));
   EXPECT_FALSE(fs::exists(ws / kModelDir / "model.pt"));
 
@@ -177,7 +151,7 @@ TEST_F(GanAvatarTrain, KilledMidTrainingResumesToTheSameModel) {
 
 TEST_F(GanAvatarTrain, TheLatentLossAblationMapsToo) {
   ASSERT_EQ(first_.code, 0) << first_.err;
-  const fs::path ws = CopyOf(Tracked(), Scratch("latent"));
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("latent"));
   std::vector<std::string> args = TrainArgs(ws);
   args.insert(args.end(), {"--mapping-loss", "latent"});
   const Result r = Headforge(args);
@@ -214,7 +188,7 @@ TEST_F(GanAvatarTrain, RenderDrawsItFromTurnedCamerasAndDrivenByAnotherCapture) 
   EXPECT_EQ(cv::norm(front, again, cv::NORM_L1), 0);  // the same frame, the same image
   // Driven by another tracked capture's expressions (here the same capture
   // through its shared workspace: its frame 100 has this frame's expression).
-  const cv::Mat driven = render({"--drive", Tracked().string()});
+  const cv::Mat driven = render({"--drive", TrackedTalkingStatic().string()});
   ASSERT_FALSE(driven.empty());
   EXPECT_EQ(driven.size(), front.size());
   // The held-out frames side by side with the frames: render | frame | error.
@@ -236,7 +210,7 @@ TEST_F(GanAvatarTrain, ExportWritesTheMeshAvatarAndTheReportAndSaysWhatItLeavesO
 }
 
 TEST(GanAvatarOptions, ARenderSizeThatDoesNotDivideTheOutputIsRefused) {
-  const fs::path ws = CopyOf(Tracked(), Scratch("bad_options"));
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("bad_options"));
   const Result r = Headforge({"train", "--workspace", ws.string(), "--model", "gan-avatar", "--resolution", "64",
                               "--render-resolution", "24"});
   EXPECT_NE(r.code, 0);

@@ -10,9 +10,9 @@
 #include <thread>
 
 #include "core/fs.h"
-#include "core/hash.h"
 #include "core/json_io.h"
 #include "tests/run_headforge.h"
+#include "tests/shared_workspace.h"
 
 namespace headforge {
 namespace {
@@ -25,12 +25,6 @@ std::vector<std::string> FitArgs(const fs::path& out) {
           "--checkpoint-every", "100", "--max-minutes", "0", "--threads", "2"};
 }
 
-std::string FileHash(const fs::path& path) {
-  Hasher h;
-  EXPECT_TRUE(h.AddFileContents(path).ok()) << path;
-  return h.Hex();
-}
-
 // Starts a fit and sends `signal` once its checkpoint has reached at least
 // `step`; returns the exit status.
 int InterruptAt(const std::vector<std::string>& args, const fs::path& out, int step, int signal) {
@@ -38,20 +32,12 @@ int InterruptAt(const std::vector<std::string>& args, const fs::path& out, int s
   const pid_t pid = Spawn(args, log, log);
   const fs::path checkpoint = out / ".staging" / "splat_fit" / "checkpoint.pt";
   const fs::path stats = out / ".staging" / "splat_fit" / "stats.jsonl";
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(300);
   int status = 0;
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (waitpid(pid, &status, WNOHANG) == pid) {
-      ADD_FAILURE() << "the fit ended before it was interrupted:\n" << Slurp(log);
-      return status;
-    }
-    // stats.jsonl gets a line every 100 steps (log_every): count them.
-    const std::string text = fs::exists(checkpoint) ? Slurp(stats) : "";
-    if (std::count(text.begin(), text.end(), '\n') * 100 >= step) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  kill(pid, signal);
-  waitpid(pid, &status, 0);
+  // stats.jsonl gets a line every 100 steps (log_every): count them.
+  const bool signalled = SignalWhen(pid, signal, [&] {
+    return fs::exists(checkpoint) && int(CountLines(stats)) * 100 >= step;
+  }, std::chrono::seconds(300), &status, std::chrono::milliseconds(20));
+  if (!signalled) ADD_FAILURE() << "the fit ended before it was interrupted:\n" << Slurp(log);
   return status;
 }
 

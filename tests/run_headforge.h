@@ -3,13 +3,18 @@
 
 #include <fcntl.h>
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <chrono>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/fs.h"
@@ -65,6 +70,28 @@ inline Result Headforge(const std::vector<std::string>& args) {
   r.out = Slurp(out);
   r.err = Slurp(err);
   return r;
+}
+
+// Polls every `poll` until `ready()` holds (or `timeout` passes), then sends
+// `signal` to `pid` and waits for it to end. False when the process ended by
+// itself first. *status is its wait status either way.
+inline bool SignalWhen(pid_t pid, int signal, const std::function<bool()>& ready, std::chrono::seconds timeout,
+                       int* status, std::chrono::milliseconds poll = std::chrono::milliseconds(2)) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (waitpid(pid, status, WNOHANG) == pid) return false;
+    if (ready()) break;
+    std::this_thread::sleep_for(poll);
+  }
+  EXPECT_EQ(kill(pid, signal), 0);
+  waitpid(pid, status, 0);
+  return true;
+}
+
+// The number of lines of a text file (0 when it does not exist).
+inline size_t CountLines(const fs::path& path) {
+  const std::string text = Slurp(path);
+  return size_t(std::count(text.begin(), text.end(), '\n'));
 }
 
 }  // namespace headforge

@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include <functional>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -104,6 +105,27 @@ inline fs::path CopyOf(const fs::path& shared, const fs::path& to) {
   fs::copy(shared, to, fs::copy_options::recursive);
   fs::remove(to / ".complete");
   return to;
+}
+
+// The simulated talking_static capture (125 frames) taken through track: the
+// workspace the training tests start from (a copy when they change it).
+inline fs::path TrackedTalkingStatic() {
+  return SharedRun("talking_static_125_run", SimulatedInputs(SharedSimulation("talking_static", 125)));
+}
+
+// A file's contents as a hash, to compare two runs' outputs.
+inline std::string FileHash(const fs::path& path) {
+  Hasher h;
+  EXPECT_TRUE(h.AddFileContents(path).ok()) << path;
+  return h.Hex();
+}
+
+// stats.jsonl's lines.
+inline std::vector<nlohmann::json> StatsLines(const fs::path& path) {
+  std::vector<nlohmann::json> lines;
+  std::istringstream in(Slurp(path));
+  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
+  return lines;
 }
 
 }  // namespace headforge

@@ -19,7 +19,6 @@
 
 #include "core/face_model.h"
 #include "core/fs.h"
-#include "core/hash.h"
 #include "core/json_io.h"
 #include "core/mesh_renderer.h"
 #include "core/paths.h"
@@ -31,9 +30,6 @@ namespace headforge {
 namespace {
 
 const char* const kModelDir = "models/gaussian_style";
-
-// The tracked capture every test starts from (a copy when it changes it).
-fs::path Tracked() { return SharedRun("talking_static_125_run", SimulatedInputs(SharedSimulation("talking_static", 125))); }
 
 fs::path Scratch(const std::string& name) {
   const fs::path dir = fs::temp_directory_path() / ("hf_train_" + name);
@@ -56,24 +52,11 @@ std::vector<std::string> TrainArgs(const fs::path& ws) {
   return args;
 }
 
-std::string FileHash(const fs::path& path) {
-  Hasher h;
-  EXPECT_TRUE(h.AddFileContents(path).ok()) << path;
-  return h.Hex();
-}
-
-std::vector<nlohmann::json> StatsLines(const fs::path& path) {
-  std::vector<nlohmann::json> lines;
-  std::istringstream in(Slurp(path));
-  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
-  return lines;
-}
-
 // One uninterrupted tiny run, shared by the tests that compare with it.
 class TrainStage : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    reference_ = CopyOf(Tracked(), Scratch("reference"));
+    reference_ = CopyOf(TrackedTalkingStatic(), Scratch("reference"));
     first_ = Headforge(TrainArgs(reference_));
   }
   static fs::path reference_;
@@ -111,7 +94,7 @@ TEST_F(TrainStage, TheLossFallsAndTheHeldOutFramesAreScored) {
 
 TEST_F(TrainStage, TheSameSeedGivesTheSameModel) {
   ASSERT_EQ(first_.code, 0) << first_.err;
-  const fs::path again = CopyOf(Tracked(), Scratch("again"));
+  const fs::path again = CopyOf(TrackedTalkingStatic(), Scratch("again"));
   const Result second = Headforge(TrainArgs(again));
   ASSERT_EQ(second.code, 0) << second.err;
   EXPECT_EQ(FileHash(again / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
@@ -126,27 +109,17 @@ TEST_F(TrainStage, TheSameSeedGivesTheSameModel) {
 
 TEST_F(TrainStage, KilledMidTrainingResumesToTheSameModel) {
   ASSERT_EQ(first_.code, 0) << first_.err;
-  const fs::path ws = CopyOf(Tracked(), Scratch("killed"));
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("killed"));
   const fs::path log = fs::temp_directory_path() / "hf_train_killed.log";
   const pid_t pid = Spawn(TrainArgs(ws), log, log);
   const fs::path staging = ws / ".staging" / "train" / kModelDir;
   // Kill it without warning once a checkpoint past step 100 exists (stats.jsonl
   // has a line every 10 steps).
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(300);
   int status = 0;
-  bool exited = false;
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (waitpid(pid, &status, WNOHANG) == pid) {
-      exited = true;
-      break;
-    }
-    const std::string stats = fs::exists(staging / "checkpoint.pt") ? Slurp(staging / "stats.jsonl") : "";
-    if (std::count(stats.begin(), stats.end(), '\n') >= 11) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  ASSERT_FALSE(exited) << "training finished before it could be killed:\n" << Slurp(log);
-  ASSERT_EQ(kill(pid, SIGKILL), 0);
-  waitpid(pid, &status, 0);
+  const bool killed = SignalWhen(pid, SIGKILL, [&] {
+    return fs::exists(staging / "checkpoint.pt") && CountLines(staging / "stats.jsonl") >= 11;
+  }, std::chrono::seconds(300), &status);
+  ASSERT_TRUE(killed) << "training finished before it could be killed:\n" << Slurp(log);
   ASSERT_TRUE(WIFSIGNALED(status));
   EXPECT_FALSE(fs::exists(ws / kModelDir / "model.pt"));
 
@@ -165,7 +138,7 @@ TEST_F(TrainStage, KilledMidTrainingResumesToTheSameModel) {
 
 TEST_F(TrainStage, RunChainsTrainAfterTrackAndSkipsItWhenNothingChanged) {
   ASSERT_EQ(first_.code, 0) << first_.err;
-  const fs::path ws = CopyOf(Tracked(), Scratch("run"));
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("run"));
   std::vector<std::string> args = {"run", "--workspace", ws.string(), "--video"};
   for (const auto& input : SimulatedInputs(SharedSimulation("talking_static", 125))) args.push_back(input);
   for (const auto& a : TinyOptions()) args.push_back(a == "--resolution" ? "--train.resolution" : a);
@@ -237,7 +210,7 @@ class ExportStage : public TrainStage {
     // Driven by a tracked workspace too (the same capture's: what is tested
     // is that another workspace's tracking reaches the avatar).
     exported_ = Headforge({"export", "--workspace", reference_.string(), "--texture-size", "128", "--bake-views", "8",
-                           "--drive", Tracked().string()});
+                           "--drive", TrackedTalkingStatic().string()});
   }
   static Result exported_;
 };
@@ -294,19 +267,9 @@ TEST_F(ExportStage, KilledMidExportRunsAgainToTheSameFiles) {
   const fs::path log = Scratch("export_killed.log");
   const pid_t pid = Spawn(args(killed), log, log);
   const fs::path staged = killed / ".staging" / "export" / "export" / "avatar_mesh.glb";
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
   int status = 0;
-  bool exited = false;
-  while (std::chrono::steady_clock::now() < deadline && !fs::exists(staged)) {
-    if (waitpid(pid, &status, WNOHANG) == pid) {
-      exited = true;
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
-  }
-  ASSERT_FALSE(exited) << "export finished before it could be killed:\n" << Slurp(log);
-  ASSERT_EQ(kill(pid, SIGKILL), 0);
-  waitpid(pid, &status, 0);
+  const bool stopped = SignalWhen(pid, SIGKILL, [&] { return fs::exists(staged); }, std::chrono::seconds(120), &status);
+  ASSERT_TRUE(stopped) << "export finished before it could be killed:\n" << Slurp(log);
   ASSERT_TRUE(WIFSIGNALED(status));
   const fs::path out = killed / "export";
   // The earlier export (the fixture's, copied with the workspace) is left whole.
@@ -610,7 +573,7 @@ TEST_F(ExportStage, TheViewerPageShowsBothAvatars) {
 // tracking (the mesh avatar, the report) and says what the rest needs,
 // before writing anything.
 TEST(ExportBadInput, AnUntrainedWorkspaceExportsTheMeshAndTheReportAlone) {
-  const fs::path ws = CopyOf(Tracked(), Scratch("untrained"));
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("untrained"));
   const Result all = Headforge({"export", "--workspace", ws.string(), "--texture-size", "64"});
   EXPECT_EQ(all.code, 1);
   EXPECT_NE(all.err.find("no trained avatar"), std::string::npos) << all.err;
@@ -637,7 +600,7 @@ void EditJson(const fs::path& file, const std::function<void(nlohmann::json*)>& 
 }
 
 TEST(TrainBadInput, AWorkspaceWithoutTrackingSaysToRunTrack) {
-  const fs::path ws = CopyOf(Tracked(), Scratch("no_tracking"));
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("no_tracking"));
   fs::remove(ws / "tracking.json");
   EditJson(ws / "workspace.json", [](nlohmann::json* j) {
     nlohmann::json kept = nlohmann::json::array();
@@ -652,7 +615,7 @@ TEST(TrainBadInput, AWorkspaceWithoutTrackingSaysToRunTrack) {
 }
 
 TEST(TrainBadInput, TrackingThatDisagreesWithTheFramesIsRefused) {
-  const fs::path ws = CopyOf(Tracked(), Scratch("mismatch"));
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("mismatch"));
   EditJson(ws / "tracking.json", [](nlohmann::json* j) { (*j)["frames"].erase((*j)["frames"].begin() + 100, (*j)["frames"].end()); });
   const Result r = Headforge(TrainArgs(ws));
   EXPECT_NE(r.code, 0);
@@ -661,7 +624,7 @@ TEST(TrainBadInput, TrackingThatDisagreesWithTheFramesIsRefused) {
 }
 
 TEST(TrainBadInput, TooFewFramesIsAClearError) {
-  const fs::path ws = CopyOf(Tracked(), Scratch("few"));
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("few"));
   // Six frames in the capture and the tracking alike.
   EditJson(ws / "capture.json", [](nlohmann::json* j) {
     (*j)["frames"].erase((*j)["frames"].begin() + 6, (*j)["frames"].end());
@@ -675,7 +638,7 @@ TEST(TrainBadInput, TooFewFramesIsAClearError) {
 }
 
 TEST(TrainHardCases, FramesTheTrackerFlaggedAreLeftOutOfTraining) {
-  const fs::path ws = CopyOf(Tracked(), Scratch("flagged"));
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("flagged"));
   // Frames 10-29 "failed": interpolated or low-confidence, as the tracker marks them.
   EditJson(ws / "tracking.json", [](nlohmann::json* j) {
     for (int f = 10; f < 30; ++f) (*j)["frames"][size_t(f)][f % 2 ? "interpolated" : "low_confidence"] = true;

@@ -22,21 +22,7 @@ Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avata
   if (config.value("model", "") != "gan-avatar" || config.value("version", 0) != 1) return damaged;
   GanAvatarOptions arch;
   try {
-    const nlohmann::json& a = config.at("architecture");
-    arch.z_dim = a.at("z_dim");
-    arch.w_dim = a.at("w_dim");
-    arch.mapping_layers = a.at("mapping_layers");
-    arch.synthesis_channels = a.at("synthesis_channels");
-    arch.plane_resolution = a.at("plane_resolution");
-    arch.plane_channels = a.at("plane_channels");
-    arch.decoder_hidden = a.at("decoder_hidden");
-    arch.feature_channels = a.at("feature_channels");
-    arch.coarse_samples = a.at("coarse_samples");
-    arch.fine_samples = a.at("fine_samples");
-    arch.super_resolution_doublings = a.at("super_resolution_doublings");
-    arch.density_scale = a.at("density_scale");
-    arch.box.min = a.at("box_min").get<std::array<double, 3>>();
-    arch.box.max = a.at("box_max").get<std::array<double, 3>>();
+    config.at("architecture").get_to(arch);
     avatar->render_width = config.at("render_size").at(0);
     avatar->render_height = config.at("render_size").at(1);
     avatar->out_width = config.at("output_size").at(0);
@@ -49,19 +35,11 @@ Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avata
   Checkpoint weights;
   HF_RETURN_IF_ERROR(Checkpoint::Load(dir / "model.pt", &weights));
   avatar->generator = GanGenerator(arch);
-  torch::NoGradGuard no_grad;
-  auto restore = [&](const std::string& prefix, torch::nn::Module& module) {
-    for (auto& item : module.named_parameters()) {
-      torch::Tensor value;
-      if (!weights.Get(prefix + item.key(), &value) || !value.sizes().equals(item.value().sizes())) return false;
-      item.value().copy_(value);
-    }
-    return true;
-  };
-  if (!restore("generator.", *avatar->generator) || !weights.Get("w_average", &avatar->w_average)) return damaged;
+  if (!weights.GetModule("generator.", avatar->generator.get()) || !weights.Get("w_average", &avatar->w_average))
+    return damaged;
   if (config.at("expression_mapping").value("trained", false)) {
     avatar->mapping = ExpressionMapping(avatar->expressions, arch.w_dim);
-    if (!restore("mapping.", *avatar->mapping)) return damaged;
+    if (!weights.GetModule("mapping.", avatar->mapping.get())) return damaged;
     avatar->mapping->to(device);
   }
   avatar->generator->to(device);

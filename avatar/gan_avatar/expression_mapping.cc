@@ -59,10 +59,9 @@ Status EstimateRenderExpressions(GanGenerator& generator, const SplatCamera& cam
   tc.fy = big.fy;
   tc.cx = big.cx;
   tc.cy = big.cy;
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) tc.rotation(r, c) = big.cam_from_world[size_t(4 * r + c)];
-    tc.translation[r] = big.cam_from_world[size_t(4 * r + 3)];
-  }
+  const Eigen::Isometry3d cam_from_head = CameraPose(big);
+  tc.rotation = cam_from_head.linear();
+  tc.translation = cam_from_head.translation();
   std::array<Eigen::Vector2d, 68> projected;
   const Eigen::VectorXd neutral = Eigen::VectorXd::Zero(basis.num_expressions);
   for (int i = 0; i < 68; ++i) projected[size_t(i)] = tc.Pixel(basis.Point(i, tracking.identity, neutral));

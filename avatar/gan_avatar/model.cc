@@ -4,24 +4,11 @@
 
 #include <cmath>
 
+#include "avatar/nn/functional.h"
+
 namespace headforge {
 
 namespace F = torch::nn::functional;
-
-namespace {
-
-torch::Tensor LeakyRelu(const torch::Tensor& x) {
-  return F::leaky_relu(x, F::LeakyReLUFuncOptions().negative_slope(0.2));
-}
-
-torch::Tensor Resize(const torch::Tensor& x, int64_t height, int64_t width) {
-  return F::interpolate(x, F::InterpolateFuncOptions()
-                               .size(std::vector<int64_t>{height, width})
-                               .mode(torch::kBilinear)
-                               .align_corners(false));
-}
-
-}  // namespace
 
 GanGeneratorImpl::GanGeneratorImpl(const GanAvatarOptions& options) : options_(options) {
   TORCH_CHECK(options.feature_channels >= 3, "gan-avatar: at least the three colour channels");
@@ -109,14 +96,38 @@ GanRender GanGeneratorImpl::Render(const torch::Tensor& w, const std::vector<Spl
   for (int i = 0; i < doublings; ++i) {
     const bool last = i + 1 == doublings;
     const int64_t th = last ? out_height : h << (i + 1), tw = last ? out_width : wd << (i + 1);
-    x = Resize(x, th, tw);
-    x = LeakyRelu(super_resolution_[size_t(2 * i)]->as<nn::ModulatedConv2d>()->forward(x, w));
-    x = LeakyRelu(super_resolution_[size_t(2 * i + 1)]->as<nn::ModulatedConv2d>()->forward(x, w));
+    x = nn::ResizeBilinear(x, th, tw);
+    x = nn::LeakyRelu(super_resolution_[size_t(2 * i)]->as<nn::ModulatedConv2d>()->forward(x, w));
+    x = nn::LeakyRelu(super_resolution_[size_t(2 * i + 1)]->as<nn::ModulatedConv2d>()->forward(x, w));
   }
-  if (x.size(2) != out_height || x.size(3) != out_width) x = Resize(x, out_height, out_width);
-  out.image = Resize(out.raw, out_height, out_width) + to_rgb_->forward(x, w);
+  if (x.size(2) != out_height || x.size(3) != out_width) x = nn::ResizeBilinear(x, out_height, out_width);
+  out.image = nn::ResizeBilinear(out.raw, out_height, out_width) + to_rgb_->forward(x, w);
   return out;
 }
+
+// The architecture's scalar fields, each written and read under its own name.
+#define HF_GAN_ARCHITECTURE_FIELDS(X)                                                                         \
+  X(z_dim) X(w_dim) X(mapping_layers) X(synthesis_channels) X(plane_resolution) X(plane_channels)            \
+  X(decoder_hidden) X(feature_channels) X(coarse_samples) X(fine_samples) X(super_resolution_doublings)       \
+  X(density_scale)
+
+void to_json(nlohmann::json& json, const GanAvatarOptions& options) {
+#define HF_WRITE(field) json[#field] = options.field;
+  HF_GAN_ARCHITECTURE_FIELDS(HF_WRITE)
+#undef HF_WRITE
+  json["box_min"] = options.box.min;
+  json["box_max"] = options.box.max;
+}
+
+void from_json(const nlohmann::json& json, GanAvatarOptions& options) {
+#define HF_READ(field) json.at(#field).get_to(options.field);
+  HF_GAN_ARCHITECTURE_FIELDS(HF_READ)
+#undef HF_READ
+  json.at("box_min").get_to(options.box.min);
+  json.at("box_max").get_to(options.box.max);
+}
+
+#undef HF_GAN_ARCHITECTURE_FIELDS
 
 torch::Tensor CameraCondition(const SplatCamera& camera) {
   std::vector<double> c(camera.cam_from_world.begin(), camera.cam_from_world.end());

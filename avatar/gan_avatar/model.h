@@ -14,6 +14,8 @@
 
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "avatar/nn/mlp.h"
 #include "avatar/nn/modulated_conv.h"
 #include "avatar/nn/triplane.h"
@@ -37,6 +39,11 @@ struct GanAvatarOptions {
   // optical depths a raw value near 1 gives across one metre.
   double density_scale = 30;
 };
+
+// The architecture as config.json holds it, and back (nlohmann::json's
+// conversions; reading throws nlohmann::json::exception on a missing field).
+void to_json(nlohmann::json& json, const GanAvatarOptions& options);
+void from_json(const nlohmann::json& json, GanAvatarOptions& options);
 
 struct GanRender {
   torch::Tensor image;     // [B, 3, H, W] the super-resolved image

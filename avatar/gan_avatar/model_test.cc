@@ -83,9 +83,11 @@ TEST(GanGenerator, RaysThatMissTheBoxShowTheBackground) {
   };
   EXPECT_EQ(grads(0, 0), 0);
   EXPECT_GT(grads(6, 6), 0);
-  for (const auto& p : g->named_parameters())
-    if (p.key().rfind("planes.mapping", 0) == 0 || p.key().rfind("decoder", 0) == 0)
+  for (const auto& p : g->named_parameters()) {
+    if (p.key().rfind("planes.mapping", 0) == 0 || p.key().rfind("decoder", 0) == 0) {
       EXPECT_TRUE(p.value().grad().defined() && p.value().grad().abs().sum().item<double>() > 0) << p.key();
+    }
+  }
 }
 
 TEST(GanGenerator, SameLatentAndCameraGiveTheSameImageAndTheCameraMatters) {

@@ -14,16 +14,18 @@
 #include <map>
 #include <thread>
 
+#include "avatar/gan_avatar/avatar_io.h"
 #include "avatar/gan_avatar/expression_mapping.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/nn/augment.h"
 #include "avatar/nn/discriminator.h"
+#include "avatar/nn/functional.h"
 #include "avatar/train/adam.h"
 #include "avatar/train/checkpoint.h"
 #include "avatar/train/device.h"
+#include "avatar/train/loop.h"
 #include "avatar/train/tensor_image.h"
 #include "core/image_io.h"
-#include "core/interrupt.h"
 #include "core/json_io.h"
 #include "core/log.h"
 
@@ -41,17 +43,6 @@ constexpr double kBoxPadding = 0.04;
 constexpr double kWAverageRate = 0.01;
 // Adam's step for the warm-up's per-frame latents.
 constexpr double kCodeLearningRate = 1e-2;
-
-double Seconds(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
-
-torch::Tensor Resize(const torch::Tensor& x, int64_t height, int64_t width) {
-  return F::interpolate(x, F::InterpolateFuncOptions()
-                               .size(std::vector<int64_t>{height, width})
-                               .mode(torch::kBilinear)
-                               .align_corners(false));
-}
 
 struct GanState {
   int step = 0;
@@ -81,7 +72,7 @@ class GanTrainer {
   bool reconstructing(int step) const { return step <= options_.reconstruction_steps; }
   // The discriminator's input: the image and the raw render brought to its size.
   torch::Tensor DualImage(const torch::Tensor& image, const torch::Tensor& raw) const {
-    return torch::cat({image, Resize(raw, image.size(2), image.size(3))}, 1);
+    return torch::cat({image, nn::ResizeBilinear(raw, image.size(2), image.size(3))}, 1);
   }
   // Held-out views (or every `stride`-th training view) driven by their
   // tracked expressions through the mapping, or with the mean latent before
@@ -102,14 +93,12 @@ class GanTrainer {
   torch::Device device_;
   at::Generator gen_;
   GanAvatarOptions arch_;
-  GanGenerator generator_{nullptr};
+  GanAvatar avatar_;  // the generator, the mapping (after the GAN) and the mean latent, as render draws them
   nn::Discriminator discriminator_{nullptr};
   std::vector<torch::Tensor> g_params_, d_params_;
   Adam adam_g_, adam_d_;
   nn::AdaController ada_;
-  torch::Tensor w_average_;               // [w_dim], the running mean of the mapped w
   torch::Tensor frame_codes_;             // [frames, z_dim]: the warm-up's latent per frame
-  ExpressionMapping mapping_{nullptr};    // after the GAN
   double mapping_loss_ = 0;               // the mapping's last loss
   RenderExpressions samples_;
   torch::Tensor reals_, conditions_;      // [N, 3, H, W] over the background; [N, 16]
@@ -122,22 +111,28 @@ Status GanTrainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   GanRenderSize(options_, data_, &render_w_, &render_h_);
   arch_ = GanArchitecture(options_, data_);
   torch::manual_seed(uint64_t(options_.seed));  // the networks' initial weights
-  generator_ = GanGenerator(arch_);
+  avatar_.generator = GanGenerator(arch_);
   nn::DiscriminatorOptions d;
   d.in_channels = 6;
   d.resolution = std::max(data_.width, data_.height);
   d.channels = 32;
   d.condition_dim = 16;
   discriminator_ = nn::Discriminator(d);
-  generator_->to(device_);
+  avatar_.generator->to(device_);
   discriminator_->to(device_);
-  g_params_ = generator_->parameters();
+  g_params_ = avatar_.generator->parameters();
   d_params_ = discriminator_->parameters();
   for (torch::Tensor& t : g_params_) adam_g_.Add(&t, options_.lr_network, false);
   for (torch::Tensor& t : d_params_) adam_d_.Add(&t, options_.lr_discriminator, false);
   frame_codes_ = torch::randn({data_.num_frames, arch_.z_dim}).to(device_).requires_grad_(true);
   adam_g_.Add(&frame_codes_, kCodeLearningRate, false);
-  w_average_ = torch::zeros({arch_.w_dim}, torch::TensorOptions().device(device_));
+  avatar_.w_average = torch::zeros({arch_.w_dim}, torch::TensorOptions().device(device_));
+  avatar_.render_width = render_w_;
+  avatar_.render_height = render_h_;
+  avatar_.out_width = data_.width;
+  avatar_.out_height = data_.height;
+  avatar_.background = kBackground;
+  avatar_.expressions = int64_t(data_.expression_names.size());
   std::vector<torch::Tensor> reals, conditions;
   for (const AvatarView& view : data_.train) {
     reals.push_back(view.image * view.mask + kBackground * (1 - view.mask));
@@ -161,16 +156,16 @@ torch::Tensor GanTrainer::ReconstructionLoss() {
     frames.push_back(view.frame);
   }
   const torch::Tensor codes = frame_codes_.index_select(0, torch::tensor(frames, torch::kLong).to(device_));
-  const torch::Tensor w = generator_->Map(codes);
-  const GanRender out = generator_->Render(w, cameras, data_.width, data_.height, kBackground, &gen_);
+  const torch::Tensor w = avatar_.generator->Map(codes);
+  const GanRender out = avatar_.generator->Render(w, cameras, data_.width, data_.height, kBackground, &gen_);
   const torch::Tensor real = reals_.index_select(0, index.to(device_));
   // The super-resolved image and the raw render both: the volume learns the
   // head's shape and colour directly, not only through the super-resolution.
   const torch::Tensor l1 = (out.image - real).abs().mean() +
-                           (out.raw - Resize(real, render_h_, render_w_)).abs().mean();
+                           (out.raw - nn::ResizeBilinear(real, render_h_, render_w_)).abs().mean();
   {
     torch::NoGradGuard no_grad;
-    w_average_.lerp_(w.detach().mean(0), kWAverageRate);
+    avatar_.w_average.lerp_(w.detach().mean(0), kWAverageRate);
   }
   state_.recon_l1 += l1.item<double>();
   return l1;
@@ -194,8 +189,8 @@ void GanTrainer::Step(int step) {
   const double p = ada_.p();
 
   // Generator: make the discriminator call the renders real.
-  const torch::Tensor w = generator_->Map(z);
-  const GanRender fake = generator_->Render(w, cameras, data_.width, data_.height, kBackground, &gen_);
+  const torch::Tensor w = avatar_.generator->Map(z);
+  const GanRender fake = avatar_.generator->Render(w, cameras, data_.width, data_.height, kBackground, &gen_);
   const torch::Tensor fake_dual = DualImage(fake.image, fake.raw);
   const torch::Tensor loss_g = F::softplus(-discriminator_->forward(nn::Augment(fake_dual, p, 6, gen_), fake_c)).mean();
   // After the warm-up the adversarial loss comes in over --adversarial-ramp
@@ -211,7 +206,7 @@ void GanTrainer::Step(int step) {
 
   // Discriminator: the same renders (detached) as fake, a batch of frames as real.
   const torch::Tensor real = reals_.index_select(0, real_index.to(device_));
-  const torch::Tensor real_raw = Resize(real, render_h_, render_w_);
+  const torch::Tensor real_raw = nn::ResizeBilinear(real, render_h_, render_w_);
   const torch::Tensor real_c = conditions_.index_select(0, real_index.to(device_));
   const torch::Tensor fake_logits = discriminator_->forward(nn::Augment(fake_dual.detach(), p, 6, gen_), fake_c);
   const bool r1_now = options_.r1_gamma > 0 && step % options_.r1_every == 0;
@@ -235,7 +230,7 @@ void GanTrainer::Step(int step) {
   ada_.Observe(real_logits);
   {
     torch::NoGradGuard no_grad;
-    w_average_.lerp_(w.detach().mean(0), kWAverageRate);
+    avatar_.w_average.lerp_(w.detach().mean(0), kWAverageRate);
   }
   state_.loss_g += loss_g.item<double>();
   state_.loss_d += loss_d.item<double>();
@@ -245,19 +240,17 @@ void GanTrainer::Step(int step) {
 }
 
 torch::Tensor GanTrainer::RenderMean(const std::vector<SplatCamera>& cameras) {
-  const torch::Tensor w = w_average_.unsqueeze(0).expand({int64_t(cameras.size()), -1});
-  return generator_->Render(w, cameras, data_.width, data_.height, kBackground, nullptr).image.clamp(0, 1).cpu();
+  const torch::Tensor w = avatar_.w_average.unsqueeze(0).expand({int64_t(cameras.size()), -1});
+  return avatar_.generator->Render(w, cameras, data_.width, data_.height, kBackground, nullptr).image.clamp(0, 1).cpu();
 }
 
 const AvatarView& GanTrainer::FrontalView() const {
   size_t best = 0;
   double best_cos = -2;
   for (size_t i = 0; i < data_.train.size(); ++i) {
-    const auto& m = data_.train[i].view.cam_from_world;
-    // The camera's centre -R^T t in the head frame; the face looks along +z.
-    const double c[3] = {-(m[0] * m[3] + m[4] * m[7] + m[8] * m[11]), -(m[1] * m[3] + m[5] * m[7] + m[9] * m[11]),
-                         -(m[2] * m[3] + m[6] * m[7] + m[10] * m[11])};
-    const double cos = c[2] / std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+    // The face looks along +z of the head frame, where the camera sits at c.
+    const Eigen::Vector3d c = CameraPose(data_.train[i].view).inverse().translation();
+    const double cos = c.z() / c.norm();
     if (cos > best_cos) {
       best_cos = cos;
       best = i;
@@ -268,19 +261,12 @@ const AvatarView& GanTrainer::FrontalView() const {
 
 std::vector<ViewScores> GanTrainer::Evaluate(const fs::path& write_dir, int stride, bool mean_latent,
                                              bool training_views) {
-  torch::NoGradGuard no_grad;
   const torch::Tensor background = torch::full({3}, kBackground);
-  const int64_t expressions = int64_t(data_.expression_names.size());
   const std::vector<AvatarView>& views = training_views ? data_.train : data_.test;
   std::vector<ViewScores> scores;
   for (size_t i = 0; i < views.size(); i += size_t(std::max(stride, 1))) {
     const AvatarView& view = views[i];
-    torch::Tensor w = w_average_.unsqueeze(0);
-    if (mapping_ && !mean_latent) w = mapping_->forward(view.condition.narrow(0, 0, expressions).unsqueeze(0).to(device_));
-    const torch::Tensor render =
-        generator_->Render(w, {RenderCamera(view)}, data_.width, data_.height, kBackground, nullptr)
-            .image.clamp(0, 1)
-            .cpu()[0];
+    const torch::Tensor render = avatar_.Draw(mean_latent ? torch::Tensor() : view.condition, view.view);
     ViewScores s = ScoreRender(render, view.image, view.mask, background);
     s.frame = view.frame;
     s.camera = view.camera;
@@ -304,7 +290,7 @@ Status GanTrainer::WritePreview(const fs::path& dir, int step) {
     cameras.push_back(RenderCamera(data_.train[size_t(k * int64_t(data_.train.size()) / n)]));
   const torch::Tensor z = torch::randn({n, arch_.z_dim}, fixed).to(device_);
   const torch::Tensor random =
-      generator_->Render(generator_->Map(z), cameras, data_.width, data_.height, kBackground, nullptr).image;
+      avatar_.generator->Render(avatar_.generator->Map(z), cameras, data_.width, data_.height, kBackground, nullptr).image;
   const torch::Tensor mean = RenderMean(cameras);
   const torch::Tensor top = torch::cat(random.clamp(0, 1).cpu().unbind(0), 2);
   const torch::Tensor bottom = torch::cat(mean.unbind(0), 2);
@@ -317,18 +303,18 @@ Status GanTrainer::WritePreview(const fs::path& dir, int step) {
 Status GanTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
   Checkpoint c;
   c.Put("step", int64_t(state_.step));
-  for (const auto& item : generator_->named_parameters()) c.Put("generator." + item.key(), item.value());
-  for (const auto& item : discriminator_->named_parameters()) c.Put("discriminator." + item.key(), item.value());
+  c.PutModule("generator.", *avatar_.generator);
+  c.PutModule("discriminator.", *discriminator_);
   adam_g_.Save("adam_g.", &c);
   adam_d_.Save("adam_d.", &c);
   c.Put("ada", torch::tensor(ada_.State(), torch::kFloat64));
-  c.Put("w_average", w_average_);
+  c.Put("w_average", avatar_.w_average);
   c.Put("frame_codes", frame_codes_);
   c.Put("generator_state", gen_.get_state());
   c.Put("sums", torch::tensor({state_.loss_g, state_.loss_d, state_.r1, state_.real_accuracy, state_.fake_accuracy,
                                double(state_.count), double(state_.r1_count), state_.recon_l1},
                               torch::kFloat64));
-  c.Put("seconds", state_.seconds + Seconds(start_));
+  c.Put("seconds", state_.seconds + SecondsSince(start_));
   c.Put("stats_lines", int64_t(stats_lines));
   return c.Save(path);
 }
@@ -341,20 +327,10 @@ Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   torch::Tensor generator_state, ada, sums;
   if (!c.Get("step", &step) || !c.Get("generator_state", &generator_state) || !c.Get("stats_lines", &lines) ||
       !c.Get("ada", &ada) || !c.Get("sums", &sums) || sums.numel() < 8 || !c.Get("seconds", &state_.seconds) ||
-      !c.Get("w_average", &w_average_))
+      !c.Get("w_average", &avatar_.w_average))
     return damaged;
-  {
-    torch::NoGradGuard no_grad;
-    auto restore = [&](const std::string& prefix, torch::nn::Module& module) {
-      for (auto& item : module.named_parameters()) {
-        torch::Tensor value;
-        if (!c.Get(prefix + item.key(), &value) || !value.sizes().equals(item.value().sizes())) return false;
-        item.value().copy_(value);
-      }
-      return true;
-    };
-    if (!restore("generator.", *generator_) || !restore("discriminator.", *discriminator_)) return damaged;
-  }
+  if (!c.GetModule("generator.", avatar_.generator.get()) || !c.GetModule("discriminator.", discriminator_.get()))
+    return damaged;
   if (!adam_g_.Load("adam_g.", c) || !adam_d_.Load("adam_d.", c)) return damaged;
   ada_.Restore(std::vector<double>(ada.data_ptr<double>(), ada.data_ptr<double>() + ada.numel()));
   const double* s = sums.data_ptr<double>();
@@ -372,7 +348,7 @@ Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
     if (!c.Get("frame_codes", &codes) || !codes.sizes().equals(frame_codes_.sizes())) return damaged;
     frame_codes_.copy_(codes);
   }
-  w_average_ = w_average_.to(device_);
+  avatar_.w_average = avatar_.w_average.to(device_);
   gen_.set_state(generator_state);
   state_.step = int(step);
   HF_LOG(Info) << "train: resuming from the checkpoint at step " << step;
@@ -380,7 +356,7 @@ Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
 }
 
 Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
-  auto elapsed = [&] { return state_.seconds + Seconds(start_); };
+  auto elapsed = [&] { return state_.seconds + SecondsSince(start_); };
   progress->Start("train: gan-avatar", options_.steps);
   progress->Advance(state_.step);
   for (int step = state_.step + 1; step <= options_.steps; ++step) {
@@ -430,15 +406,8 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
       HF_LOG(Info) << "train: time limit of " << options_.max_minutes << " min reached at step " << step;
       break;
     }
-    const bool stop = InterruptRequested();
-    if (!last && (stop || step % options_.checkpoint_every == 0))
-      HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, stats->size()));
-    if (stop) {
-      progress->Finish("interrupted");
-      return Status::Interrupted("training stopped at step " + std::to_string(step) + " of " +
-                                 std::to_string(options_.steps) +
-                                 "; the checkpoint is saved: run the same command again to resume");
-    }
+    HF_RETURN_IF_ERROR(CheckpointOrStop("training", step, options_.steps, last, options_.checkpoint_every,
+                                        [&] { return SaveCheckpoint(checkpoint, stats->size()); }, progress));
   }
   progress->Finish(std::to_string(state_.step) + " steps");
   // The GAN is done: a kill during the expression mapping resumes here.
@@ -460,13 +429,13 @@ Status GanTrainer::TrainMapping(const fs::path& workspace, StatsLog* stats, Prog
   sampling.landmark_model = options_.landmark_model;
   sampling.background = kBackground;
   sampling.threads = std::max(1, int(std::thread::hardware_concurrency()));
-  HF_RETURN_IF_ERROR(EstimateRenderExpressions(generator_, camera, data_.width, data_.height, model_, tracking, sampling,
+  HF_RETURN_IF_ERROR(EstimateRenderExpressions(avatar_.generator, camera, data_.width, data_.height, model_, tracking, sampling,
                                                gen_, progress, &samples_));
   const int64_t expressions = samples_.expressions.size(1);
   torch::manual_seed(uint64_t(options_.seed) + 11);
-  mapping_ = ExpressionMapping(expressions, arch_.w_dim);
-  mapping_->to(device_);
-  std::vector<torch::Tensor> params = mapping_->parameters();
+  avatar_.mapping = ExpressionMapping(expressions, arch_.w_dim);
+  avatar_.mapping->to(device_);
+  std::vector<torch::Tensor> params = avatar_.mapping->parameters();
   Adam adam;
   for (torch::Tensor& t : params) adam.Add(&t, 1e-3, false);
   const torch::Tensor e_all = samples_.expressions.to(device_), w_all = samples_.w.to(device_),
@@ -477,13 +446,13 @@ Status GanTrainer::TrainMapping(const fs::path& workspace, StatsLog* stats, Prog
   int summed = 0;
   for (int step = 1; step <= options_.mapping_steps; ++step) {
     const torch::Tensor index = torch::randint(count, {batch}, gen_, torch::kLong).to(device_);
-    const torch::Tensor w = mapping_->forward(e_all.index_select(0, index));
+    const torch::Tensor w = avatar_.mapping->forward(e_all.index_select(0, index));
     torch::Tensor loss;
     if (options_.mapping_loss == "latent") {
       loss = (w - w_all.index_select(0, index)).pow(2).mean();
     } else {
       const torch::Tensor render =
-          generator_->Render(w, std::vector<SplatCamera>(size_t(batch), camera), data_.width, data_.height,
+          avatar_.generator->Render(w, std::vector<SplatCamera>(size_t(batch), camera), data_.width, data_.height,
                              kBackground, nullptr)
               .image;
       loss = (render - images.index_select(0, index)).abs().mean();
@@ -501,7 +470,7 @@ Status GanTrainer::TrainMapping(const fs::path& workspace, StatsLog* stats, Prog
       stats->Append(nlohmann::json{{"mapping_step", step},
                                    {"mapping_loss", sum / summed},
                                    {"mapping_loss_kind", options_.mapping_loss},
-                                   {"seconds", state_.seconds + Seconds(start)}}
+                                   {"seconds", state_.seconds + SecondsSince(start)}}
                         .dump());
       sum = 0;
       summed = 0;
@@ -509,7 +478,7 @@ Status GanTrainer::TrainMapping(const fs::path& workspace, StatsLog* stats, Prog
     progress->Advance();
   }
   progress->Finish(std::to_string(options_.mapping_steps) + " steps");
-  state_.seconds += Seconds(start);
+  state_.seconds += SecondsSince(start);
   return Status::Ok();
 }
 
@@ -537,7 +506,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
       {"held_out_frames", "the last " + std::to_string(data_.num_frames - data_.first_test_frame) + " of " +
                               std::to_string(data_.num_frames)},
       {"background", kBackground},
-      {"latent", mapping_ ? "the expression mapping (" + options_.mapping_loss +
+      {"latent", avatar_.mapping ? "the expression mapping (" + options_.mapping_loss +
                                  " loss) of each frame's tracked expression"
                           : std::string("the running mean of w (no expression mapping)")},
       {"mean", {{"psnr_masked", mean.psnr_masked}, {"ssim_masked", mean.ssim_masked}, {"psnr", mean.psnr_full},
@@ -552,24 +521,16 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "eval.json", eval, 1));
   // The model: the generator's weights and the mean latent; config.json its architecture.
   Checkpoint model;
-  for (const auto& item : generator_->named_parameters()) model.Put("generator." + item.key(), item.value());
-  model.Put("w_average", w_average_);
-  if (mapping_)
-    for (const auto& item : mapping_->named_parameters()) model.Put("mapping." + item.key(), item.value());
+  model.PutModule("generator.", *avatar_.generator);
+  model.Put("w_average", avatar_.w_average);
+  if (avatar_.mapping) model.PutModule("mapping.", *avatar_.mapping);
   HF_RETURN_IF_ERROR(model.Save(out_dir / "model.pt"));
   const nlohmann::json config = {
       {"model", "gan-avatar"},
       {"version", 1},
-      {"architecture",
-       {{"z_dim", arch_.z_dim}, {"w_dim", arch_.w_dim}, {"mapping_layers", arch_.mapping_layers},
-        {"synthesis_channels", arch_.synthesis_channels}, {"plane_resolution", arch_.plane_resolution},
-        {"plane_channels", arch_.plane_channels}, {"decoder_hidden", arch_.decoder_hidden},
-        {"feature_channels", arch_.feature_channels}, {"coarse_samples", arch_.coarse_samples},
-        {"fine_samples", arch_.fine_samples}, {"super_resolution_doublings", arch_.super_resolution_doublings},
-        {"density_scale", arch_.density_scale},
-        {"box_min", arch_.box.min}, {"box_max", arch_.box.max}}},
+      {"architecture", arch_},
       {"expression_mapping", {{"expressions", data_.expression_names}, {"hidden", 256}, {"layers", 2},
-                              {"loss", options_.mapping_loss}, {"trained", bool(mapping_)}}},
+                              {"loss", options_.mapping_loss}, {"trained", bool(avatar_.mapping)}}},
       {"render_size", {render_w_, render_h_}},
       {"output_size", {data_.width, data_.height}},
       {"background", kBackground},
@@ -579,13 +540,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "config.json", config, 1));
   summary->steps = state_.step;
   summary->seconds = state_.seconds;
-  summary->test_views = int(scores.size());
-  summary->psnr_masked = mean.psnr_masked;
-  summary->ssim_masked = mean.ssim_masked;
-  summary->psnr_full = mean.psnr_full;
-  summary->ssim_full = mean.ssim_full;
-  summary->l1_masked = mean.l1_masked;
-  summary->train_psnr_masked = fitted.psnr_masked;
+  SetSummaryScores(mean, int(scores.size()), fitted, summary);
   return Status::Ok();
 }
 

@@ -68,6 +68,16 @@ torch::Tensor ComparisonStrip(const torch::Tensor& render, const torch::Tensor& 
   return torch::cat({render, shown, error}, 2);
 }
 
+void SetSummaryScores(const ViewScores& held_out, int views, const ViewScores& training_views, TrainSummary* summary) {
+  summary->test_views = views;
+  summary->psnr_masked = held_out.psnr_masked;
+  summary->ssim_masked = held_out.ssim_masked;
+  summary->psnr_full = held_out.psnr_full;
+  summary->ssim_full = held_out.ssim_full;
+  summary->l1_masked = held_out.l1_masked;
+  summary->train_psnr_masked = training_views.psnr_masked;
+}
+
 ViewScores MeanScores(const std::vector<ViewScores>& scores) {
   ViewScores mean;
   const double heads = double(std::count_if(scores.begin(), scores.end(), [](const ViewScores& s) { return s.has_head; }));

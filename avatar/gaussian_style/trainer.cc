@@ -15,9 +15,9 @@
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/adam.h"
 #include "avatar/train/device.h"
+#include "avatar/train/loop.h"
 #include "avatar/train/tensor_image.h"
 #include "core/image_io.h"
-#include "core/interrupt.h"
 #include "core/json_io.h"
 #include "core/log.h"
 
@@ -30,10 +30,6 @@ namespace F = torch::nn::functional;
 constexpr double kEvalBackground = 0.5;
 // Side of the eye and mouth crops of the region loss, pixels.
 constexpr int64_t kCropSize = 24;
-
-double Seconds(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
 
 // The eyes' and mouth's boxes of `view` cut from `image` [3, H, W] and
 // resampled to kCropSize^2 (RoI-align with one bilinear sample per cell) -> [R, 3, S, S].
@@ -262,7 +258,7 @@ Status Trainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
   const auto rows = p.All();
   for (size_t i = 0; i < rows.size(); ++i) c.Put(std::string("gaussians.") + kRowNames[i], *rows[i]);
   c.Put("gaussians.binding", avatar_.gaussians.binding);
-  for (const auto& item : avatar_.model->named_parameters()) c.Put("model." + item.key(), item.value());
+  c.PutModule("model.", *avatar_.model);
   adam_.Save("adam.", &c);
   densify_->SaveState("densify.", &c);
   c.Put("generator", gen_.get_state());
@@ -271,7 +267,7 @@ Status Trainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
   c.Put("l1_sum", state_.l1_sum);
   c.Put("region_sum", state_.region_sum);
   c.Put("loss_count", state_.loss_count);
-  c.Put("seconds", state_.seconds + Seconds(start_));
+  c.Put("seconds", state_.seconds + SecondsSince(start_));
   c.Put("stats_lines", int64_t(stats_lines));
   return c.Save(path);
 }
@@ -295,14 +291,7 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   }
   if (c.Get("gaussians.binding", &avatar_.gaussians.binding))
     avatar_.gaussians.binding = avatar_.gaussians.binding.to(device_);
-  {
-    torch::NoGradGuard no_grad;
-    for (auto& item : avatar_.model->named_parameters()) {
-      torch::Tensor value;
-      if (!c.Get("model." + item.key(), &value) || !value.sizes().equals(item.value().sizes())) return damaged;
-      item.value().copy_(value);
-    }
-  }
+  if (!c.GetModule("model.", avatar_.model.get())) return damaged;
   if (!adam_.Load("adam.", c)) return damaged;
   densify_->LoadState("densify.", c);
   gen_.set_state(generator);
@@ -313,7 +302,7 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
 }
 
 Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
-  auto elapsed = [&] { return state_.seconds + Seconds(start_); };
+  auto elapsed = [&] { return state_.seconds + SecondsSince(start_); };
   progress->Start("train: gaussian-style", options_.steps);
   progress->Advance(state_.step);
   for (int step = state_.step + 1; step <= options_.steps; ++step) {
@@ -360,15 +349,8 @@ Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, Stats
       HF_LOG(Info) << "train: time limit of " << options_.max_minutes << " min reached at step " << step;
       break;
     }
-    const bool stop = InterruptRequested();
-    if (!last && (stop || step % options_.checkpoint_every == 0))
-      HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, stats->size()));
-    if (stop) {
-      progress->Finish("interrupted");
-      return Status::Interrupted("training stopped at step " + std::to_string(step) + " of " +
-                                 std::to_string(options_.steps) +
-                                 "; the checkpoint is saved: run the same command again to resume");
-    }
+    HF_RETURN_IF_ERROR(CheckpointOrStop("training", step, options_.steps, last, options_.checkpoint_every,
+                                        [&] { return SaveCheckpoint(checkpoint, stats->size()); }, progress));
   }
   progress->Finish(std::to_string(state_.step) + " steps, " + std::to_string(avatar_.gaussians.params.size()) +
                    " Gaussians");
@@ -407,13 +389,7 @@ Status Trainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   summary->steps = state_.step;
   summary->seconds = state_.seconds;
   summary->gaussians = avatar_.gaussians.params.size();
-  summary->test_views = int(scores.size());
-  summary->psnr_masked = mean.psnr_masked;
-  summary->ssim_masked = mean.ssim_masked;
-  summary->psnr_full = mean.psnr_full;
-  summary->ssim_full = mean.ssim_full;
-  summary->l1_masked = mean.l1_masked;
-  summary->train_psnr_masked = fitted.psnr_masked;
+  SetSummaryScores(mean, int(scores.size()), fitted, summary);
   return Status::Ok();
 }
 

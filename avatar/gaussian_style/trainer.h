@@ -59,6 +59,9 @@ torch::Tensor ComparisonStrip(const torch::Tensor& render, const torch::Tensor& 
                               double background);
 // Means over views; the masked figures over the views with a head.
 ViewScores MeanScores(const std::vector<ViewScores>& scores);
+// The held-out views' mean scores (`views` of them) and the training views'
+// masked PSNR into `summary`.
+void SetSummaryScores(const ViewScores& held_out, int views, const ViewScores& training_views, TrainSummary* summary);
 
 // The model file (model.pt + config.json in `dir`).
 Status SaveAvatar(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,

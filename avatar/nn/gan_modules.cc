@@ -6,18 +6,11 @@
 
 #include "avatar/nn/augment.h"
 #include "avatar/nn/discriminator.h"
+#include "avatar/nn/functional.h"
 
 namespace headforge::nn {
 
 namespace F = torch::nn::functional;
-
-namespace {
-
-torch::Tensor LeakyRelu(const torch::Tensor& x) {
-  return F::leaky_relu(x, F::LeakyReLUFuncOptions().negative_slope(0.2));
-}
-
-}  // namespace
 
 DiscriminatorImpl::DiscriminatorImpl(const DiscriminatorOptions& options) : options_(options) {
   TORCH_CHECK(options.resolution >= 4 && options.in_channels >= 1 && options.channels >= 1,

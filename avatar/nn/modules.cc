@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "avatar/nn/attention.h"
+#include "avatar/nn/functional.h"
 #include "avatar/nn/mlp.h"
 #include "avatar/nn/modulated_conv.h"
 #include "avatar/nn/triplane.h"
@@ -27,7 +28,7 @@ torch::Tensor MlpImpl::forward(const torch::Tensor& x) {
   torch::Tensor y = x;
   for (size_t i = 0; i < layers_.size(); ++i) {
     y = layers_[i]->forward(y);
-    if (i + 1 < layers_.size()) y = F::leaky_relu(y, F::LeakyReLUFuncOptions().negative_slope(0.2));
+    if (i + 1 < layers_.size()) y = LeakyRelu(y);
   }
   return y;
 }
@@ -104,17 +105,13 @@ torch::Tensor TriplaneGeneratorImpl::Map(const torch::Tensor& latent) { return m
 
 torch::Tensor TriplaneGeneratorImpl::Synthesize(const torch::Tensor& w) {
   const int64_t batch = w.size(0);
-  auto act = [](const torch::Tensor& t) { return F::leaky_relu(t, F::LeakyReLUFuncOptions().negative_slope(0.2)); };
   torch::Tensor x = constant_.expand({batch, -1, -1, -1});
   size_t next = 0;
-  x = act(convs_[next++]->as<ModulatedConv2d>()->forward(x, w));
+  x = LeakyRelu(convs_[next++]->as<ModulatedConv2d>()->forward(x, w));
   for (int64_t r = 8; r <= options_.resolution; r *= 2) {
-    x = F::interpolate(x, F::InterpolateFuncOptions()
-                              .size(std::vector<int64_t>{r, r})
-                              .mode(torch::kBilinear)
-                              .align_corners(false));
-    x = act(convs_[next++]->as<ModulatedConv2d>()->forward(x, w));
-    x = act(convs_[next++]->as<ModulatedConv2d>()->forward(x, w));
+    x = ResizeBilinear(x, r, r);
+    x = LeakyRelu(convs_[next++]->as<ModulatedConv2d>()->forward(x, w));
+    x = LeakyRelu(convs_[next++]->as<ModulatedConv2d>()->forward(x, w));
   }
   const torch::Tensor planes = to_planes_->forward(x, w);
   return planes.view({batch, 3, options_.plane_channels, options_.resolution, options_.resolution});

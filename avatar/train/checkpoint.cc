@@ -22,6 +22,20 @@ void Checkpoint::Put(const std::string& name, const torch::Tensor& tensor) {
 void Checkpoint::Put(const std::string& name, int64_t value) { integers_[name] = value; }
 void Checkpoint::Put(const std::string& name, double value) { reals_[name] = value; }
 
+void Checkpoint::PutModule(const std::string& prefix, const torch::nn::Module& module) {
+  for (const auto& item : module.named_parameters()) Put(prefix + item.key(), item.value());
+}
+
+bool Checkpoint::GetModule(const std::string& prefix, torch::nn::Module* module) const {
+  torch::NoGradGuard no_grad;
+  for (auto& item : module->named_parameters()) {
+    const auto it = tensors_.find(prefix + item.key());
+    if (it == tensors_.end() || !it->second.sizes().equals(item.value().sizes())) return false;
+    item.value().copy_(it->second);
+  }
+  return true;
+}
+
 bool Checkpoint::Get(const std::string& name, torch::Tensor* tensor) const {
   const auto it = tensors_.find(name);
   if (it == tensors_.end()) return false;

@@ -5,6 +5,7 @@
 // running sums); tensors come back on the CPU.
 #pragma once
 
+#include <torch/nn/module.h>
 #include <torch/types.h>
 
 #include <map>
@@ -27,6 +28,11 @@ class Checkpoint {
   bool Get(const std::string& name, torch::Tensor* tensor) const;
   bool Get(const std::string& name, int64_t* value) const;
   bool Get(const std::string& name, double* value) const;
+
+  // Every parameter of `module` as prefix + its name; and back, copied into
+  // the module's own tensors (false when one is missing or of another shape).
+  void PutModule(const std::string& prefix, const torch::nn::Module& module);
+  bool GetModule(const std::string& prefix, torch::nn::Module* module) const;
 
   Status Save(const fs::path& path) const;
   // DataError when the file is not a checkpoint (damaged, another format).

@@ -11,15 +11,12 @@
 #include "avatar/train/adam.h"
 #include "avatar/train/checkpoint.h"
 #include "avatar/train/device.h"
+#include "avatar/train/loop.h"
 #include "core/interrupt.h"
 #include "core/log.h"
 
 namespace headforge {
 namespace {
-
-double Seconds(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
 
 struct Evaluation {
   double psnr = 0, ssim = 0;
@@ -197,7 +194,7 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
     HF_LOG(Info) << "splat-fit: resuming from the checkpoint at step " << state.step << " (" << p.size()
                  << " Gaussians)";
   }
-  auto elapsed = [&] { return state.seconds + Seconds(t0); };
+  auto elapsed = [&] { return state.seconds + SecondsSince(t0); };
   auto save = [&](int step) {
     FitState now = state;
     now.step = step;

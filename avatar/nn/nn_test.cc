@@ -8,6 +8,7 @@
 #include "avatar/nn/attention.h"
 #include "avatar/nn/mlp.h"
 #include "avatar/nn/modulated_conv.h"
+#include "avatar/nn/stylegan.h"
 #include "avatar/nn/triplane.h"
 
 namespace headforge::nn {
@@ -171,6 +172,124 @@ TEST(Mlp, ZeroLastStartsAsZeroAndLearns) {
   EXPECT_EQ(mlp->forward(x).abs().max().item<double>(), 0.0);
   mlp->forward(x).sum().backward();
   EXPECT_GT(mlp->parameters().back().grad().abs().sum().item<double>(), 0.0);  // the last bias learns
+}
+
+// A 3x3 convolution with zero padding written out as loops.
+torch::Tensor PlainConv3x3(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias) {
+  const int64_t in = x.size(0), out = weight.size(0), h = x.size(1), w = x.size(2);
+  torch::Tensor y = torch::zeros({out, h, w}, kDouble);
+  auto xa = x.accessor<double, 3>();
+  auto wa = weight.accessor<double, 4>();
+  auto ya = y.accessor<double, 3>();
+  for (int64_t o = 0; o < out; ++o)
+    for (int64_t r = 0; r < h; ++r)
+      for (int64_t c = 0; c < w; ++c) {
+        double sum = bias[o].item<double>();
+        for (int64_t i = 0; i < in; ++i)
+          for (int64_t dy = -1; dy <= 1; ++dy)
+            for (int64_t dx = -1; dx <= 1; ++dx)
+              if (r + dy >= 0 && r + dy < h && c + dx >= 0 && c + dx < w)
+                sum += wa[o][i][dy + 1][dx + 1] * xa[i][r + dy][c + dx];
+        ya[o][r][c] = sum;
+      }
+  return y;
+}
+
+TEST(Projection, MatchesPlainConvolutionsAndItsGradientFiniteDifferences) {
+  torch::manual_seed(11);
+  Projection projection(3, 4);
+  projection->to(torch::kFloat64);
+  {
+    // A fresh projection is zero; give its second convolution weights to test.
+    torch::NoGradGuard no_grad;
+    EXPECT_EQ(projection->forward(torch::randn({1, 3, 5, 5}, kDouble)).abs().max().item<double>(), 0.0);
+    projection->second->weight.normal_();
+    projection->second->bias.normal_();
+  }
+  const torch::Tensor x = torch::randn({2, 3, 5, 6}, kDouble);
+  const torch::Tensor got = projection->forward(x);
+  for (int64_t b = 0; b < 2; ++b) {
+    torch::NoGradGuard no_grad;
+    const torch::Tensor h = torch::leaky_relu(
+        PlainConv3x3(x[b], projection->first->weight, projection->first->bias), 0.2);
+    const torch::Tensor want = PlainConv3x3(h, projection->second->weight, projection->second->bias);
+    EXPECT_TRUE(torch::allclose(got[b], want, 1e-12, 1e-12)) << (got[b] - want).abs().max();
+  }
+  ExpectGradientMatchesFiniteDifferences([&](const torch::Tensor& in) { return projection->forward(in); }, x, 1e-6);
+  ExpectGradientMatchesFiniteDifferences(
+      [&](const torch::Tensor& weight) {
+        return torch::nn::functional::conv2d(
+            torch::leaky_relu(torch::nn::functional::conv2d(x, weight, torch::nn::functional::Conv2dFuncOptions()
+                                                                           .bias(projection->first->bias)
+                                                                           .padding(1)),
+                              0.2),
+            projection->second->weight,
+            torch::nn::functional::Conv2dFuncOptions().bias(projection->second->bias).padding(1));
+      },
+      projection->first->weight.detach(), 1e-6);
+}
+
+StyleGeneratorOptions TinyGenerator() {
+  StyleGeneratorOptions options;
+  options.z_dim = 6;
+  options.w_dim = 5;
+  options.mapping_layers = 2;
+  options.resolution = 16;
+  options.channel_base = 32;
+  options.min_channels = 2;
+  options.max_channels = 4;
+  return options;
+}
+
+TEST(StyleGenerator, BlocksChannelsAndTheInputsItTakes) {
+  torch::manual_seed(12);
+  const StyleGeneratorOptions options = TinyGenerator();
+  EXPECT_EQ(options.Blocks(), 3);  // 4, 8, 16 px
+  EXPECT_EQ(options.Channels(4), 4);
+  EXPECT_EQ(options.Channels(16), 2);
+  StyleGenerator generator(options);
+  generator->to(torch::kFloat64);
+  const torch::Tensor w = generator->Map(torch::randn({2, 6}, kDouble));
+  const torch::Tensor image = generator->Synthesize(w);
+  ASSERT_EQ(image.sizes(), torch::IntArrayRef({2, 3, 16, 16}));
+  // The learned constant given as the input, and zero injections, change nothing.
+  const std::vector<torch::Tensor> zeros = {torch::zeros({2, 4, 4, 4}, kDouble), torch::zeros({2, 4, 8, 8}, kDouble),
+                                            torch::zeros({2, 2, 16, 16}, kDouble)};
+  EXPECT_TRUE(torch::equal(image, generator->Synthesize(w, zeros, generator->constant().expand({2, -1, -1, -1}))));
+  // Random noise differs from the fixed noise once the strengths are non-zero.
+  for (auto& item : generator->named_parameters())
+    if (item.key().find("noise_strength") == 0) item.value().detach().fill_(0.5);
+  auto noise = at::detail::createCPUGenerator(3);
+  EXPECT_TRUE(torch::equal(generator->Synthesize(w), generator->Synthesize(w)));  // fixed noise: deterministic
+  EXPECT_FALSE(torch::allclose(generator->Synthesize(w), generator->Synthesize(w, {}, {}, &noise)));
+  // A larger input gives a larger image (the decoder's non-native canvases).
+  EXPECT_EQ(generator->Synthesize(w, {}, torch::randn({2, 4, 8, 4}, kDouble)).sizes(),
+            torch::IntArrayRef({2, 3, 32, 16}));
+}
+
+TEST(StyleGenerator, GradientsMatchFiniteDifferences) {
+  torch::manual_seed(13);
+  StyleGenerator generator(TinyGenerator());
+  generator->to(torch::kFloat64);
+  for (auto& item : generator->named_parameters())
+    if (item.key().find("noise_strength") == 0) item.value().detach().fill_(0.3);
+  const torch::Tensor w = torch::randn({1, 5}, kDouble);
+  ExpectGradientMatchesFiniteDifferences([&](const torch::Tensor& ww) { return generator->Synthesize(ww); }, w, 1e-6);
+  const torch::Tensor inject = torch::randn({1, 4, 8, 8}, kDouble);
+  ExpectGradientMatchesFiniteDifferences(
+      [&](const torch::Tensor& i) { return generator->Synthesize(w, {torch::Tensor(), i}); }, inject, 1e-6);
+}
+
+TEST(ConvEncoder, GivesEveryBlocksFeatureCoarsestFirst) {
+  torch::manual_seed(14);
+  const StyleGeneratorOptions options = TinyGenerator();
+  ConvEncoder encoder(7, options);
+  const std::vector<torch::Tensor> features = encoder->forward(torch::randn({2, 7, 16, 16}));
+  ASSERT_EQ(features.size(), 3u);
+  for (int b = 0; b < 3; ++b) {
+    const int64_t r = options.BlockResolution(b);
+    EXPECT_EQ(features[size_t(b)].sizes(), torch::IntArrayRef({2, options.Channels(r), r, r})) << b;
+  }
 }
 
 }  // namespace

@@ -79,7 +79,7 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     const torch::Tensor background = torch::full({3}, options.background, torch::TensorOptions().device(device));
     draw = [&, background](const torch::Tensor& condition, const SplatCamera& camera) {
       torch::NoGradGuard no_grad;
-      return RenderRgb(avatar.Pose(own, condition, 0, avatar.deform), camera, background).clamp(0, 1).cpu();
+      return avatar.Draw(avatar.Pose(own, condition, 0, avatar.deform), camera, background).clamp(0, 1).cpu();
     };
   }
   const std::vector<const AvatarView*> own_views = AllViews(own);
@@ -237,7 +237,7 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
         out[k].pitch_deg = elevation - elevation0;
         SplatCamera camera = lenses[k];
         SetCameraPose(novel * world_from_head, &camera);
-        const torch::Tensor render = RenderRgb(posed, camera, background).clamp(0, 1);
+        const torch::Tensor render = avatar.Draw(posed, camera, background).clamp(0, 1);
         const fs::path image_path = truth / cam.at("input").get<std::string>() / file;
         const fs::path mask_path = truth / "masks" / out[k].camera / file;
         cv::Mat image = cv::imread(image_path.string(), cv::IMREAD_COLOR);

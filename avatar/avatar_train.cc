@@ -25,15 +25,16 @@ struct Preset {
   int densify_until, triplane_resolution;
   double lr_network;
   int eval_every, preview_every;
+  int decoder_steps, prior_steps, pti_steps;  // stage 3
 };
 
 // draft: measured on two CPU cores to end within its 15 minutes
 // (docs/benchmarks.md); standard: one GPU at 512 px; high: the paper's
 // learning rate and a long run.
 const Preset kPresets[] = {
-    {"draft", "cpu", 256, 6000, 15, 20000, 40000, 3000, 64, 5e-4, 1000, 1000},
-    {"standard", "cuda", 512, 30000, 10, 50000, 300000, 20000, 128, 2e-4, 2000, 2000},
-    {"high", "cuda", 512, 100000, 0, 100000, 500000, 60000, 256, 1e-4, 5000, 5000},
+    {"draft", "cpu", 256, 6000, 15, 20000, 40000, 3000, 64, 5e-4, 1000, 1000, 0, 0, 0},
+    {"standard", "cuda", 512, 30000, 10, 50000, 300000, 20000, 128, 2e-4, 2000, 2000, 20000, 20000, 500},
+    {"high", "cuda", 512, 100000, 0, 100000, 500000, 60000, 256, 1e-4, 5000, 5000, 50000, 50000, 1000},
 };
 
 // The gan-avatar model's presets. draft: a 32 px volume render
@@ -105,6 +106,22 @@ Status TrainOptions::Check() const {
     if (coarse_samples < 1 || fine_samples < 0)
       return Status::InvalidArgument("train: --samples must be at least 1 and --fine-samples at least 0");
   }
+  if (model == "gaussian-style" && decoder_steps > 0) {
+    const int side = decoder_resolution > 0 ? decoder_resolution : resolution;
+    if (side < 8 || !IsPowerOfTwo(side))
+      return Status::InvalidArgument("train: the decoder's side (--decoder-resolution, else --resolution) must be a "
+                                     "power of two of at least 8, not " + std::to_string(side));
+    if (prior_steps < 0 || pti_steps < 0 || pti_frames < 1 || projected_blocks < 0 || batch < 1)
+      return Status::InvalidArgument("train: --prior-steps and --pti-steps must be >= 0, --pti-frames and --batch >= 1, "
+                                     "--projected-blocks >= 0");
+    if (!(adversarial_weight >= 0) || !(perceptual_weight >= 0) || !(r1_gamma >= 0) || r1_every < 1 ||
+        !(ada_target > 0 && ada_target < 1) || !(lr_discriminator >= 0))
+      return Status::InvalidArgument("train: --adversarial-weight, --perceptual-weight, --r1-gamma and "
+                                     "--lr-discriminator must be >= 0, --r1-every >= 1, --ada-target in (0, 1)");
+    std::error_code ec;
+    if (!decoder_init.empty() && !fs::is_regular_file(decoder_init, ec))
+      return Status::InvalidArgument("train: --decoder-init: no file " + decoder_init);
+  }
   if (log_every < 1 || eval_every < 0 || preview_every < 0 || checkpoint_every < 1)
     return Status::InvalidArgument("train: --log-every and --checkpoint-every must be >= 1, the others >= 0");
   return Status::Ok();
@@ -113,7 +130,7 @@ Status TrainOptions::Check() const {
 void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.model", &t->model,
          "Avatar model: gaussian-style (Gaussians driven by the tracked expressions) or gan-avatar (a 3D GAN of the "
-         "subject trained on frames and cameras alone; no expression mapping yet).",
+         "subject trained on frames and cameras alone, driven through an expression mapping).",
          "model");
   o->Add("train.preset", &t->preset,
          "draft (2 CPU cores, 256 px, within 15 min), standard (one GPU, 512 px), high (the paper's scale); it sets "
@@ -160,7 +177,7 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.render_resolution", &t->render_resolution,
          "gan-avatar: the volume render's longer side; --resolution / this must be a power of two.",
          "render-resolution");
-  o->Add("train.batch", &t->batch, "gan-avatar: real and generated views per step.", "batch");
+  o->Add("train.batch", &t->batch, "gan-avatar, and stage 3's prior: real and generated views per step.", "batch");
   o->Add("train.reconstruction_steps", &t->reconstruction_steps,
          "gan-avatar: the first steps reconstruct the training frames (L1, a latent per frame) before the "
          "adversarial training: a personal prior in place of pretrained EG3D weights (0: none).",
@@ -172,9 +189,10 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.adversarial_ramp", &t->adversarial_ramp,
          "gan-avatar: steps after the warm-up over which the generator's adversarial loss rises from 0 to 1.",
          "adversarial-ramp");
-  o->Add("train.lr_discriminator", &t->lr_discriminator, "gan-avatar: Adam step of the discriminator.",
+  o->Add("train.lr_discriminator", &t->lr_discriminator, "gan-avatar: Adam step of the discriminator; gaussian-style stage 3: of its prior's generator and "
+         "discriminator and of the UV-conditioned discriminator.",
          "lr-discriminator");
-  o->Add("train.r1_gamma", &t->r1_gamma, "gan-avatar: weight of the R1 penalty on the real images (0: none).",
+  o->Add("train.r1_gamma", &t->r1_gamma, "gan-avatar and stage 3: weight of the R1 penalty on the real images (0: none).",
          "r1-gamma");
   o->Add("train.r1_every", &t->r1_every, "gan-avatar: steps between R1 penalties (lazy regularisation).", "r1-every");
   o->Add("train.ada_target", &t->ada_target,
@@ -195,6 +213,39 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
          "gan-avatar: dlib's 68-point landmark model, which reads the renders' landmarks (default: Debian's "
          "libdlib-data).",
          "landmark-model", OptionSet::Effect::kRuntime);
+  o->Add("train.decoder_steps", &t->decoder_steps,
+         "gaussian-style: steps of stage 3, the StyleGAN decoder that turns the splatted 32-channel features into "
+         "the image (0: none; the image is the splatted RGB).",
+         "decoder-steps");
+  o->Add("train.prior_steps", &t->prior_steps,
+         "gaussian-style stage 3: steps training the decoder's generator on the training frames (a personal prior in "
+         "place of pretrained FFHQ weights) before PTI.",
+         "prior-steps");
+  o->Add("train.pti_steps", &t->pti_steps,
+         "gaussian-style stage 3: PTI's steps inverting the extreme-pose frames, and as many fine-tuning the generator.",
+         "pti-steps");
+  o->Add("train.pti_frames", &t->pti_frames, "gaussian-style stage 3: the frames of the most extreme head poses PTI uses.",
+         "pti-frames");
+  o->Add("train.decoder_resolution", &t->decoder_resolution,
+         "gaussian-style stage 3: the decoder's square side, a power of two (0: --resolution).", "decoder-resolution");
+  o->Add("train.projected_blocks", &t->projected_blocks,
+         "gaussian-style stage 3: generator blocks (4, 8, 16, ... px) the encoder's features are fused into.",
+         "projected-blocks");
+  o->Add("train.adversarial_weight", &t->adversarial_weight,
+         "gaussian-style stage 3: weight of the UV-conditioned adversarial loss (0: no discriminator).",
+         "adversarial-weight");
+  o->Add("train.perceptual_weight", &t->perceptual_weight,
+         "gaussian-style stage 3: weight of the discriminator feature matching that stands in for LPIPS.",
+         "perceptual-weight");
+  o->Add("train.decoder_ada", &t->decoder_ada, "gaussian-style stage 3: adaptive augmentation of the discriminator's inputs.",
+         "decoder-ada");
+  o->Add("train.full_tune", &t->full_tune,
+         "gaussian-style stage 3: no PTI, and the generator trained with the rest (the paper's full-tune ablation).",
+         "full-tune");
+  o->Add("train.decoder_init", &t->decoder_init,
+         "gaussian-style stage 3: a .safetensors file of generator weights to start from instead of the personal "
+         "prior (layout in docs/avatar.md).",
+         "decoder-init");
   o->Add("train.log_every", &t->log_every, "Steps between lines of stats.jsonl.", "log-every");
   o->Add("train.eval_every", &t->eval_every, "Steps between held-out evaluations (0: only at the end).", "eval-every");
   o->Add("train.preview_every", &t->preview_every, "Steps between preview images (0: none).", "preview-every");
@@ -245,6 +296,12 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* t) {
   fill("train.lr_network", &t->lr_network, preset->lr_network);
   fill("train.eval_every", &t->eval_every, preset->eval_every);
   fill("train.preview_every", &t->preview_every, preset->preview_every);
+  // Stage 3's GANs (the prior, the UV-conditioned discriminator) step as the gan-avatar's do.
+  fill("train.lr_discriminator", &t->lr_discriminator, 2.5e-4);
+  fill("train.r1_gamma", &t->r1_gamma, 1.0);
+  fill("train.decoder_steps", &t->decoder_steps, preset->decoder_steps);
+  fill("train.prior_steps", &t->prior_steps, preset->prior_steps);
+  fill("train.pti_steps", &t->pti_steps, preset->pti_steps);
   return Status::Ok();
 }
 
@@ -280,7 +337,8 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   // Lines written after the last checkpoint, or with none, are dropped.
   std::error_code ec;
-  if (!fs::exists(out_dir / "checkpoint.pt", ec)) HF_RETURN_IF_ERROR(RemoveAll(out_dir / "stats.jsonl"));
+  if (!fs::exists(out_dir / "checkpoint.pt", ec) && !fs::exists(out_dir / "decoder_checkpoint.pt", ec))
+    HF_RETURN_IF_ERROR(RemoveAll(out_dir / "stats.jsonl"));
   StatsLog stats;
   HF_RETURN_IF_ERROR(StatsLog::Open(out_dir / "stats.jsonl", &stats));
   *summary = TrainSummary();
@@ -290,6 +348,7 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
     HF_RETURN_IF_ERROR(TrainGaussianStyle(options, data, model, out_dir, &stats, progress, summary));
   summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json", "held_out"};
   if (fs::exists(out_dir / "previews", ec)) summary->outputs.push_back("previews");
+  if (options.model == "gaussian-style" && options.decoder_steps > 0) summary->outputs.push_back("eval_stage2.json");
   return Status::Ok();
 }
 

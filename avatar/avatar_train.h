@@ -64,6 +64,23 @@ struct TrainOptions {
   int mapping_steps = 300;
   std::string mapping_loss = "image";
   std::string landmark_model;
+  // gaussian-style's stage 3, the StyleGAN decoder: its steps (0: no stage
+  // 3), the personal prior's steps (the generator trained on the frames),
+  // PTI's steps (each half) and frames, the decoder's side (0: --resolution),
+  // the generator blocks the encoder feeds, the adversarial and
+  // feature-matching weights, ADA, full-tune (no PTI, the generator trained
+  // too) and generator weights to start from instead of the prior.
+  int decoder_steps = 0;
+  int prior_steps = 1000;
+  int pti_steps = 200;
+  int pti_frames = 4;
+  int decoder_resolution = 0;
+  int projected_blocks = 5;
+  double adversarial_weight = 0.05;
+  double perceptual_weight = 0.1;
+  bool decoder_ada = true;
+  bool full_tune = false;
+  std::string decoder_init;
   int log_every = 50, eval_every = 1000, preview_every = 1000, checkpoint_every = 250;
   int seed = 0;
 

@@ -5,13 +5,13 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
-#include <map>
 
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/metrics/image_metrics.h"
+#include "avatar/nn/functional.h"
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/checkpoint.h"
+#include "avatar/train/tensor_safetensors.h"
 #include "core/json_io.h"
 #include "core/safetensors.h"
 
@@ -35,6 +35,27 @@ torch::Tensor RenderRgb(const PosedGaussians& posed, const SplatCamera& camera, 
   return RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities, posed.features.slice(1, 0, 3),
                          background, camera)
       .image;
+}
+
+torch::Tensor DecodeRender(StyleDecoderImpl& decoder, const PosedGaussians& posed, const SplatCamera& camera) {
+  const int side = int(decoder.options().generator.resolution);
+  const SquareCanvas canvas = MakeSquareCanvas(camera, side);
+  torch::Tensor background = torch::zeros({posed.features.size(1)}, posed.features.options());
+  background.slice(0, 0, 3).fill_(kDecoderBackground);
+  const torch::Tensor splat = RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities,
+                                              posed.features, background, canvas.camera)
+                                  .image;
+  torch::Tensor image = decoder.forward(splat.unsqueeze(0))
+                            .slice(2, canvas.y0, canvas.y0 + canvas.height)
+                            .slice(3, canvas.x0, canvas.x0 + canvas.width);
+  if (canvas.width != camera.width || canvas.height != camera.height)
+    image = nn::ResizeBilinear(image, camera.height, camera.width);
+  return image[0];
+}
+
+torch::Tensor GaussianStyleAvatar::Draw(const PosedGaussians& posed, const SplatCamera& camera,
+                                        const torch::Tensor& background) {
+  return decoder ? DecodeRender(*decoder, posed, camera) : RenderRgb(posed, camera, background);
 }
 
 ViewScores ScoreRender(const torch::Tensor& render, const torch::Tensor& image, const torch::Tensor& mask,
@@ -148,42 +169,15 @@ std::vector<std::pair<std::string, torch::Tensor>> NamedTensors(const GaussianSt
   for (size_t i = 0; i < params.size(); ++i) out.emplace_back(std::string("gaussians.") + kGaussianNames[i], *params[i]);
   if (avatar.gaussians.binding.defined()) out.emplace_back("gaussians.binding", avatar.gaussians.binding);
   for (const auto& item : avatar.model->named_parameters()) out.emplace_back("model." + item.key(), item.value());
+  if (avatar.decoder)
+    for (const auto& item : avatar.decoder->named_parameters()) out.emplace_back("decoder." + item.key(), item.value());
   return out;
-}
-
-SafeTensor ToSafeTensor(const std::string& name, const torch::Tensor& tensor) {
-  const torch::Tensor t = tensor.detach().cpu().contiguous();
-  SafeTensor out;
-  out.name = name;
-  out.shape.assign(t.sizes().begin(), t.sizes().end());
-  if (t.scalar_type() == torch::kFloat32) {
-    out.dtype = "F32";
-  } else if (t.scalar_type() == torch::kInt64) {
-    out.dtype = "I64";
-  } else if (t.scalar_type() == torch::kFloat64) {
-    out.dtype = "F64";
-  } else {
-    TORCH_CHECK(false, "weights export: ", name, " has a type the writer does not take");
-  }
-  const auto* bytes = static_cast<const uint8_t*>(t.data_ptr());
-  out.bytes.assign(bytes, bytes + t.nbytes());
-  return out;
-}
-
-bool FromSafeTensor(const SafeTensor& s, torch::Tensor* tensor) {
-  const std::map<std::string, torch::ScalarType> types = {
-      {"F32", torch::kFloat32}, {"F64", torch::kFloat64}, {"I64", torch::kInt64}};
-  const auto it = types.find(s.dtype);
-  if (it == types.end()) return false;
-  *tensor = torch::empty(s.shape, torch::TensorOptions().dtype(it->second));
-  if (!s.bytes.empty()) std::memcpy(tensor->data_ptr(), s.bytes.data(), s.bytes.size());
-  return true;
 }
 
 }  // namespace
 
 nlohmann::json ConfigJson(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data) {
-  return {{"version", 1},
+  nlohmann::json config = {{"version", 1},
           {"model", "gaussian-style"},
           {"architecture", OptionsJson(avatar.model->options())},
           {"frames", data.num_frames},
@@ -194,6 +188,8 @@ nlohmann::json ConfigJson(const GaussianStyleAvatar& avatar, const TrainOptions&
           {"height", data.height},
           {"gaussians", avatar.gaussians.params.size()},
           {"expression_names", data.expression_names}};
+  if (avatar.decoder) config["decoder"] = ToJson(avatar.decoder->options());
+  return config;
 }
 
 Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
@@ -249,6 +245,7 @@ Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar
   try {
     out.model = GaussianStyle(OptionsFromJson(config.at("architecture")), config.at("frames").get<int64_t>());
     out.deform = config.at("deform").get<bool>();
+    if (config.contains("decoder")) out.decoder = StyleDecoder(StyleDecoderOptionsFromJson(config.at("decoder")));
     if (options) {
       options->resolution = config.at("resolution").get<int>();
       options->holdout = config.value("holdout", options->holdout);
@@ -258,14 +255,19 @@ Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar
     return Status::DataError((dir / "config.json").string() + " is damaged (" + e.what() + "); run headforge train again");
   }
   torch::NoGradGuard no_grad;
-  for (auto& item : out.model->named_parameters()) {
-    torch::Tensor value;
-    if (!get("model." + item.key(), &value) || !value.sizes().equals(item.value().sizes()))
-      return Status::DataError(weights.string() + " does not hold " + item.key() +
-                               " as config.json describes it; run headforge train again");
-    item.value().copy_(value);
-  }
-  out.model->to(device);
+  const auto load_module = [&](const std::string& prefix, torch::nn::Module& module) {
+    for (auto& item : module.named_parameters()) {
+      torch::Tensor value;
+      if (!get(prefix + item.key(), &value) || !value.sizes().equals(item.value().sizes()))
+        return Status::DataError(weights.string() + " does not hold " + prefix + item.key() +
+                                 " as config.json describes it; run headforge train again");
+      item.value().copy_(value);
+    }
+    module.to(device);
+    return Status::Ok();
+  };
+  HF_RETURN_IF_ERROR(load_module("model.", *out.model));
+  if (out.decoder) HF_RETURN_IF_ERROR(load_module("decoder.", *out.decoder));
   auto params = out.gaussians.params.All();
   for (size_t i = 0; i < params.size(); ++i)
     if (!get(std::string("gaussians.") + kGaussianNames[i], params[i]))

@@ -72,13 +72,11 @@ class Trainer {
   Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
   Status Finish(const fs::path& out_dir, TrainSummary* summary);
   int step() const { return state_.step; }
+  const GaussianStyleAvatar& avatar() const { return avatar_; }
 
  private:
   double Step(int step);
   void Densify(int step);
-  // Scores every `stride`-th held-out (or training) view, writing each
-  // render | target | error into `write_dir` when given.
-  std::vector<ViewScores> Evaluate(int stride, const fs::path& write_dir, bool training_views = false);
   Status SaveCheckpoint(const fs::path& path, size_t stats_lines) const;
   Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
   Status WritePreview(const fs::path& dir, int step);
@@ -213,37 +211,13 @@ void Trainer::Densify(int step) {
   if (!plan.summary.empty()) HF_LOG(Debug) << "train step " << step << ": " << plan.summary;
 }
 
-std::vector<ViewScores> Trainer::Evaluate(int stride, const fs::path& write_dir, bool training_views) {
-  torch::NoGradGuard no_grad;
-  const torch::Tensor background = torch::full({3}, kEvalBackground, torch::TensorOptions().device(device_));
-  const std::vector<AvatarView>& views = training_views ? data_.train : data_.test;
-  std::vector<ViewScores> scores;
-  for (size_t i = 0; i < views.size(); i += size_t(std::max(stride, 1))) {
-    const AvatarView& view = views[i];
-    // Inference takes frame 0's latent: a held-out frame has none of its own.
-    // Training views are scored as trained, with their own.
-    const PosedGaussians posed = avatar_.Pose(data_, view.condition, training_views ? view.frame : 0, avatar_.deform);
-    const torch::Tensor render = RenderRgb(posed, view.view, background).clamp(0, 1).cpu();
-    ViewScores s = ScoreRender(render, view.image, view.mask, background.cpu());
-    s.frame = view.frame;
-    s.camera = view.camera;
-    scores.push_back(s);
-    if (write_dir.empty()) continue;
-    char name[64];
-    std::snprintf(name, sizeof(name), "%s_%06d.png", view.camera.c_str(), view.frame);
-    WriteImageAtomic(write_dir / name, TensorToImage(ComparisonStrip(render, view.image, view.mask, kEvalBackground)))
-        .ok();
-  }
-  return scores;
-}
-
 Status Trainer::WritePreview(const fs::path& dir, int step) {
   if (data_.test.empty()) return Status::Ok();
   torch::NoGradGuard no_grad;
   const AvatarView& view = data_.test.front();
   const torch::Tensor background = torch::full({3}, kEvalBackground, torch::TensorOptions().device(device_));
   const torch::Tensor render =
-      RenderRgb(avatar_.Pose(data_, view.condition, 0, deform_now(step)), view.view, background).cpu();
+      avatar_.Draw(avatar_.Pose(data_, view.condition, 0, deform_now(step)), view.view, background).cpu();
   const torch::Tensor target = view.image * view.mask + kEvalBackground * (1 - view.mask);
   char name[32];
   std::snprintf(name, sizeof(name), "step_%06d.png", step);
@@ -335,7 +309,7 @@ Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, Stats
     if (!last && options_.eval_every > 0 && step % options_.eval_every == 0) {
       const bool deform = avatar_.deform;
       avatar_.deform = deform_now(step);
-      const ViewScores s = MeanScores(Evaluate(5, {}));
+      const ViewScores s = MeanScores(EvaluateAvatar(avatar_, data_, 5, {}));
       avatar_.deform = deform;
       stats->Append(nlohmann::json{{"step", step}, {"test_psnr_masked", s.psnr_masked}, {"test_ssim_masked", s.ssim_masked},
                                    {"gaussians", avatar_.gaussians.params.size()}, {"seconds", elapsed()}}
@@ -361,53 +335,119 @@ Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, Stats
 }
 
 Status Trainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
+  HF_RETURN_IF_ERROR(FinishAvatar(avatar_, options_, data_, out_dir, nlohmann::json::object(), summary));
+  summary->steps = state_.step;
+  summary->seconds = state_.seconds;
+  return Status::Ok();
+}
+
+}  // namespace
+
+std::vector<ViewScores> EvaluateAvatar(GaussianStyleAvatar& avatar, const AvatarDataset& data, int stride,
+                                       const fs::path& write_dir, bool training_views) {
+  torch::NoGradGuard no_grad;
+  const torch::Device device = avatar.gaussians.params.means.device();
+  const torch::Tensor background = torch::full({3}, kEvalBackground, torch::TensorOptions().device(device));
+  const std::vector<AvatarView>& views = training_views ? data.train : data.test;
+  std::vector<ViewScores> scores;
+  for (size_t i = 0; i < views.size(); i += size_t(std::max(stride, 1))) {
+    const AvatarView& view = views[i];
+    // Inference takes frame 0's latent: a held-out frame has none of its own.
+    // Training views are scored as trained, with their own.
+    const PosedGaussians posed = avatar.Pose(data, view.condition, training_views ? view.frame : 0, avatar.deform);
+    const torch::Tensor render = avatar.Draw(posed, view.view, background).clamp(0, 1).cpu();
+    ViewScores s = ScoreRender(render, view.image, view.mask, background.cpu());
+    s.frame = view.frame;
+    s.camera = view.camera;
+    scores.push_back(s);
+    if (write_dir.empty()) continue;
+    char name[64];
+    std::snprintf(name, sizeof(name), "%s_%06d.png", view.camera.c_str(), view.frame);
+    WriteImageAtomic(write_dir / name, TensorToImage(ComparisonStrip(render, view.image, view.mask, kEvalBackground)))
+        .ok();
+  }
+  return scores;
+}
+
+Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,
+                    const fs::path& out_dir, const nlohmann::json& extra, TrainSummary* summary) {
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "held_out"));
-  const std::vector<ViewScores> scores = Evaluate(1, out_dir / "held_out");
+  const std::vector<ViewScores> scores = EvaluateAvatar(avatar, data, 1, out_dir / "held_out");
   const ViewScores mean = MeanScores(scores);
   // How well the training views themselves are fitted (every 10th): set
   // against the held-out figures, it tells underfitting from what the
   // held-out frames bring that training never saw.
-  const ViewScores fitted = MeanScores(Evaluate(10, {}, true));
+  const ViewScores fitted = MeanScores(EvaluateAvatar(avatar, data, 10, {}, true));
   nlohmann::json views = nlohmann::json::array();
   for (const ViewScores& s : scores)
     views.push_back({{"frame", s.frame}, {"camera", s.camera}, {"psnr_masked", s.psnr_masked},
                      {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full}, {"ssim", s.ssim_full},
                      {"l1_masked", s.l1_masked}, {"sharpness", s.sharpness}, {"sharpness_truth", s.sharpness_truth},
                      {"sd", s.sd}});
-  const nlohmann::json eval = {
-      {"held_out_frames", "the last " + std::to_string(data_.num_frames - data_.first_test_frame) + " of " +
-                              std::to_string(data_.num_frames)},
+  nlohmann::json eval = {
+      {"held_out_frames", "the last " + std::to_string(data.num_frames - data.first_test_frame) + " of " +
+                              std::to_string(data.num_frames)},
       {"background", kEvalBackground},
       {"latent_frame", 0},
+      {"decoder", bool(avatar.decoder)},
       {"mean", {{"psnr_masked", mean.psnr_masked}, {"ssim_masked", mean.ssim_masked}, {"psnr", mean.psnr_full},
                 {"ssim", mean.ssim_full}, {"l1_masked", mean.l1_masked}, {"sharpness", mean.sharpness},
                 {"sharpness_truth", mean.sharpness_truth}, {"sd", mean.sd}}},
       {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
       {"views", views}};
+  eval.update(extra);
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "eval.json", eval, 1));
-  HF_RETURN_IF_ERROR(SaveAvatar(avatar_, options_, data_, out_dir));
-  summary->steps = state_.step;
-  summary->seconds = state_.seconds;
-  summary->gaussians = avatar_.gaussians.params.size();
+  HF_RETURN_IF_ERROR(SaveAvatar(avatar, options, data, out_dir));
+  summary->gaussians = avatar.gaussians.params.size();
   SetSummaryScores(mean, int(scores.size()), fitted, summary);
   return Status::Ok();
 }
-
-}  // namespace
 
 Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
                           const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary) {
   torch::Device device = torch::kCPU;
   HF_RETURN_IF_ERROR(ParseDevice("train", options.device, &device));
-  const fs::path checkpoint = out_dir / "checkpoint.pt";
-  Trainer trainer(options, data, device);
-  HF_RETURN_IF_ERROR(trainer.Start(model, checkpoint, stats));
-  const int resumed_from = trainer.step();
-  HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
-  HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
-  summary->resumed_from = resumed_from;
+  const fs::path checkpoint = out_dir / "checkpoint.pt", decoder_checkpoint = out_dir / "decoder_checkpoint.pt";
   std::error_code ec;
-  fs::remove(checkpoint, ec);
+  GaussianStyleAvatar avatar;
+  // Stage 3 under way: stages 1-2 are in model.pt and eval_stage2.json.
+  if (options.decoder_steps > 0 && fs::exists(decoder_checkpoint, ec) && !fs::exists(checkpoint, ec)) {
+    HF_RETURN_IF_ERROR(LoadAvatar(out_dir, device, &avatar, nullptr));
+    avatar.decoder = nullptr;
+    if (options.mesh_riding) avatar.neutral = ComputeTriangleFrames(data.identity_vertices, data.triangles).To(device);
+    nlohmann::json stage2;
+    HF_RETURN_IF_ERROR(ReadJson(out_dir / "eval_stage2.json", &stage2));
+    summary->steps = stage2.value("steps", 0);
+    summary->seconds = stage2.value("seconds", 0.0);
+    summary->resumed_from = summary->steps;
+  } else {
+    Trainer trainer(options, data, device);
+    HF_RETURN_IF_ERROR(trainer.Start(model, checkpoint, stats));
+    const int resumed_from = trainer.step();
+    HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
+    HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
+    summary->resumed_from = resumed_from;
+    if (options.decoder_steps <= 0) {
+      fs::remove(checkpoint, ec);
+      return Status::Ok();
+    }
+    // What stage 3 is measured against.
+    nlohmann::json stage2;
+    HF_RETURN_IF_ERROR(ReadJson(out_dir / "eval.json", &stage2));
+    stage2.erase("views");
+    stage2["steps"] = summary->steps;
+    stage2["seconds"] = summary->seconds;
+    HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "eval_stage2.json", stage2, 1));
+    avatar = trainer.avatar();
+  }
+  double seconds = 0;
+  HF_RETURN_IF_ERROR(TrainStyleDecoder(options, data, model, &avatar, out_dir, checkpoint, stats, progress, &seconds));
+  nlohmann::json stage2;
+  HF_RETURN_IF_ERROR(ReadJson(out_dir / "eval_stage2.json", &stage2));
+  const nlohmann::json extra = {{"stage2", stage2.at("mean")}, {"stage3_seconds", seconds}};
+  HF_RETURN_IF_ERROR(FinishAvatar(avatar, options, data, out_dir, extra, summary));
+  summary->seconds += seconds;
+  fs::remove(decoder_checkpoint, ec);
   return Status::Ok();
 }
 

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "avatar/avatar_train.h"
+#include "avatar/gaussian_style/decoder.h"
 #include "avatar/gaussian_style/model.h"
 #include "avatar/train/dataset.h"
 #include "core/face_model.h"
@@ -24,12 +25,23 @@ struct GaussianStyleAvatar {
   AvatarGaussians gaussians;
   TriangleFrames neutral;  // the mesh without expression (mesh riding)
   bool deform = true;      // trained with stage 2
+  StyleDecoder decoder{nullptr};  // trained with stage 3: the image is the decoder's
 
   // The Gaussians for `condition` [E + 9] with frame latent `latent`; with
   // mesh riding they ride the mesh of the condition's expressions.
   PosedGaussians Pose(const AvatarDataset& data, const torch::Tensor& condition, int64_t latent,
                       bool deform_now);
+  // The avatar's image [3, H, W] of `posed` through `camera`: the decoder's
+  // (over the grey it was trained on) when there is one, else the splatted
+  // RGB over `background` [3].
+  torch::Tensor Draw(const PosedGaussians& posed, const SplatCamera& camera, const torch::Tensor& background);
 };
+
+// The splat image's background in stage 3 and after: grey RGB, zero features.
+inline constexpr double kDecoderBackground = 0.5;
+// `posed`'s C-channel features splatted on the decoder's square canvas and
+// decoded, cut back to `camera`'s image (resized when its size differs) -> [3, H, W].
+torch::Tensor DecodeRender(StyleDecoderImpl& decoder, const PosedGaussians& posed, const SplatCamera& camera);
 
 // Gaussians sampled by area on the tracked identity's face, scalp, neck,
 // ears, eyes, teeth and mouth (not the eyelashes or the eyes' shells), grey
@@ -80,8 +92,26 @@ Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const s
                    torch::Device device, int resolution, DatasetOptions* loading, GaussianStyleAvatar* avatar,
                    TrainOptions* trained, FaceModel* model, AvatarDataset* data);
 
-// Stages 1 and 2 into `out_dir` (checkpoint.pt between attempts; a run that
-// finds one continues from it).
+// Every `stride`-th held-out (or training) view drawn as the avatar draws
+// it (inference: frame 0's latent; training views their own) and scored,
+// each render | target | error written into `write_dir` when given.
+std::vector<ViewScores> EvaluateAvatar(GaussianStyleAvatar& avatar, const AvatarDataset& data, int stride,
+                                       const fs::path& write_dir, bool training_views = false);
+// The held-out views' scores as eval.json (with `extra` merged in), the
+// model file, and the summary's figures.
+Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,
+                    const fs::path& out_dir, const nlohmann::json& extra, TrainSummary* summary);
+
+// Stage 3 (decoder.h) on `avatar` (stages 1-2 done) into `out_dir`:
+// decoder_checkpoint.pt between attempts (once it is written,
+// `stage2_checkpoint` is removed), `seconds` its training time.
+Status TrainStyleDecoder(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
+                         GaussianStyleAvatar* avatar, const fs::path& out_dir, const fs::path& stage2_checkpoint,
+                         StatsLog* stats, Progress* progress, double* seconds);
+
+// Stages 1 and 2, then stage 3 when --decoder-steps asks, into `out_dir`
+// (checkpoint.pt and decoder_checkpoint.pt between attempts; a run that finds
+// one continues from it).
 Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
                           const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary);
 

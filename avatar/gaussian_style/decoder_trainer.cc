@@ -1,0 +1,557 @@
+// The gaussian-style avatar's stage 3 (decoder.h), in four phases over one
+// step count, checkpointed as one run:
+//   prior:  the generator trained unconditionally on the training frames
+//           (non-saturating GAN loss, lazy R1, ADA), the subject's own prior;
+//   invert: PTI's first half, a latent per extreme-pose frame fitted with the
+//           generator fixed (L1, D-SSIM and the prior discriminator's features);
+//   tune:   PTI's second half, the generator fine-tuned on those frames at
+//           their latents; the decoder's w becomes their mean;
+//   fuse:   the generator frozen (unless full-tune), the encoder, the
+//           projections and the Gaussians' networks trained on every view
+//           with L1 + D-SSIM + feature matching + a discriminator that sees
+//           the image beside the tracked mesh's UV map.
+#include <torch/torch.h>
+
+#include <nlohmann/json.hpp>
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "avatar/gaussian_style/trainer.h"
+#include "avatar/metrics/image_metrics.h"
+#include "avatar/nn/augment.h"
+#include "avatar/nn/discriminator.h"
+#include "avatar/nn/functional.h"
+#include "avatar/splat/splat_ops.h"
+#include "avatar/train/adam.h"
+#include "avatar/train/checkpoint.h"
+#include "avatar/train/loop.h"
+#include "avatar/train/tensor_image.h"
+#include "core/image_io.h"
+#include "core/log.h"
+#include "core/mesh_renderer.h"
+
+namespace headforge {
+namespace {
+
+namespace F = torch::nn::functional;
+
+enum class Phase { kPrior, kInvert, kTune, kFuse };
+const char* PhaseName(Phase p) {
+  switch (p) {
+    case Phase::kPrior: return "prior";
+    case Phase::kInvert: return "pti-invert";
+    case Phase::kTune: return "pti-tune";
+    case Phase::kFuse: return "fuse";
+  }
+  return "";
+}
+
+// `image` [C, H, W] resized to `canvas`'s image and placed on its square, `fill` around it -> [1, C, S, S].
+torch::Tensor OnCanvas(const torch::Tensor& image, const SquareCanvas& canvas, double fill) {
+  torch::Tensor resized = image.unsqueeze(0);
+  if (image.size(2) > canvas.width) {
+    resized = F::interpolate(resized, F::InterpolateFuncOptions()
+                                          .size(std::vector<int64_t>{canvas.height, canvas.width})
+                                          .mode(torch::kArea));
+  } else if (image.size(2) < canvas.width || image.size(1) != canvas.height) {
+    resized = nn::ResizeBilinear(resized, canvas.height, canvas.width);
+  }
+  torch::Tensor out = torch::full({1, image.size(0), canvas.camera.height, canvas.camera.width}, fill, image.options());
+  out.slice(2, canvas.y0, canvas.y0 + canvas.height).slice(3, canvas.x0, canvas.x0 + canvas.width).copy_(resized);
+  return out;
+}
+
+// The discriminator's feature matching: the mean L1 between its block
+// features of `a` and `b` (b's taken as constant), each normalised by b's mean magnitude.
+torch::Tensor FeatureMatching(nn::DiscriminatorImpl& d, const torch::Tensor& a, const torch::Tensor& b) {
+  const std::vector<torch::Tensor> fa = d.Features(a);
+  std::vector<torch::Tensor> fb;
+  {
+    torch::NoGradGuard no_grad;
+    fb = d.Features(b);
+  }
+  torch::Tensor sum = torch::zeros({}, a.options());
+  for (size_t i = 0; i < fa.size(); ++i) sum = sum + (fa[i] - fb[i]).abs().mean() / (fb[i].abs().mean() + 1e-3);
+  return sum / double(fa.size());
+}
+
+void SetTrainable(const std::vector<torch::Tensor>& params, bool on) {
+  for (torch::Tensor t : params) t.requires_grad_(on);
+}
+
+class DecoderTrainer {
+ public:
+  DecoderTrainer(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
+                 GaussianStyleAvatar* avatar)
+      : options_(options), data_(data), model_(model), avatar_(avatar),
+        device_(avatar->gaussians.params.means.device()), gen_(at::detail::createCPUGenerator(options.seed + 3)),
+        adam_prior_g_(0.0, 0.99), adam_prior_d_(0.0, 0.99), adam_fuse_d_(0.0, 0.99),
+        ada_prior_(options.ada_target), ada_fuse_(options.ada_target) {
+    side_ = options.decoder_resolution > 0 ? options.decoder_resolution : options.resolution;
+    prior_end_ = options.decoder_init.empty() ? options.prior_steps : 0;
+    invert_end_ = prior_end_ + (options.full_tune ? 0 : options.pti_steps);
+    tune_end_ = invert_end_ + (options.full_tune ? 0 : options.pti_steps);
+    total_ = tune_end_ + options.decoder_steps;
+  }
+
+  Status Start(const fs::path& checkpoint, const fs::path& stage2_checkpoint, StatsLog* stats);
+  Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
+  double seconds() const { return seconds_ + SecondsSince(start_); }
+
+ private:
+  Phase PhaseOf(int step) const {
+    return step <= prior_end_ ? Phase::kPrior
+           : step <= invert_end_ ? Phase::kInvert
+           : step <= tune_end_ ? Phase::kTune
+                               : Phase::kFuse;
+  }
+  torch::Tensor Target(const AvatarView& view) const;  // [1, 3, S, S], the head over grey
+  torch::Tensor UvMap(const AvatarView& view) const;   // [1, 3, S, S]: u, v, covered
+  double PriorStep(int step);
+  double InvertOrTune(bool tune);
+  double FuseStep(int step);
+  // The discriminator's step on `real` and `fake` (detached), with lazy R1.
+  double DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, nn::AdaController& ada, const torch::Tensor& real,
+                           const torch::Tensor& fake, int step);
+  void ChoosePtiFrames();
+  Status SaveCheckpoint(const fs::path& path, size_t stats_lines) const;
+  Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
+  Status WritePreview(const fs::path& dir, int step);
+
+  TrainOptions options_;
+  const AvatarDataset& data_;
+  const FaceModel& model_;
+  GaussianStyleAvatar* avatar_;
+  torch::Device device_;
+  at::Generator gen_;
+  int side_ = 0, prior_end_ = 0, invert_end_ = 0, tune_end_ = 0, total_ = 0;
+  nn::Discriminator prior_d_{nullptr}, fuse_d_{nullptr};
+  std::vector<torch::Tensor> generator_params_, prior_d_params_, fuse_params_, fuse_d_params_;
+  torch::Tensor pti_w_;                  // [k, w_dim]
+  std::vector<int64_t> pti_views_;       // training views PTI fits
+  std::vector<int64_t> usable_;          // training views with reliable tracking
+  Adam adam_prior_g_, adam_prior_d_, adam_invert_, adam_tune_, adam_fuse_, adam_fuse_d_;
+  nn::AdaController ada_prior_, ada_fuse_;
+  Eigen::Matrix2Xf uvs_;                 // the face model's UVs scaled into [0, 1]
+  int step_ = 0;
+  torch::Tensor order_;
+  double loss_sum_ = 0, d_sum_ = 0, l1_sum_ = 0;
+  int64_t count_ = 0;
+  double seconds_ = 0;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+};
+
+torch::Tensor DecoderTrainer::Target(const AvatarView& view) const {
+  const SquareCanvas canvas = MakeSquareCanvas(view.view, side_);
+  const torch::Tensor shown = view.image * view.mask + kDecoderBackground * (1 - view.mask);
+  return OnCanvas(shown, canvas, kDecoderBackground).to(device_);
+}
+
+torch::Tensor DecoderTrainer::UvMap(const AvatarView& view) const {
+  torch::NoGradGuard no_grad;
+  const SquareCanvas canvas = MakeSquareCanvas(view.view, side_);
+  const int64_t e = int64_t(data_.expression_names.size());
+  const torch::Tensor vertices = data_.Vertices(view.condition.slice(0, 0, e)).to(torch::kFloat32).contiguous();
+  Mesh mesh;
+  mesh.vertices = Eigen::Map<const Eigen::Matrix3Xf>(vertices.data_ptr<float>(), 3, vertices.size(0));
+  mesh.triangles = model_.triangles();
+  if (uvs_.cols() > 0 && model_.uv_triangles().cols() == mesh.triangles.cols()) {
+    mesh.uvs = uvs_;
+    mesh.uv_triangles = model_.uv_triangles();
+  } else {
+    // No UVs: the neutral shape's x and y stand in for them.
+    const Eigen::Map<const Eigen::Matrix3Xf> neutral(data_.identity_vertices.data_ptr<float>(), 3,
+                                                     data_.identity_vertices.size(0));
+    const Eigen::Vector2f lo = neutral.topRows(2).rowwise().minCoeff(), hi = neutral.topRows(2).rowwise().maxCoeff();
+    mesh.uvs = ((neutral.topRows(2).colwise() - lo).array().colwise() / (hi - lo).array().max(1e-6f)).matrix();
+  }
+  mesh.materials.emplace_back();
+  PinholeCamera camera;
+  camera.fx = canvas.camera.fx;
+  camera.fy = canvas.camera.fy;
+  camera.cx = canvas.camera.cx;
+  camera.cy = canvas.camera.cy;
+  camera.width = canvas.camera.width;
+  camera.height = canvas.camera.height;
+  camera.cam_from_world = CameraPose(canvas.camera);
+  RenderOptions render;
+  render.supersample = 1;
+  RenderOutput out;
+  RenderMeshes({&mesh}, camera, render, &out);
+  torch::Tensor map = torch::zeros({3, side_, side_});
+  auto a = map.accessor<float, 3>();
+  for (int y = 0; y < side_; ++y)
+    for (int x = 0; x < side_; ++x) {
+      if (out.triangle.at<int32_t>(y, x) < 0) continue;
+      const cv::Vec2f uv = out.uv.at<cv::Vec2f>(y, x);
+      a[0][y][x] = uv[0];
+      a[1][y][x] = uv[1];
+      a[2][y][x] = 1;
+    }
+  return (map * 2 - 1).unsqueeze(0).to(device_);
+}
+
+void DecoderTrainer::ChoosePtiFrames() {
+  // The head's rotation (the condition's first two columns) of each usable
+  // view; the farthest from the mean first, then each next the farthest
+  // from those chosen.
+  const int64_t e = int64_t(data_.expression_names.size());
+  std::vector<torch::Tensor> rows;
+  for (int64_t i : usable_) rows.push_back(data_.train[size_t(i)].condition.slice(0, e, e + 6));
+  const torch::Tensor r = torch::stack(rows).to(torch::kFloat64);
+  torch::Tensor nearest = (r - r.mean(0, true)).norm(2, 1);
+  const int k = std::min<int>(options_.pti_frames, int(usable_.size()));
+  for (int j = 0; j < k; ++j) {
+    const int64_t pick = nearest.argmax().item<int64_t>();
+    pti_views_.push_back(usable_[size_t(pick)]);
+    nearest = torch::minimum(nearest, (r - r[pick]).norm(2, 1));
+  }
+}
+
+Status DecoderTrainer::Start(const fs::path& checkpoint, const fs::path& stage2_checkpoint, StatsLog* stats) {
+  StyleDecoderOptions architecture;
+  architecture.feature_channels = avatar_->model->options().feature_channels;
+  architecture.generator.resolution = side_;
+  architecture.projected_blocks = options_.projected_blocks;
+  torch::manual_seed(uint64_t(options_.seed) + 3);
+  avatar_->decoder = StyleDecoder(architecture);
+  StyleDecoderImpl& decoder = *avatar_->decoder;
+  if (!options_.decoder_init.empty())
+    HF_RETURN_IF_ERROR(LoadGeneratorWeights(options_.decoder_init, decoder.generator.get()).WithContext("train"));
+  nn::DiscriminatorOptions d;
+  d.resolution = side_;
+  d.channels = 16;
+  d.max_channels = 128;
+  d.in_channels = 3;
+  prior_d_ = nn::Discriminator(d);
+  d.in_channels = 6;  // the image, then the UV map (u, v, covered)
+  fuse_d_ = nn::Discriminator(d);
+  decoder.to(device_);
+  prior_d_->to(device_);
+  fuse_d_->to(device_);
+
+  // The Gaussians stay as stages 1-2 left them; their networks go on learning.
+  for (torch::Tensor* t : avatar_->gaussians.params.All()) *t = t->detach();
+  generator_params_ = decoder.generator->parameters();
+  prior_d_params_ = prior_d_->parameters();
+  fuse_d_params_ = fuse_d_->parameters();
+  fuse_params_ = decoder.FusionParameters();
+  for (const torch::Tensor& t : avatar_->model->parameters()) fuse_params_.push_back(t);
+  if (options_.full_tune)
+    for (const torch::Tensor& t : generator_params_) fuse_params_.push_back(t);
+  for (torch::Tensor& t : generator_params_) adam_prior_g_.Add(&t, options_.lr_discriminator, false);
+  for (torch::Tensor& t : generator_params_) adam_tune_.Add(&t, options_.lr_network * 0.2, false);
+  for (torch::Tensor& t : prior_d_params_) adam_prior_d_.Add(&t, options_.lr_discriminator, false);
+  for (torch::Tensor& t : fuse_params_) adam_fuse_.Add(&t, options_.lr_network, false);
+  for (torch::Tensor& t : fuse_d_params_) adam_fuse_d_.Add(&t, options_.lr_discriminator, false);
+  decoder.w.requires_grad_(false);
+
+  for (size_t i = 0; i < data_.train.size(); ++i)
+    if (!data_.train[i].unreliable) usable_.push_back(int64_t(i));
+  if (usable_.empty()) return Status::DataError("train: no reliably tracked training view for stage 3");
+  ChoosePtiFrames();
+  if (model_.has_uv()) {
+    const Eigen::Matrix2Xf& uv = model_.uv_coords();
+    const Eigen::Vector2f lo = uv.rowwise().minCoeff(), hi = uv.rowwise().maxCoeff();
+    uvs_ = ((uv.colwise() - lo).array().colwise() / (hi - lo).array().max(1e-6f)).matrix();
+  }
+  {
+    // PTI starts from the mean latent; without PTI it is the decoder's w.
+    torch::NoGradGuard no_grad;
+    const torch::Tensor z = torch::randn({1024, decoder.options().generator.z_dim}, gen_).to(device_);
+    const torch::Tensor mean = decoder.generator->Map(z).mean(0, true);
+    pti_w_ = mean.repeat({int64_t(pti_views_.size()), 1}).clone();
+  }
+  pti_w_.requires_grad_(true);
+  adam_invert_.Add(&pti_w_, 0.01, false);
+
+  std::error_code ec;
+  if (fs::exists(checkpoint, ec)) {
+    HF_RETURN_IF_ERROR(LoadCheckpoint(checkpoint, stats));
+  } else {
+    // Stage 3's first checkpoint replaces stages 1-2's: from here a resumed
+    // run starts at stage 3.
+    HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, stats->size()));
+  }
+  fs::remove(stage2_checkpoint, ec);
+  return Status::Ok();
+}
+
+double DecoderTrainer::DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, nn::AdaController& ada,
+                                         const torch::Tensor& real, const torch::Tensor& fake, int step) {
+  const double p = options_.decoder_ada ? ada.p() : 0.0;
+  const torch::Tensor fake_logits = d.forward(nn::Augment(fake.detach(), p, 3, gen_));
+  const bool r1_now = options_.r1_gamma > 0 && step % options_.r1_every == 0;
+  torch::Tensor real_in = nn::Augment(real.detach(), p, 3, gen_);
+  if (r1_now) real_in = real_in.detach().requires_grad_(true);
+  const torch::Tensor real_logits = d.forward(real_in);
+  torch::Tensor loss = F::softplus(fake_logits).mean() + F::softplus(-real_logits).mean();
+  if (r1_now) {
+    const torch::Tensor grad =
+        torch::autograd::grad({real_logits.sum()}, {real_in}, {}, /*retain_graph=*/true, /*create_graph=*/true)[0];
+    loss = loss + 0.5 * options_.r1_gamma * options_.r1_every * grad.pow(2).sum({1, 2, 3}).mean();
+  }
+  loss.backward();
+  adam.Step();
+  adam.ZeroGrad();
+  ada.Observe(real_logits);
+  return loss.item<double>();
+}
+
+double DecoderTrainer::PriorStep(int step) {
+  StyleDecoderImpl& decoder = *avatar_->decoder;
+  const int64_t batch = options_.batch;
+  const torch::Tensor z = torch::randn({batch, decoder.options().generator.z_dim}, gen_).to(device_);
+  const torch::Tensor fake = decoder.Generate(decoder.generator->Map(z), &gen_) * 2 - 1;
+  std::vector<torch::Tensor> reals;
+  for (int64_t b = 0; b < batch; ++b) {
+    const int64_t pick = torch::randint(int64_t(usable_.size()), {1}, gen_).item<int64_t>();
+    reals.push_back(Target(data_.train[size_t(usable_[size_t(pick)])]));
+  }
+  const torch::Tensor real = torch::cat(reals) * 2 - 1;
+  const double p = options_.decoder_ada ? ada_prior_.p() : 0.0;
+  const torch::Tensor loss_g = F::softplus(-prior_d_->forward(nn::Augment(fake, p, 3, gen_))).mean();
+  loss_g.backward();
+  adam_prior_g_.Step();
+  adam_prior_g_.ZeroGrad();
+  adam_prior_d_.ZeroGrad();
+  d_sum_ += DiscriminatorStep(*prior_d_, adam_prior_d_, ada_prior_, real, fake, step);
+  adam_prior_g_.ZeroGrad();
+  return loss_g.item<double>();
+}
+
+double DecoderTrainer::InvertOrTune(bool tune) {
+  StyleDecoderImpl& decoder = *avatar_->decoder;
+  std::vector<torch::Tensor> targets;
+  for (int64_t i : pti_views_) targets.push_back(Target(data_.train[size_t(i)]));
+  const torch::Tensor target = torch::cat(targets);
+  const torch::Tensor out = decoder.Generate(tune ? pti_w_.detach() : pti_w_);
+  const torch::Tensor l1 = (out - target).abs().mean();
+  torch::Tensor loss = (1 - options_.ssim_weight) * l1 + options_.ssim_weight * (1 - Ssim(out, target));
+  if (options_.perceptual_weight > 0 && prior_end_ > 0)
+    loss = loss + options_.perceptual_weight * FeatureMatching(*prior_d_, out * 2 - 1, target * 2 - 1);
+  loss.backward();
+  Adam& adam = tune ? adam_tune_ : adam_invert_;
+  adam.Step();
+  adam.ZeroGrad();
+  adam_prior_d_.ZeroGrad();
+  l1_sum_ += l1.item<double>();
+  return loss.item<double>();
+}
+
+double DecoderTrainer::FuseStep(int step) {
+  StyleDecoderImpl& decoder = *avatar_->decoder;
+  const int64_t views = int64_t(usable_.size());
+  const int64_t slot = (step - tune_end_ - 1) % views;
+  if (slot == 0) order_ = torch::randperm(views, gen_);
+  const AvatarView& view = data_.train[size_t(usable_[size_t(order_[slot].item<int64_t>())])];
+  const PosedGaussians posed = avatar_->Pose(data_, view.condition, view.frame, avatar_->deform);
+  const SquareCanvas canvas = MakeSquareCanvas(view.view, side_);
+  torch::Tensor background = torch::zeros({posed.features.size(1)}, posed.features.options());
+  background.slice(0, 0, 3).fill_(kDecoderBackground);
+  const torch::Tensor splat = RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities,
+                                              posed.features, background, canvas.camera)
+                                  .image;
+  const torch::Tensor out = decoder.forward(splat.unsqueeze(0));
+  const torch::Tensor target = Target(view);
+  const torch::Tensor l1 = (out - target).abs().mean();
+  torch::Tensor loss = (1 - options_.ssim_weight) * l1 + options_.ssim_weight * (1 - Ssim(out, target));
+  const bool adversarial = options_.adversarial_weight > 0;
+  torch::Tensor fake, real;
+  if (adversarial) {
+    const torch::Tensor uv = UvMap(view);
+    fake = torch::cat({out * 2 - 1, uv}, 1);
+    real = torch::cat({target * 2 - 1, uv}, 1);
+    const double p = options_.decoder_ada ? ada_fuse_.p() : 0.0;
+    loss = loss + options_.adversarial_weight * F::softplus(-fuse_d_->forward(nn::Augment(fake, p, 3, gen_))).mean();
+    if (options_.perceptual_weight > 0) loss = loss + options_.perceptual_weight * FeatureMatching(*fuse_d_, fake, real);
+  }
+  const double value = loss.item<double>();
+  if (!std::isfinite(value)) return value;
+  loss.backward();
+  adam_fuse_.Step();
+  adam_fuse_.ZeroGrad();
+  if (adversarial) {
+    adam_fuse_d_.ZeroGrad();
+    d_sum_ += DiscriminatorStep(*fuse_d_, adam_fuse_d_, ada_fuse_, real, fake, step);
+    adam_fuse_.ZeroGrad();
+  }
+  l1_sum_ += l1.item<double>();
+  return value;
+}
+
+Status DecoderTrainer::WritePreview(const fs::path& dir, int step) {
+  torch::NoGradGuard no_grad;
+  StyleDecoderImpl& decoder = *avatar_->decoder;
+  torch::Tensor image;
+  if (PhaseOf(step) == Phase::kPrior) {
+    // Four samples of the prior.
+    auto preview = at::detail::createCPUGenerator(7);
+    const torch::Tensor z = torch::randn({4, decoder.options().generator.z_dim}, preview).to(device_);
+    const torch::Tensor samples = decoder.Generate(decoder.generator->Map(z)).clamp(0, 1).cpu();
+    image = torch::cat(samples.unbind(0), 2);
+  } else if (PhaseOf(step) != Phase::kFuse) {
+    // PTI's fits beside their frames.
+    std::vector<torch::Tensor> rows;
+    const torch::Tensor fits = decoder.Generate(pti_w_).clamp(0, 1).cpu();
+    for (size_t k = 0; k < pti_views_.size(); ++k)
+      rows.push_back(torch::cat({fits[int64_t(k)], Target(data_.train[size_t(pti_views_[k])])[0].cpu()}, 2));
+    image = torch::cat(rows, 1);
+  } else {
+    const std::vector<AvatarView>& views = data_.test.empty() ? data_.train : data_.test;
+    const AvatarView& view = views.front();
+    const torch::Tensor grey = torch::full({3}, kDecoderBackground, torch::TensorOptions().device(device_));
+    const PosedGaussians posed = avatar_->Pose(data_, view.condition, 0, avatar_->deform);
+    const torch::Tensor splatted = RenderRgb(posed, view.view, grey).clamp(0, 1).cpu();
+    const torch::Tensor decoded = avatar_->Draw(posed, view.view, grey).clamp(0, 1).cpu();
+    image = torch::cat({splatted, decoded, view.image * view.mask + kDecoderBackground * (1 - view.mask)}, 2);
+  }
+  char name[48];
+  std::snprintf(name, sizeof(name), "stage3_%s_%06d.png", PhaseName(PhaseOf(step)), step);
+  HF_RETURN_IF_ERROR(EnsureDirectory(dir));
+  return WriteImageAtomic(dir / name, TensorToImage(image));
+}
+
+Status DecoderTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
+  Checkpoint c;
+  c.Put("step", int64_t(step_));
+  c.PutModule("model.", *avatar_->model);
+  c.PutModule("decoder.", *avatar_->decoder);
+  c.PutModule("prior_d.", *prior_d_);
+  c.PutModule("fuse_d.", *fuse_d_);
+  c.Put("pti_w", pti_w_);
+  adam_prior_g_.Save("adam_prior_g.", &c);
+  adam_prior_d_.Save("adam_prior_d.", &c);
+  adam_invert_.Save("adam_invert.", &c);
+  adam_tune_.Save("adam_tune.", &c);
+  adam_fuse_.Save("adam_fuse.", &c);
+  adam_fuse_d_.Save("adam_fuse_d.", &c);
+  c.Put("ada_prior", torch::tensor(ada_prior_.State(), torch::kFloat64));
+  c.Put("ada_fuse", torch::tensor(ada_fuse_.State(), torch::kFloat64));
+  c.Put("generator", gen_.get_state());
+  c.Put("order", order_);
+  c.Put("loss_sum", loss_sum_);
+  c.Put("d_sum", d_sum_);
+  c.Put("l1_sum", l1_sum_);
+  c.Put("count", count_);
+  c.Put("seconds", seconds());
+  c.Put("stats_lines", int64_t(stats_lines));
+  return c.Save(path);
+}
+
+Status DecoderTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
+  Checkpoint c;
+  HF_RETURN_IF_ERROR(Checkpoint::Load(path, &c));
+  const Status damaged =
+      Status::DataError(path.string() + " is not this stage 3's checkpoint; delete it to start stage 3 over");
+  int64_t step = 0, lines = 0;
+  torch::Tensor generator, ada_prior, ada_fuse, pti_w;
+  if (!c.Get("step", &step) || !c.Get("generator", &generator) || !c.Get("stats_lines", &lines) ||
+      !c.Get("pti_w", &pti_w) || !c.Get("ada_prior", &ada_prior) || !c.Get("ada_fuse", &ada_fuse) ||
+      !c.Get("loss_sum", &loss_sum_) || !c.Get("d_sum", &d_sum_) || !c.Get("l1_sum", &l1_sum_) ||
+      !c.Get("count", &count_) || !c.Get("seconds", &seconds_) || !pti_w.sizes().equals(pti_w_.sizes()))
+    return damaged;
+  if (!c.GetModule("model.", avatar_->model.get()) || !c.GetModule("decoder.", avatar_->decoder.get()) ||
+      !c.GetModule("prior_d.", prior_d_.get()) || !c.GetModule("fuse_d.", fuse_d_.get()))
+    return damaged;
+  {
+    torch::NoGradGuard no_grad;
+    pti_w_.copy_(pti_w);
+  }
+  if (!adam_prior_g_.Load("adam_prior_g.", c) || !adam_prior_d_.Load("adam_prior_d.", c) ||
+      !adam_invert_.Load("adam_invert.", c) || !adam_tune_.Load("adam_tune.", c) ||
+      !adam_fuse_.Load("adam_fuse.", c) || !adam_fuse_d_.Load("adam_fuse_d.", c))
+    return damaged;
+  const auto values = [](const torch::Tensor& t) {
+    return std::vector<double>(t.data_ptr<double>(), t.data_ptr<double>() + t.numel());
+  };
+  ada_prior_.Restore(values(ada_prior));
+  ada_fuse_.Restore(values(ada_fuse));
+  gen_.set_state(generator);
+  if (!c.Get("order", &order_)) order_ = torch::Tensor();
+  step_ = int(step);
+  if (step_ > 0) HF_LOG(Info) << "train: resuming stage 3 from its checkpoint at step " << step_ << " of " << total_;
+  return stats->Truncate(size_t(lines));
+}
+
+Status DecoderTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats,
+                             Progress* progress) {
+  StyleDecoderImpl& decoder = *avatar_->decoder;
+  HF_LOG(Info) << "train: stage 3, the StyleGAN decoder at " << side_ << "x" << side_ << ": "
+               << prior_end_ << " prior steps, " << (invert_end_ - prior_end_) << " + " << (tune_end_ - invert_end_)
+               << " PTI steps on " << pti_views_.size() << " extreme-pose frames, " << options_.decoder_steps
+               << " fusion steps" << (options_.full_tune ? " (full-tune: the generator trained too)" : "");
+  progress->Start("train: stage 3", total_);
+  progress->Advance(step_);
+  for (int step = step_ + 1; step <= total_; ++step) {
+    const Phase phase = PhaseOf(step);
+    // Only the phase's own parameters take gradients.
+    SetTrainable(generator_params_, phase == Phase::kPrior || phase == Phase::kTune ||
+                                        (phase == Phase::kFuse && options_.full_tune));
+    if (phase == Phase::kFuse && step == tune_end_ + 1) {
+      torch::NoGradGuard no_grad;
+      decoder.w.copy_(pti_w_.mean(0, true));  // PTI's latents, or the mean latent without PTI
+    }
+    double loss = 0;
+    switch (phase) {
+      case Phase::kPrior: loss = PriorStep(step); break;
+      case Phase::kInvert: loss = InvertOrTune(false); break;
+      case Phase::kTune: loss = InvertOrTune(true); break;
+      case Phase::kFuse: loss = FuseStep(step); break;
+    }
+    if (!std::isfinite(loss)) {
+      progress->Finish("diverged");
+      return Status::Internal("train: stage 3's loss became " + std::to_string(loss) + " at step " +
+                              std::to_string(step) + " (" + PhaseName(phase) +
+                              "); lower --lr-network or --adversarial-weight (a changed option starts training over)");
+    }
+    loss_sum_ += loss;
+    ++count_;
+    step_ = step;
+    progress->Advance();
+    const bool last = step == total_;
+    const bool phase_end = last || PhaseOf(step + 1) != phase;
+    if (step % options_.log_every == 0 || phase_end) {
+      const double n = double(std::max<int64_t>(count_, 1));
+      stats->Append(nlohmann::json{{"step", step},
+                                   {"stage", 3},
+                                   {"phase", PhaseName(phase)},
+                                   {"loss", loss_sum_ / n},
+                                   {"loss_d", d_sum_ / n},
+                                   {"l1", l1_sum_ / n},
+                                   {"augment_p", phase == Phase::kPrior ? ada_prior_.p() : ada_fuse_.p()},
+                                   {"seconds", seconds()}}
+                        .dump());
+      loss_sum_ = d_sum_ = l1_sum_ = 0;
+      count_ = 0;
+    }
+    if (phase_end || (options_.preview_every > 0 && step % options_.preview_every == 0))
+      HF_RETURN_IF_ERROR(WritePreview(out_dir / "previews", step));
+    HF_RETURN_IF_ERROR(CheckpointOrStop("stage 3", step, total_, last, options_.checkpoint_every,
+                                        [&] { return SaveCheckpoint(checkpoint, stats->size()); }, progress));
+  }
+  SetTrainable(generator_params_, false);
+  decoder.eval();
+  progress->Finish(std::to_string(total_) + " steps");
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status TrainStyleDecoder(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
+                         GaussianStyleAvatar* avatar, const fs::path& out_dir, const fs::path& stage2_checkpoint,
+                         StatsLog* stats, Progress* progress, double* seconds) {
+  DecoderTrainer trainer(options, data, model, avatar);
+  const fs::path checkpoint = out_dir / "decoder_checkpoint.pt";
+  HF_RETURN_IF_ERROR(trainer.Start(checkpoint, stage2_checkpoint, stats));
+  HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
+  *seconds = trainer.seconds();
+  return Status::Ok();
+}
+
+}  // namespace headforge

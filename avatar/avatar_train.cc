@@ -2,12 +2,11 @@
 
 #include <torch/torch.h>
 
-#include <cstdio>
-
 #include "avatar/gan_avatar/trainer.h"
 #include "avatar/gaussian_style/trainer.h"
+#include "avatar/train/dataset_pack.h"
 #include "avatar/torch_runtime.h"
-#include "avatar/train/device.h"
+#include "avatar/train/loop.h"
 #include "core/log.h"
 #include "core/paths.h"
 
@@ -61,71 +60,7 @@ const GanPreset kGanPresets[] = {
     {"high", "cuda", 512, 128, 200000, 0, 256, 16, 20000, 2.5e-4, 2.5e-4, 1.0, 5000, 5000},
 };
 
-bool IsPowerOfTwo(int v) { return v > 0 && (v & (v - 1)) == 0; }
-
 }  // namespace
-
-Status TrainOptions::Check() const {
-  torch::Device parsed = torch::kCPU;
-  HF_RETURN_IF_ERROR(ParseDevice("train", device, &parsed));
-  if (model != "gaussian-style" && model != "gan-avatar")
-    return Status::InvalidArgument("train: --model must be gaussian-style or gan-avatar, not '" + model + "'");
-  if (resolution < 16 || resolution > 4096) return Status::InvalidArgument("train: --resolution must be in [16, 4096]");
-  if (steps < 1) return Status::InvalidArgument("train: --steps must be at least 1");
-  if (!(max_minutes >= 0)) return Status::InvalidArgument("train: --max-minutes must be zero or positive");
-  if (!(canonical_fraction >= 0 && canonical_fraction <= 1))
-    return Status::InvalidArgument("train: --canonical-fraction must be in [0, 1]");
-  if (!(region_weight >= 0) || !(ssim_weight >= 0 && ssim_weight <= 1))
-    return Status::InvalidArgument("train: --region-weight must be >= 0 and --ssim-weight in [0, 1]");
-  if (!(holdout > 0 && holdout < 0.9)) return Status::InvalidArgument("train: --holdout must be in (0, 0.9)");
-  if (init_gaussians < 1 || max_gaussians < init_gaussians)
-    return Status::InvalidArgument("train: --init-gaussians must be positive and at most --max-gaussians");
-  if (densify_every < 1) return Status::InvalidArgument("train: --densify-every must be at least 1");
-  for (double lr : {lr_network, lr_means, lr_quats, lr_scales, lr_opacity, lr_features})
-    if (!(lr >= 0)) return Status::InvalidArgument("train: learning rates must be zero or positive");
-  if (feature_channels < 3) return Status::InvalidArgument("train: --feature-channels must be at least 3 (RGB)");
-  if (triplane_resolution < 8 || (triplane_resolution & (triplane_resolution - 1)) != 0)
-    return Status::InvalidArgument("train: --triplane-resolution must be a power of two of at least 8");
-  if (latent_dim < 1) return Status::InvalidArgument("train: --latent-dim must be positive");
-  if (model == "gan-avatar") {
-    if (render_resolution < 4 || render_resolution > resolution ||
-        resolution % render_resolution != 0 || !IsPowerOfTwo(resolution / render_resolution))
-      return Status::InvalidArgument("train: --render-resolution must divide --resolution by a power of two (" +
-                                     std::to_string(render_resolution) + " into " + std::to_string(resolution) + ")");
-    if (batch < 1) return Status::InvalidArgument("train: --batch must be at least 1");
-    if (reconstruction_steps < 0 || adversarial_ramp < 0 || !(recon_weight >= 0))
-      return Status::InvalidArgument(
-          "train: --reconstruction-steps, --adversarial-ramp and --recon-weight must be zero or positive");
-    if (!(lr_discriminator >= 0) || !(r1_gamma >= 0) || r1_every < 1)
-      return Status::InvalidArgument("train: --lr-discriminator and --r1-gamma must be >= 0, --r1-every >= 1");
-    if (!(ada_target > 0 && ada_target < 1)) return Status::InvalidArgument("train: --ada-target must be in (0, 1)");
-    if (mapping_loss != "image" && mapping_loss != "latent")
-      return Status::InvalidArgument("train: --mapping-loss must be image or latent, not '" + mapping_loss + "'");
-    if (mapping_samples < 1 || mapping_steps < 0)
-      return Status::InvalidArgument("train: --mapping-samples must be at least 1 and --mapping-steps at least 0");
-    if (coarse_samples < 1 || fine_samples < 0)
-      return Status::InvalidArgument("train: --samples must be at least 1 and --fine-samples at least 0");
-  }
-  if (model == "gaussian-style" && decoder_steps > 0) {
-    const int side = decoder_resolution > 0 ? decoder_resolution : resolution;
-    if (side < 8 || !IsPowerOfTwo(side))
-      return Status::InvalidArgument("train: the decoder's side (--decoder-resolution, else --resolution) must be a "
-                                     "power of two of at least 8, not " + std::to_string(side));
-    if (prior_steps < 0 || pti_steps < 0 || pti_frames < 1 || projected_blocks < 0 || batch < 1)
-      return Status::InvalidArgument("train: --prior-steps and --pti-steps must be >= 0, --pti-frames and --batch >= 1, "
-                                     "--projected-blocks >= 0");
-    if (!(adversarial_weight >= 0) || !(perceptual_weight >= 0) || !(r1_gamma >= 0) || r1_every < 1 ||
-        !(ada_target > 0 && ada_target < 1) || !(lr_discriminator >= 0))
-      return Status::InvalidArgument("train: --adversarial-weight, --perceptual-weight, --r1-gamma and "
-                                     "--lr-discriminator must be >= 0, --r1-every >= 1, --ada-target in (0, 1)");
-    std::error_code ec;
-    if (!decoder_init.empty() && !fs::is_regular_file(decoder_init, ec))
-      return Status::InvalidArgument("train: --decoder-init: no file " + decoder_init);
-  }
-  if (log_every < 1 || eval_every < 0 || preview_every < 0 || checkpoint_every < 1)
-    return Status::InvalidArgument("train: --log-every and --checkpoint-every must be >= 1, the others >= 0");
-  return Status::Ok();
-}
 
 void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.model", &t->model,
@@ -305,17 +240,26 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* t) {
   return Status::Ok();
 }
 
-std::string TrainSummary::OneLine() const {
-  char text[320];
-  const std::string resumed = resumed_from > 0 ? " (resumed at step " + std::to_string(resumed_from) + ")" : "";
-  const std::string count = gaussians > 0 ? ", " + std::to_string(gaussians) + " Gaussians" : "";
-  std::snprintf(text, sizeof(text),
-                "%d steps in %.0f s%s%s; %d held-out views: PSNR %.2f dB / SSIM %.3f over the head, "
-                "%.2f dB / %.3f over the frame",
-                steps, seconds, resumed.c_str(), count.c_str(), test_views, psnr_masked, ssim_masked, psnr_full,
-                ssim_full);
-  return text;
+namespace {
+
+// The workspace's views as the run of `options` trains on them (with the UV
+// maps stage 3's discriminator needs).
+Status LoadTrainingData(const TrainOptions& options, const fs::path& workspace, const FaceModel& model,
+                        AvatarDataset* data) {
+  DatasetOptions loading;
+  loading.resolution = options.resolution;
+  loading.holdout = options.holdout;
+  loading.holdout_cameras = options.holdout_cameras;
+  if (options.model == "gaussian-style" && options.decoder_steps > 0 && options.adversarial_weight > 0)
+    loading.uv_map_side = options.decoder_resolution > 0 ? options.decoder_resolution : options.resolution;
+  HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, data).WithContext("train"));
+  HF_LOG(Info) << "train: " << data->train.size() << " training and " << data->test.size() << " held-out views at "
+               << data->width << "x" << data->height << " (frames " << data->first_test_frame << "-"
+               << data->num_frames - 1 << " held out)";
+  return Status::Ok();
 }
+
+}  // namespace
 
 Status RunTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
                 const fs::path& out_dir, Progress* progress, TrainSummary* summary) {
@@ -323,33 +267,36 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
   HF_RETURN_IF_ERROR(options.Check());
   FaceModel model;
   HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+  AvatarDataset data;
+  HF_RETURN_IF_ERROR(LoadTrainingData(options, workspace, model, &data));
+  if (options.model != "gan-avatar") return TrainGaussianStyleRun(options, data, out_dir, progress, summary);
   TrainOptions resolved = options;
   if (resolved.landmark_model.empty()) resolved.landmark_model = DefaultLandmarkModel();
-  DatasetOptions loading;
-  loading.resolution = options.resolution;
-  loading.holdout = options.holdout;
-  loading.holdout_cameras = options.holdout_cameras;
-  AvatarDataset data;
-  HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, &data).WithContext("train"));
-  HF_LOG(Info) << "train: " << data.train.size() << " training and " << data.test.size() << " held-out views at "
-               << data.width << "x" << data.height << " (frames " << data.first_test_frame << "-"
-               << data.num_frames - 1 << " held out)";
-  HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
-  // Lines written after the last checkpoint, or with none, are dropped.
-  std::error_code ec;
-  if (!fs::exists(out_dir / "checkpoint.pt", ec) && !fs::exists(out_dir / "decoder_checkpoint.pt", ec))
-    HF_RETURN_IF_ERROR(RemoveAll(out_dir / "stats.jsonl"));
   StatsLog stats;
-  HF_RETURN_IF_ERROR(StatsLog::Open(out_dir / "stats.jsonl", &stats));
+  HF_RETURN_IF_ERROR(OpenTrainStats(out_dir, &stats));
   *summary = TrainSummary();
-  if (options.model == "gan-avatar")
-    HF_RETURN_IF_ERROR(TrainGanAvatar(resolved, workspace, data, model, out_dir, &stats, progress, summary));
-  else
-    HF_RETURN_IF_ERROR(TrainGaussianStyle(options, data, model, out_dir, &stats, progress, summary));
+  HF_RETURN_IF_ERROR(TrainGanAvatar(resolved, workspace, data, model, out_dir, &stats, progress, summary));
   summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json", "held_out"};
+  std::error_code ec;
   if (fs::exists(out_dir / "previews", ec)) summary->outputs.push_back("previews");
-  if (options.model == "gaussian-style" && options.decoder_steps > 0) summary->outputs.push_back("eval_stage2.json");
   return Status::Ok();
+}
+
+Status WriteTrainPack(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
+                      const fs::path& pack) {
+  UseTensorThreads();
+  // The device is the training machine's, not this one's.
+  TrainOptions here = options;
+  here.device = "cpu";
+  HF_RETURN_IF_ERROR(here.Check());
+  if (options.model != "gaussian-style")
+    return Status::InvalidArgument("pack: only the gaussian-style model trains from a pack (the gan-avatar "
+                                   "model's expression mapping tracks its renders, which needs the full build)");
+  FaceModel model;
+  HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+  AvatarDataset data;
+  HF_RETURN_IF_ERROR(LoadTrainingData(options, workspace, model, &data));
+  return WriteDatasetPack(data, ToJson(options), pack);
 }
 
 }  // namespace headforge

@@ -6,6 +6,8 @@
 // docs/avatar.md.
 #pragma once
 
+#include <nlohmann/json_fwd.hpp>
+
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -87,6 +89,11 @@ struct TrainOptions {
   Status Check() const;
 };
 
+// Every option by its field name, for a training pack's record of the run it
+// is for; a field the JSON lacks keeps its default.
+nlohmann::json ToJson(const TrainOptions& options);
+TrainOptions TrainOptionsFromJson(const nlohmann::json& j);
+
 void AddTrainOptions(OptionSet* options, TrainOptions* train);
 // Gives the preset's values to the options `parsed` says nobody set.
 Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* train);
@@ -110,5 +117,18 @@ struct TrainSummary {
 // eval.json, previews/ and held_out/.
 Status RunTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
                 const fs::path& out_dir, Progress* progress, TrainSummary* summary);
+
+// The same run in two halves, for a GPU machine without the rest of the
+// stack: WriteTrainPack reads the workspace's views as RunTrain would and
+// writes them with `options` into one file (avatar/train/dataset_pack.h);
+// TrainFromPack, which needs LibTorch alone (the headforge-train program),
+// trains on it into `out_dir` with the same result as RunTrain. `settings`
+// ("field=value", TrainOptions' field names: device=cuda, max_minutes=9)
+// replace the pack's options. gaussian-style only (the gan-avatar model's
+// mapping tracks its renders).
+Status WriteTrainPack(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
+                      const fs::path& pack);
+Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& settings, const fs::path& out_dir,
+                     Progress* progress, TrainSummary* summary);
 
 }  // namespace headforge

@@ -25,6 +25,8 @@ const std::vector<Command>& Commands() {
     }
     const std::vector<Command> tools = {
       {"render", "Render a trained avatar's frames from any camera round the head.", RenderCommand},
+      {"pack", "Write a training pack: a tracked workspace's training data for headforge-train on a GPU machine.",
+       PackCommand},
       {"simulate", "Render a synthetic head capture with ground truth from a scene file.",
        SimulateCommand},
       {"status", "Show the stages of a workspace: status, wall time, summary.", StatusCommand},

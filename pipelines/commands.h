@@ -62,6 +62,7 @@ int BenchCommand(const std::vector<std::string>& args);
 int BenchTrain(const std::vector<std::string>& args);
 int SplatFitCommand(const std::vector<std::string>& args);
 int RenderCommand(const std::vector<std::string>& args);
+int PackCommand(const std::vector<std::string>& args);
 int StatusCommand(const std::vector<std::string>& args);
 int VersionCommand(const std::vector<std::string>& args);
 

@@ -11,10 +11,15 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <memory>
+#include <string>
 
 #include "core/status.h"
 
 namespace headforge {
+
+// InvalidArgument naming `what` when a triangle names a vertex outside [0,
+// num_vertices).
+Status CheckTriangleIndices(const Eigen::Matrix3Xi& triangles, int num_vertices, const std::string& what);
 
 // Area-weighted unit vertex normals, computed with OpenMesh: each triangle
 // adds its (unnormalised) cross product, i.e. its normal times twice its area,

@@ -28,8 +28,10 @@ struct Result {
   std::string out, err;
 };
 
-inline pid_t Spawn(const std::vector<std::string>& args, const fs::path& out, const fs::path& err) {
-  std::vector<std::string> full = {HEADFORGE_BINARY};
+// `binary` (headforge unless named) with `args`, its output into `out` and `err`.
+inline pid_t Spawn(const std::vector<std::string>& args, const fs::path& out, const fs::path& err,
+                   const char* binary = HEADFORGE_BINARY) {
+  std::vector<std::string> full = {binary};
   full.insert(full.end(), args.begin(), args.end());
   std::vector<char*> argv;
   for (auto& a : full) argv.push_back(a.data());
@@ -39,7 +41,7 @@ inline pid_t Spawn(const std::vector<std::string>& args, const fs::path& out, co
   posix_spawn_file_actions_addopen(&actions, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_addopen(&actions, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   pid_t pid = -1;
-  EXPECT_EQ(posix_spawn(&pid, HEADFORGE_BINARY, &actions, nullptr, argv.data(), environ), 0);
+  EXPECT_EQ(posix_spawn(&pid, binary, &actions, nullptr, argv.data(), environ), 0);
   posix_spawn_file_actions_destroy(&actions);
   return pid;
 }
@@ -59,10 +61,10 @@ inline size_t CountFiles(const fs::path& dir) {
   return n;
 }
 
-inline Result Headforge(const std::vector<std::string>& args) {
+inline Result Headforge(const std::vector<std::string>& args, const char* binary = HEADFORGE_BINARY) {
   const fs::path out = fs::temp_directory_path() / ("hf_cli_out_" + std::to_string(getpid()));
   const fs::path err = fs::temp_directory_path() / ("hf_cli_err_" + std::to_string(getpid()));
-  const pid_t pid = Spawn(args, out, err);
+  const pid_t pid = Spawn(args, out, err, binary);
   int status = 0;
   waitpid(pid, &status, 0);
   Result r;

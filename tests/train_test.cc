@@ -569,9 +569,6 @@ TEST_F(ExportStage, TheViewerPageShowsBothAvatars) {
 }
 #endif
 
-// A tracked workspace without a trained model exports what needs only
-// tracking (the mesh avatar, the report) and says what the rest needs,
-// before writing anything.
 // Stage 3, the StyleGAN decoder, on a tiny stage 1-2 model: 100 steps at
 // 48 px, then a 32 px decoder (prior 20 steps, PTI 10 + 10 on 2 frames,
 // 30 fusion steps), a checkpoint every 10 steps.
@@ -668,6 +665,70 @@ TEST_F(DecoderStage, KilledInStageThreeResumesThereToTheSameModel) {
   for (size_t i = 0; i < stats.size(); ++i) EXPECT_EQ(stats[i]["loss"], expected[i]["loss"]) << i;
 }
 
+// A training pack (headforge pack) trained by headforge-train, the
+// LibTorch-only program for GPU machines: the same model, losses and scores
+// as headforge train on the workspace, stage 3 included; and the folder it
+// writes renders in the workspace as the train stage's does.
+TEST_F(DecoderStage, APackTrainedByHeadforgeTrainGivesTheSameModelAsTheTrainStage) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("pack"));
+  std::vector<std::string> args = DecoderArgs(ws);
+  args[0] = "pack";
+  args.insert(args.end(), {"--out", (ws / "talking.pack").string()});
+  const Result packed = Headforge(args);
+  ASSERT_EQ(packed.code, 0) << packed.err;
+  EXPECT_NE(packed.err.find("headforge-train"), std::string::npos) << packed.err;
+  const fs::path out = ws / "trained_elsewhere";
+  const Result trained =
+      Headforge({(ws / "talking.pack").string(), "--out", out.string(), "--threads", "2"}, HEADFORGE_TRAIN_BINARY);
+  ASSERT_EQ(trained.code, 0) << trained.err;
+  EXPECT_EQ(FileHash(out / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
+  const std::vector<nlohmann::json> stats = StatsLines(out / "stats.jsonl");
+  const std::vector<nlohmann::json> expected = StatsLines(reference_ / kModelDir / "stats.jsonl");
+  ASSERT_EQ(stats.size(), expected.size());
+  for (size_t i = 0; i < stats.size(); ++i) EXPECT_EQ(stats[i]["loss"], expected[i]["loss"]) << i;
+  nlohmann::json eval, expected_eval;
+  ASSERT_TRUE(ReadJson(out / "eval.json", &eval).ok());
+  ASSERT_TRUE(ReadJson(reference_ / kModelDir / "eval.json", &expected_eval).ok());
+  EXPECT_EQ(eval["mean"], expected_eval["mean"]);
+
+  // Copied into the workspace, the model renders there.
+  fs::create_directories(ws / "models");
+  fs::rename(out, ws / kModelDir);
+  const Result r = Headforge({"render", "--workspace", ws.string(), "--frames", "110", "--out",
+                              (ws / "renders").string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(ws / "renders" / "frame_000110.png"));
+}
+
+TEST(PackBadInput, WhatCannotBePackedOrTrainedSaysWhy) {
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("pack_bad"));
+  // No --out.
+  Result r = Headforge({"pack", "--workspace", ws.string()});
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--out"), std::string::npos) << r.err;
+  // The gan-avatar model does not train from a pack.
+  r = Headforge({"pack", "--workspace", ws.string(), "--model", "gan-avatar", "--out", (ws / "g.pack").string()});
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("gaussian-style"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(ws / "g.pack"));
+  // A workspace not yet tracked.
+  fs::remove(ws / "tracking.json");
+  r = Headforge({"pack", "--workspace", ws.string(), "--out", (ws / "t.pack").string()});
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("track"), std::string::npos) << r.err;
+  // headforge-train: a file that is not a pack, and no --out.
+  r = Headforge({(ws / "capture.json").string(), "--out", (ws / "m").string()}, HEADFORGE_TRAIN_BINARY);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("capture.json"), std::string::npos) << r.err;
+  r = Headforge({(ws / "capture.json").string()}, HEADFORGE_TRAIN_BINARY);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--out"), std::string::npos) << r.err;
+}
+
+// A tracked workspace without a trained model exports what needs only
+// tracking (the mesh avatar, the report) and says what the rest needs,
+// before writing anything.
 TEST(ExportBadInput, AnUntrainedWorkspaceExportsTheMeshAndTheReportAlone) {
   const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("untrained"));
   const Result all = Headforge({"export", "--workspace", ws.string(), "--texture-size", "64"});

@@ -23,9 +23,8 @@
 #include "avatar/train/adam.h"
 #include "avatar/train/checkpoint.h"
 #include "avatar/train/device.h"
+#include "avatar/train/image_file.h"
 #include "avatar/train/loop.h"
-#include "avatar/train/tensor_image.h"
-#include "core/image_io.h"
 #include "core/json_io.h"
 #include "core/log.h"
 
@@ -274,7 +273,7 @@ std::vector<ViewScores> GanTrainer::Evaluate(const fs::path& write_dir, int stri
     if (write_dir.empty()) continue;
     char name[64];
     std::snprintf(name, sizeof(name), "%s_%06d.png", view.camera.c_str(), view.frame);
-    WriteImageAtomic(write_dir / name, TensorToImage(ComparisonStrip(render, view.image, view.mask, kBackground))).ok();
+    WriteTensorImage(write_dir / name, ComparisonStrip(render, view.image, view.mask, kBackground)).ok();
   }
   return scores;
 }
@@ -297,7 +296,7 @@ Status GanTrainer::WritePreview(const fs::path& dir, int step) {
   char name[32];
   std::snprintf(name, sizeof(name), "step_%06d.png", step);
   HF_RETURN_IF_ERROR(EnsureDirectory(dir));
-  return WriteImageAtomic(dir / name, TensorToImage(torch::cat({top, bottom}, 1)));
+  return WriteTensorImage(dir / name, torch::cat({top, bottom}, 1));
 }
 
 Status GanTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {

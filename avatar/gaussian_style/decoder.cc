@@ -70,22 +70,6 @@ std::vector<torch::Tensor> StyleDecoderImpl::FusionParameters() {
   return out;
 }
 
-SquareCanvas MakeSquareCanvas(const SplatCamera& camera, int side) {
-  const double scale = double(side) / std::max(camera.width, camera.height);
-  SquareCanvas canvas;
-  canvas.width = std::clamp(int(std::lround(camera.width * scale)), 1, side);
-  canvas.height = std::clamp(int(std::lround(camera.height * scale)), 1, side);
-  canvas.x0 = (side - canvas.width) / 2;
-  canvas.y0 = (side - canvas.height) / 2;
-  canvas.camera = camera;
-  canvas.camera.width = canvas.camera.height = side;
-  canvas.camera.fx = camera.fx * scale;
-  canvas.camera.fy = camera.fy * scale;
-  canvas.camera.cx = (camera.cx + 0.5) * scale - 0.5 + canvas.x0;
-  canvas.camera.cy = (camera.cy + 0.5) * scale - 0.5 + canvas.y0;
-  return canvas;
-}
-
 Status LoadGeneratorWeights(const fs::path& path, nn::StyleGeneratorImpl* generator) {
   SafeTensorsFile file;
   HF_RETURN_IF_ERROR(ReadSafetensors(path, &file));

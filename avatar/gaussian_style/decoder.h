@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "avatar/nn/stylegan.h"
-#include "avatar/splat/splat_camera.h"
+#include "avatar/train/view_camera.h"
 #include "core/fs.h"
 #include "core/status.h"
 
@@ -59,15 +59,6 @@ class StyleDecoderImpl : public torch::nn::Module {
   StyleDecoderOptions options_;
 };
 TORCH_MODULE(StyleDecoder);
-
-// A camera's image drawn on a square canvas of `side` px: the same view
-// scaled so its longer side is `side`, centred; [x0, x0 + width) x [y0, y0 +
-// height) is the image on the canvas.
-struct SquareCanvas {
-  SplatCamera camera;
-  int x0 = 0, y0 = 0, width = 0, height = 0;
-};
-SquareCanvas MakeSquareCanvas(const SplatCamera& camera, int side);
 
 // Loads a generator's weights (`--decoder-init`): a .safetensors file with
 // one F32 tensor per parameter of `generator`, under its parameter name and

@@ -14,8 +14,6 @@
 
 #include <nlohmann/json.hpp>
 
-#include <Eigen/Core>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -29,11 +27,9 @@
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/adam.h"
 #include "avatar/train/checkpoint.h"
+#include "avatar/train/image_file.h"
 #include "avatar/train/loop.h"
-#include "avatar/train/tensor_image.h"
-#include "core/image_io.h"
 #include "core/log.h"
-#include "core/mesh_renderer.h"
 
 namespace headforge {
 namespace {
@@ -86,9 +82,8 @@ void SetTrainable(const std::vector<torch::Tensor>& params, bool on) {
 
 class DecoderTrainer {
  public:
-  DecoderTrainer(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
-                 GaussianStyleAvatar* avatar)
-      : options_(options), data_(data), model_(model), avatar_(avatar),
+  DecoderTrainer(const TrainOptions& options, const AvatarDataset& data, GaussianStyleAvatar* avatar)
+      : options_(options), data_(data), avatar_(avatar),
         device_(avatar->gaussians.params.means.device()), gen_(at::detail::createCPUGenerator(options.seed + 3)),
         adam_prior_g_(0.0, 0.99), adam_prior_d_(0.0, 0.99), adam_fuse_d_(0.0, 0.99),
         ada_prior_(options.ada_target), ada_fuse_(options.ada_target) {
@@ -111,7 +106,7 @@ class DecoderTrainer {
                                : Phase::kFuse;
   }
   torch::Tensor Target(const AvatarView& view) const;  // [1, 3, S, S], the head over grey
-  torch::Tensor UvMap(const AvatarView& view) const;   // [1, 3, S, S]: u, v, covered
+  torch::Tensor UvMap(const AvatarView& view) const;   // [1, 3, S, S]: u, v, covered in [-1, 1]
   double PriorStep(int step);
   double InvertOrTune(bool tune);
   double FuseStep(int step);
@@ -125,7 +120,6 @@ class DecoderTrainer {
 
   TrainOptions options_;
   const AvatarDataset& data_;
-  const FaceModel& model_;
   GaussianStyleAvatar* avatar_;
   torch::Device device_;
   at::Generator gen_;
@@ -137,7 +131,6 @@ class DecoderTrainer {
   std::vector<int64_t> usable_;          // training views with reliable tracking
   Adam adam_prior_g_, adam_prior_d_, adam_invert_, adam_tune_, adam_fuse_, adam_fuse_d_;
   nn::AdaController ada_prior_, ada_fuse_;
-  Eigen::Matrix2Xf uvs_;                 // the face model's UVs scaled into [0, 1]
   int step_ = 0;
   torch::Tensor order_;
   double loss_sum_ = 0, d_sum_ = 0, l1_sum_ = 0;
@@ -153,47 +146,10 @@ torch::Tensor DecoderTrainer::Target(const AvatarView& view) const {
 }
 
 torch::Tensor DecoderTrainer::UvMap(const AvatarView& view) const {
-  torch::NoGradGuard no_grad;
-  const SquareCanvas canvas = MakeSquareCanvas(view.view, side_);
-  const int64_t e = int64_t(data_.expression_names.size());
-  const torch::Tensor vertices = data_.Vertices(view.condition.slice(0, 0, e)).to(torch::kFloat32).contiguous();
-  Mesh mesh;
-  mesh.vertices = Eigen::Map<const Eigen::Matrix3Xf>(vertices.data_ptr<float>(), 3, vertices.size(0));
-  mesh.triangles = model_.triangles();
-  if (uvs_.cols() > 0 && model_.uv_triangles().cols() == mesh.triangles.cols()) {
-    mesh.uvs = uvs_;
-    mesh.uv_triangles = model_.uv_triangles();
-  } else {
-    // No UVs: the neutral shape's x and y stand in for them.
-    const Eigen::Map<const Eigen::Matrix3Xf> neutral(data_.identity_vertices.data_ptr<float>(), 3,
-                                                     data_.identity_vertices.size(0));
-    const Eigen::Vector2f lo = neutral.topRows(2).rowwise().minCoeff(), hi = neutral.topRows(2).rowwise().maxCoeff();
-    mesh.uvs = ((neutral.topRows(2).colwise() - lo).array().colwise() / (hi - lo).array().max(1e-6f)).matrix();
-  }
-  mesh.materials.emplace_back();
-  PinholeCamera camera;
-  camera.fx = canvas.camera.fx;
-  camera.fy = canvas.camera.fy;
-  camera.cx = canvas.camera.cx;
-  camera.cy = canvas.camera.cy;
-  camera.width = canvas.camera.width;
-  camera.height = canvas.camera.height;
-  camera.cam_from_world = CameraPose(canvas.camera);
-  RenderOptions render;
-  render.supersample = 1;
-  RenderOutput out;
-  RenderMeshes({&mesh}, camera, render, &out);
-  torch::Tensor map = torch::zeros({3, side_, side_});
-  auto a = map.accessor<float, 3>();
-  for (int y = 0; y < side_; ++y)
-    for (int x = 0; x < side_; ++x) {
-      if (out.triangle.at<int32_t>(y, x) < 0) continue;
-      const cv::Vec2f uv = out.uv.at<cv::Vec2f>(y, x);
-      a[0][y][x] = uv[0];
-      a[1][y][x] = uv[1];
-      a[2][y][x] = 1;
-    }
-  return (map * 2 - 1).unsqueeze(0).to(device_);
+  torch::Tensor map = (view.uv_map.to(device_, torch::kFloat32) * (2.0 / 255) - 1).unsqueeze(0);
+  // Maps drawn at another side (a pack written for another decoder size) are resized.
+  if (map.size(2) != side_) map = nn::ResizeBilinear(map, side_, side_);
+  return map;
 }
 
 void DecoderTrainer::ChoosePtiFrames() {
@@ -254,12 +210,12 @@ Status DecoderTrainer::Start(const fs::path& checkpoint, const fs::path& stage2_
   for (size_t i = 0; i < data_.train.size(); ++i)
     if (!data_.train[i].unreliable) usable_.push_back(int64_t(i));
   if (usable_.empty()) return Status::DataError("train: no reliably tracked training view for stage 3");
+  if (options_.adversarial_weight > 0)
+    for (int64_t i : usable_)
+      if (!data_.train[size_t(i)].uv_map.defined())
+        return Status::InvalidArgument("train: stage 3's discriminator needs the training views' UV maps "
+                                       "(DatasetOptions::uv_map_side)");
   ChoosePtiFrames();
-  if (model_.has_uv()) {
-    const Eigen::Matrix2Xf& uv = model_.uv_coords();
-    const Eigen::Vector2f lo = uv.rowwise().minCoeff(), hi = uv.rowwise().maxCoeff();
-    uvs_ = ((uv.colwise() - lo).array().colwise() / (hi - lo).array().max(1e-6f)).matrix();
-  }
   {
     // PTI starts from the mean latent; without PTI it is the decoder's w.
     torch::NoGradGuard no_grad;
@@ -414,7 +370,7 @@ Status DecoderTrainer::WritePreview(const fs::path& dir, int step) {
   char name[48];
   std::snprintf(name, sizeof(name), "stage3_%s_%06d.png", PhaseName(PhaseOf(step)), step);
   HF_RETURN_IF_ERROR(EnsureDirectory(dir));
-  return WriteImageAtomic(dir / name, TensorToImage(image));
+  return WriteTensorImage(dir / name, image);
 }
 
 Status DecoderTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
@@ -543,10 +499,10 @@ Status DecoderTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint
 
 }  // namespace
 
-Status TrainStyleDecoder(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
-                         GaussianStyleAvatar* avatar, const fs::path& out_dir, const fs::path& stage2_checkpoint,
-                         StatsLog* stats, Progress* progress, double* seconds) {
-  DecoderTrainer trainer(options, data, model, avatar);
+Status TrainStyleDecoder(const TrainOptions& options, const AvatarDataset& data, GaussianStyleAvatar* avatar,
+                         const fs::path& out_dir, const fs::path& stage2_checkpoint, StatsLog* stats,
+                         Progress* progress, double* seconds) {
+  DecoderTrainer trainer(options, data, avatar);
   const fs::path checkpoint = out_dir / "decoder_checkpoint.pt";
   HF_RETURN_IF_ERROR(trainer.Start(checkpoint, stage2_checkpoint, stats));
   HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));

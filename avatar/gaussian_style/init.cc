@@ -55,17 +55,21 @@ Eigen::Matrix3Xf SeenColours(const AvatarDataset& data, const Eigen::Matrix3Xf& 
 
 }  // namespace
 
-Status InitGaussians(const AvatarDataset& data, const FaceModel& model, const TrainOptions& options,
-                     const GaussianStyleAvatar& avatar, AvatarGaussians* gaussians) {
+Status InitGaussians(const AvatarDataset& data, const TrainOptions& options, const GaussianStyleAvatar& avatar,
+                     AvatarGaussians* gaussians) {
   std::vector<int> chosen;  // model triangle indices
   for (const char* name : kSampledRegions) {
-    if (const FaceModel::Region* region = model.FindRegion(name))
-      for (int t = region->first_triangle; t <= region->last_triangle; ++t) chosen.push_back(t);
+    const auto part = data.mesh_parts.find(name);
+    if (part != data.mesh_parts.end())
+      for (int t = part->second.first; t <= part->second.second; ++t) chosen.push_back(t);
   }
+  const torch::Tensor model_triangles = data.triangles.to(torch::kInt64).contiguous().cpu();
   if (chosen.empty())
-    for (int t = 0; t < model.num_triangles(); ++t) chosen.push_back(t);
+    for (int t = 0; t < int(model_triangles.size(0)); ++t) chosen.push_back(t);
   Eigen::Matrix3Xi triangles(3, Eigen::Index(chosen.size()));
-  for (size_t i = 0; i < chosen.size(); ++i) triangles.col(Eigen::Index(i)) = model.triangles().col(chosen[i]);
+  const auto corners = model_triangles.accessor<int64_t, 2>();
+  for (size_t i = 0; i < chosen.size(); ++i)
+    for (int k = 0; k < 3; ++k) triangles(k, Eigen::Index(i)) = int(corners[chosen[i]][k]);
   const torch::Tensor identity = data.identity_vertices.contiguous().cpu();
   const Eigen::Matrix3Xf vertices = Eigen::Map<const Eigen::Matrix3Xf>(identity.data_ptr<float>(), 3, identity.size(0));
   SurfaceSamples samples;

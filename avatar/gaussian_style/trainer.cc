@@ -15,9 +15,8 @@
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/adam.h"
 #include "avatar/train/device.h"
+#include "avatar/train/image_file.h"
 #include "avatar/train/loop.h"
-#include "avatar/train/tensor_image.h"
-#include "core/image_io.h"
 #include "core/json_io.h"
 #include "core/log.h"
 
@@ -68,7 +67,7 @@ class Trainer {
     stage1_steps_ = std::clamp(canonical, 0, options.steps);
   }
 
-  Status Start(const FaceModel& model, const fs::path& checkpoint, StatsLog* stats);
+  Status Start(const fs::path& checkpoint, StatsLog* stats);
   Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
   Status Finish(const fs::path& out_dir, TrainSummary* summary);
   int step() const { return state_.step; }
@@ -98,7 +97,7 @@ class Trainer {
   double lr_means_ = 0;  // the means' first learning rate; it decays to 1% over the steps
 };
 
-Status Trainer::Start(const FaceModel& model, const fs::path& checkpoint, StatsLog* stats) {
+Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   GaussianStyleOptions architecture;
   architecture.feature_channels = options_.feature_channels;
   architecture.triplane.latent_dim = options_.latent_dim;
@@ -109,7 +108,7 @@ Status Trainer::Start(const FaceModel& model, const fs::path& checkpoint, StatsL
   avatar_.model = GaussianStyle(architecture, data_.num_frames);
   avatar_.deform = options_.deform;
   if (options_.mesh_riding) avatar_.neutral = ComputeTriangleFrames(data_.identity_vertices, data_.triangles);
-  HF_RETURN_IF_ERROR(InitGaussians(data_, model, options_, avatar_, &avatar_.gaussians));
+  HF_RETURN_IF_ERROR(InitGaussians(data_, options_, avatar_, &avatar_.gaussians));
   avatar_.model->to(device_);
   if (options_.mesh_riding) avatar_.neutral = avatar_.neutral.To(device_);
   GaussianParams& p = avatar_.gaussians.params;
@@ -222,7 +221,7 @@ Status Trainer::WritePreview(const fs::path& dir, int step) {
   char name[32];
   std::snprintf(name, sizeof(name), "step_%06d.png", step);
   HF_RETURN_IF_ERROR(EnsureDirectory(dir));
-  return WriteImageAtomic(dir / name, TensorToImage(torch::cat({render, target}, 2)));
+  return WriteTensorImage(dir / name, torch::cat({render, target}, 2));
 }
 
 Status Trainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
@@ -354,16 +353,19 @@ std::vector<ViewScores> EvaluateAvatar(GaussianStyleAvatar& avatar, const Avatar
     const AvatarView& view = views[i];
     // Inference takes frame 0's latent: a held-out frame has none of its own.
     // Training views are scored as trained, with their own.
+    const auto start = std::chrono::steady_clock::now();
     const PosedGaussians posed = avatar.Pose(data, view.condition, training_views ? view.frame : 0, avatar.deform);
     const torch::Tensor render = avatar.Draw(posed, view.view, background).clamp(0, 1).cpu();
+    const double ms = 1000 * SecondsSince(start);
     ViewScores s = ScoreRender(render, view.image, view.mask, background.cpu());
+    s.render_ms = ms;
     s.frame = view.frame;
     s.camera = view.camera;
     scores.push_back(s);
     if (write_dir.empty()) continue;
     char name[64];
     std::snprintf(name, sizeof(name), "%s_%06d.png", view.camera.c_str(), view.frame);
-    WriteImageAtomic(write_dir / name, TensorToImage(ComparisonStrip(render, view.image, view.mask, kEvalBackground)))
+    WriteTensorImage(write_dir / name, ComparisonStrip(render, view.image, view.mask, kEvalBackground))
         .ok();
   }
   return scores;
@@ -374,6 +376,9 @@ Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, co
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "held_out"));
   const std::vector<ViewScores> scores = EvaluateAvatar(avatar, data, 1, out_dir / "held_out");
   const ViewScores mean = MeanScores(scores);
+  // Render time per frame, the first (warming up) left out.
+  double render_ms = 0;
+  for (size_t i = 1; i < scores.size(); ++i) render_ms += scores[i].render_ms / double(scores.size() - 1);
   // How well the training views themselves are fitted (every 10th): set
   // against the held-out figures, it tells underfitting from what the
   // held-out frames bring that training never saw.
@@ -394,6 +399,10 @@ Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, co
                 {"ssim", mean.ssim_full}, {"l1_masked", mean.l1_masked}, {"sharpness", mean.sharpness},
                 {"sharpness_truth", mean.sharpness_truth}, {"sd", mean.sd}}},
       {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
+      // Posing and drawing one held-out view, its image back on the CPU,
+      // on the training device (the first view, warming up, left out).
+      {"render_ms", render_ms},
+      {"device", options.device},
       {"views", views}};
   eval.update(extra);
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "eval.json", eval, 1));
@@ -403,8 +412,8 @@ Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, co
   return Status::Ok();
 }
 
-Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
-                          const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary) {
+Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data, const fs::path& out_dir,
+                          StatsLog* stats, Progress* progress, TrainSummary* summary) {
   torch::Device device = torch::kCPU;
   HF_RETURN_IF_ERROR(ParseDevice("train", options.device, &device));
   const fs::path checkpoint = out_dir / "checkpoint.pt", decoder_checkpoint = out_dir / "decoder_checkpoint.pt";
@@ -422,7 +431,7 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data
     summary->resumed_from = summary->steps;
   } else {
     Trainer trainer(options, data, device);
-    HF_RETURN_IF_ERROR(trainer.Start(model, checkpoint, stats));
+    HF_RETURN_IF_ERROR(trainer.Start(checkpoint, stats));
     const int resumed_from = trainer.step();
     HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
     HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
@@ -441,13 +450,26 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data
     avatar = trainer.avatar();
   }
   double seconds = 0;
-  HF_RETURN_IF_ERROR(TrainStyleDecoder(options, data, model, &avatar, out_dir, checkpoint, stats, progress, &seconds));
+  HF_RETURN_IF_ERROR(TrainStyleDecoder(options, data, &avatar, out_dir, checkpoint, stats, progress, &seconds));
   nlohmann::json stage2;
   HF_RETURN_IF_ERROR(ReadJson(out_dir / "eval_stage2.json", &stage2));
   const nlohmann::json extra = {{"stage2", stage2.at("mean")}, {"stage3_seconds", seconds}};
   HF_RETURN_IF_ERROR(FinishAvatar(avatar, options, data, out_dir, extra, summary));
   summary->seconds += seconds;
   fs::remove(decoder_checkpoint, ec);
+  return Status::Ok();
+}
+
+Status TrainGaussianStyleRun(const TrainOptions& options, const AvatarDataset& data, const fs::path& out_dir,
+                             Progress* progress, TrainSummary* summary) {
+  StatsLog stats;
+  HF_RETURN_IF_ERROR(OpenTrainStats(out_dir, &stats));
+  *summary = TrainSummary();
+  HF_RETURN_IF_ERROR(TrainGaussianStyle(options, data, out_dir, &stats, progress, summary));
+  summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json"};
+  std::error_code ec;
+  for (const char* extra : {"held_out", "previews", "eval_stage2.json"})
+    if (fs::exists(out_dir / extra, ec)) summary->outputs.push_back(extra);
   return Status::Ok();
 }
 

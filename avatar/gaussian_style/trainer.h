@@ -46,7 +46,7 @@ torch::Tensor DecodeRender(StyleDecoderImpl& decoder, const PosedGaussians& pose
 // Gaussians sampled by area on the tracked identity's face, scalp, neck,
 // ears, eyes, teeth and mouth (not the eyelashes or the eyes' shells), grey
 // or the colour the first training views see there.
-Status InitGaussians(const AvatarDataset& data, const FaceModel& model, const TrainOptions& options,
+Status InitGaussians(const AvatarDataset& data, const TrainOptions& options,
                      const GaussianStyleAvatar& avatar, AvatarGaussians* gaussians);
 
 // The RGB render [3, H, W] of `view`'s camera over `background` [3].
@@ -60,6 +60,8 @@ struct ViewScores {
   // the render and of the frame; SD = render's - frame's (negative: blurrier).
   double sharpness = 0, sharpness_truth = 0, sd = 0;
   bool has_head = true;  // false: the mask is empty and the masked figures mean nothing
+  // Posing and drawing the view, its image back on the CPU (EvaluateAvatar).
+  double render_ms = 0;
 };
 // `render` [3, H, W] against `image` [3, H, W] on `mask` [1, H, W], the
 // image's background set to `background` [3] (the render's own).
@@ -105,14 +107,18 @@ Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, co
 // Stage 3 (decoder.h) on `avatar` (stages 1-2 done) into `out_dir`:
 // decoder_checkpoint.pt between attempts (once it is written,
 // `stage2_checkpoint` is removed), `seconds` its training time.
-Status TrainStyleDecoder(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
-                         GaussianStyleAvatar* avatar, const fs::path& out_dir, const fs::path& stage2_checkpoint,
-                         StatsLog* stats, Progress* progress, double* seconds);
+Status TrainStyleDecoder(const TrainOptions& options, const AvatarDataset& data, GaussianStyleAvatar* avatar,
+                         const fs::path& out_dir, const fs::path& stage2_checkpoint, StatsLog* stats,
+                         Progress* progress, double* seconds);
 
 // Stages 1 and 2, then stage 3 when --decoder-steps asks, into `out_dir`
 // (checkpoint.pt and decoder_checkpoint.pt between attempts; a run that finds
 // one continues from it).
-Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model,
-                          const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary);
+Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data, const fs::path& out_dir,
+                          StatsLog* stats, Progress* progress, TrainSummary* summary);
+// The same with out_dir's stats.jsonl opened (OpenTrainStats) and the
+// summary's outputs listed: the train stage's run, and a run from a pack.
+Status TrainGaussianStyleRun(const TrainOptions& options, const AvatarDataset& data, const fs::path& out_dir,
+                             Progress* progress, TrainSummary* summary);
 
 }  // namespace headforge

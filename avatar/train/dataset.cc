@@ -13,6 +13,7 @@
 #include "avatar/train/tensor_image.h"
 #include "capture/capture_io.h"
 #include "core/camera_set.h"
+#include "core/mesh_renderer.h"
 #include "reconstruction/tracking_io.h"
 
 namespace headforge {
@@ -45,33 +46,55 @@ void RegionBoxes(const Landmarks68& points, const CameraIntrinsics& lens, double
   view->has_landmarks = true;
 }
 
+// The tracked mesh of `vertices` [V, 3] drawn through `camera` on its square
+// canvas of `side` px: u, v (the model's UV range scaled to 0..255) and
+// covered (255) per pixel, uint8 [3, side, side]. A model without UVs gets the
+// neutral shape's x and y in their place.
+torch::Tensor RenderUvMap(const FaceModel& model, const torch::Tensor& vertices, const torch::Tensor& identity,
+                          const SplatCamera& camera, int side) {
+  const SquareCanvas canvas = MakeSquareCanvas(camera, side);
+  const torch::Tensor v = vertices.to(torch::kFloat32).contiguous();
+  Mesh mesh;
+  mesh.vertices = Eigen::Map<const Eigen::Matrix3Xf>(v.data_ptr<float>(), 3, v.size(0));
+  mesh.triangles = model.triangles();
+  const auto unit = [](const Eigen::Matrix2Xf& uv) -> Eigen::Matrix2Xf {
+    const Eigen::Vector2f lo = uv.rowwise().minCoeff(), hi = uv.rowwise().maxCoeff();
+    return ((uv.colwise() - lo).array().colwise() / (hi - lo).array().max(1e-6f)).matrix();
+  };
+  if (model.has_uv() && model.uv_triangles().cols() == mesh.triangles.cols()) {
+    mesh.uvs = unit(model.uv_coords());
+    mesh.uv_triangles = model.uv_triangles();
+  } else {
+    const torch::Tensor neutral = identity.to(torch::kFloat32).contiguous();
+    mesh.uvs = unit(Eigen::Map<const Eigen::Matrix3Xf>(neutral.data_ptr<float>(), 3, neutral.size(0)).topRows(2));
+  }
+  mesh.materials.emplace_back();
+  PinholeCamera pinhole;
+  pinhole.fx = canvas.camera.fx;
+  pinhole.fy = canvas.camera.fy;
+  pinhole.cx = canvas.camera.cx;
+  pinhole.cy = canvas.camera.cy;
+  pinhole.width = canvas.camera.width;
+  pinhole.height = canvas.camera.height;
+  pinhole.cam_from_world = CameraPose(canvas.camera);
+  RenderOptions render;
+  render.supersample = 1;
+  RenderOutput out;
+  RenderMeshes({&mesh}, pinhole, render, &out);
+  torch::Tensor map = torch::zeros({3, side, side}, torch::kUInt8);
+  auto a = map.accessor<uint8_t, 3>();
+  for (int y = 0; y < side; ++y)
+    for (int x = 0; x < side; ++x) {
+      if (out.triangle.at<int32_t>(y, x) < 0) continue;
+      const cv::Vec2f uv = out.uv.at<cv::Vec2f>(y, x);
+      a[0][y][x] = uint8_t(std::lround(std::clamp(uv[0], 0.f, 1.f) * 255));
+      a[1][y][x] = uint8_t(std::lround(std::clamp(uv[1], 0.f, 1.f) * 255));
+      a[2][y][x] = 255;
+    }
+  return map;
+}
+
 }  // namespace
-
-torch::Tensor AvatarDataset::Vertices(const torch::Tensor& expression) const {
-  return identity_vertices + torch::matmul(expression_basis, expression.to(expression_basis.dtype())).view({-1, 3});
-}
-
-torch::Tensor PoseCondition(const double rotation[9], const double translation[3]) {
-  // Row-major rotation: its first two columns, then the translation.
-  return torch::tensor({rotation[0], rotation[3], rotation[6], rotation[1], rotation[4], rotation[7], translation[0],
-                        translation[1], translation[2]},
-                       torch::kFloat32);
-}
-
-SplatCamera OrbitCamera(const SplatCamera& camera, double yaw_deg, double pitch_deg) {
-  const double yaw = yaw_deg * M_PI / 180, pitch = pitch_deg * M_PI / 180;
-  // world_from_cam' = O world_from_cam, so cam_from_world' = cam_from_world O^T,
-  // with O turning +z toward +x (yaw) and toward +y (pitch).
-  const Eigen::Matrix3d o = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()) *
-                             Eigen::AngleAxisd(-pitch, Eigen::Vector3d::UnitX()))
-                                .toRotationMatrix();
-  // Turning the camera about the origin keeps its translation.
-  Eigen::Isometry3d turned = CameraPose(camera);
-  turned.linear() = turned.linear() * o.transpose();
-  SplatCamera out = camera;
-  SetCameraPose(turned, &out);
-  return out;
-}
 
 Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, const DatasetOptions& options,
                          AvatarDataset* dataset) {
@@ -98,6 +121,8 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   out.expression_basis = torch::from_blob(const_cast<float*>(basis_t.data()), {basis.rows(), basis.cols()}).clone();
   const Eigen::Matrix3Xi& tris = model.triangles();
   out.triangles = torch::from_blob(const_cast<int*>(tris.data()), {tris.cols(), 3}, torch::kInt32).to(torch::kInt64);
+  for (const auto& [name, region] : model.regions())
+    out.mesh_parts[name] = {region.first_triangle, region.last_triangle};
 
   for (const std::string& name : options.holdout_cameras) {
     bool known = false;
@@ -144,7 +169,13 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       view.condition = torch::cat({torch::from_blob(const_cast<float*>(expression.data()), {expression.size()}).clone(),
                                    PoseCondition(rotation, translation)});
       if (f.landmarks) RegionBoxes(*f.landmarks, *lens, scale, &view);
-      (f.index < out.first_test_frame && !held_camera ? out.train : out.test).push_back(std::move(view));
+      const bool training = f.index < out.first_test_frame && !held_camera;
+      if (training && options.uv_map_side > 0) {
+        const int64_t e = int64_t(out.expression_names.size());
+        view.uv_map = RenderUvMap(model, out.Vertices(view.condition.slice(0, 0, e)), out.identity_vertices,
+                                  view.view, options.uv_map_side);
+      }
+      (training ? out.train : out.test).push_back(std::move(view));
       out.width = size.width;
       out.height = size.height;
     }

@@ -10,7 +10,9 @@
 #include <torch/types.h>
 
 #include <array>
+#include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "avatar/splat/splat_camera.h"
@@ -32,6 +34,11 @@ struct AvatarView {
   std::array<std::array<float, 4>, 3> regions{};
   bool has_landmarks = false;
   bool unreliable = false;  // tracking interpolated it or flagged it low-confidence
+  // The tracked mesh's texture coordinates where it covers the view drawn on
+  // a square canvas (MakeSquareCanvas, DatasetOptions::uv_map_side): [3, S,
+  // S] uint8, u and v (0..255 over the model's UV range) and covered (255);
+  // undefined unless asked for.
+  torch::Tensor uv_map;
 };
 
 struct DatasetOptions {
@@ -42,6 +49,7 @@ struct DatasetOptions {
   std::vector<std::string> holdout_cameras;
   int min_train_frames = 8;   // fewer is refused
   bool images = true;         // false: cameras and conditions only (rendering)
+  int uv_map_side = 0;        // > 0: the training views' UV maps on a canvas this side (stage 3)
 };
 
 struct AvatarDataset {
@@ -53,10 +61,17 @@ struct AvatarDataset {
   // The subject's mesh: identity shape [V, 3] (head frame, metres), the
   // expression basis [V * 3, E] and triangles [T, 3] (int64).
   torch::Tensor identity_vertices, expression_basis, triangles;
+  // The model's named parts as inclusive triangle ranges (ICT's regions:
+  // "face", "head_and_neck", ...; empty for a model without them).
+  std::map<std::string, std::pair<int, int>> mesh_parts;
 
   // The tracked mesh for `expression` [E]: [V, 3].
   torch::Tensor Vertices(const torch::Tensor& expression) const;
 };
+
+// 8-bit channels [C, H, W] (uint8) -> floats in [0, 1]: every image the
+// dataset holds, from a workspace's frames or from a pack, goes through it.
+torch::Tensor ImageFromBytes(const torch::Tensor& bytes);
 
 // The pose part of a condition: the head's rotation (its first two columns)
 // and translation (metres) relative to what lights it: the camera for

@@ -14,4 +14,12 @@ Status CheckpointOrStop(const std::string& what, int step, int steps, bool last,
                              "; the checkpoint is saved: run the same command again to resume");
 }
 
+Status OpenTrainStats(const fs::path& out_dir, StatsLog* stats) {
+  HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
+  std::error_code ec;
+  if (!fs::exists(out_dir / "checkpoint.pt", ec) && !fs::exists(out_dir / "decoder_checkpoint.pt", ec))
+    HF_RETURN_IF_ERROR(RemoveAll(out_dir / "stats.jsonl"));
+  return StatsLog::Open(out_dir / "stats.jsonl", stats);
+}
+
 }  // namespace headforge

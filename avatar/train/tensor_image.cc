@@ -4,13 +4,16 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "avatar/train/dataset.h"
+#include "avatar/train/image_file.h"
+#include "core/image_io.h"
+
 namespace headforge {
 
 torch::Tensor ImageToTensor(const cv::Mat& bgr) {
   cv::Mat rgb;
   cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  rgb.convertTo(rgb, CV_32FC3, 1.0 / 255.0);
-  return torch::from_blob(rgb.data, {rgb.rows, rgb.cols, 3}, torch::kFloat32).permute({2, 0, 1}).clone();
+  return ImageFromBytes(torch::from_blob(rgb.data, {rgb.rows, rgb.cols, 3}, torch::kUInt8).permute({2, 0, 1}));
 }
 
 torch::Tensor MaskToTensor(const cv::Mat& mask) {
@@ -28,6 +31,12 @@ cv::Mat TensorToImage(const torch::Tensor& rgb) {
   return bgr;
 }
 
+Status WriteTensorImage(const fs::path& path, const torch::Tensor& rgb) {
+  return WriteImageAtomic(path, TensorToImage(rgb));
+}
+
+bool ImageFilesWritten() { return true; }
+
 SplatCamera ToSplatCamera(const PinholeCamera& camera) {
   SplatCamera out;
   SetCameraPose(camera.cam_from_world, &out);
@@ -38,18 +47,6 @@ SplatCamera ToSplatCamera(const PinholeCamera& camera) {
   out.width = camera.width;
   out.height = camera.height;
   return out;
-}
-
-Eigen::Isometry3d CameraPose(const SplatCamera& camera) {
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 4; ++j) pose.matrix()(i, j) = camera.cam_from_world[size_t(4 * i + j)];
-  return pose;
-}
-
-void SetCameraPose(const Eigen::Isometry3d& cam_from_world, SplatCamera* camera) {
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 4; ++j) camera->cam_from_world[size_t(4 * i + j)] = cam_from_world.matrix()(i, j);
 }
 
 }  // namespace headforge

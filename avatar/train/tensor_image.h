@@ -1,14 +1,13 @@
 // Between OpenCV's 8-bit BGR images and [3, H, W] float RGB tensors in [0, 1],
-// the project's pinhole camera to the rasterizer's, and the rasterizer
-// camera's pose as an isometry.
+// and the project's pinhole camera to the rasterizer's (whose pose as an
+// isometry is in view_camera.h).
 #pragma once
 
 #include <opencv2/core.hpp>
 #include <torch/types.h>
 
-#include <Eigen/Geometry>
-
 #include "avatar/splat/splat_camera.h"
+#include "avatar/train/view_camera.h"
 #include "core/mesh_renderer.h"
 
 namespace headforge {
@@ -17,7 +16,5 @@ torch::Tensor ImageToTensor(const cv::Mat& bgr);       // CV_8UC3 -> [3, H, W]
 torch::Tensor MaskToTensor(const cv::Mat& mask);       // CV_8U (0 / 255) -> [1, H, W] in {0, 1}
 cv::Mat TensorToImage(const torch::Tensor& rgb);       // [3, H, W] (clamped to [0, 1]) -> CV_8UC3
 SplatCamera ToSplatCamera(const PinholeCamera& camera);
-Eigen::Isometry3d CameraPose(const SplatCamera& camera);                 // its cam_from_world
-void SetCameraPose(const Eigen::Isometry3d& cam_from_world, SplatCamera* camera);
 
 }  // namespace headforge

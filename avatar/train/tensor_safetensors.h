@@ -1,5 +1,6 @@
-// Between LibTorch tensors and core/safetensors.h's entries (F32, F64 and
-// I64), for the weight files the avatars write and read.
+// Between LibTorch tensors and core/safetensors.h's entries (F32, F64, I64,
+// I32 and U8), for the weight files the avatars write and read and the
+// training packs.
 #pragma once
 
 #include <torch/types.h>

@@ -1,0 +1,23 @@
+// LoadTrained (trainer.h): a trained avatar with its workspace's views, for
+// render, export and the benches (the full build's; it reads the workspace).
+#include <torch/torch.h>
+
+#include "avatar/gaussian_style/trainer.h"
+
+namespace headforge {
+
+Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                   torch::Device device, int resolution, DatasetOptions* loading, GaussianStyleAvatar* avatar,
+                   TrainOptions* trained, FaceModel* model, AvatarDataset* data) {
+  HF_RETURN_IF_ERROR(LoadAvatar(model_dir, device, avatar, trained));
+  HF_RETURN_IF_ERROR(FaceModel::Load(face_model, model));
+  loading->resolution = resolution > 0 ? resolution : trained->resolution;
+  loading->min_train_frames = 1;
+  loading->holdout = trained->holdout;
+  HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, *model, *loading, data).WithContext("render"));
+  if (trained->mesh_riding)
+    avatar->neutral = ComputeTriangleFrames(data->identity_vertices, data->triangles).To(device);
+  return Status::Ok();
+}
+
+}  // namespace headforge

@@ -1,0 +1,42 @@
+// The parts of the avatar dataset that need LibTorch and Eigen alone (a
+// LibTorch-only build trains from a pack with them; dataset_pack.h).
+#include <torch/torch.h>
+
+#include <cmath>
+
+#include <Eigen/Geometry>
+
+#include "avatar/train/dataset.h"
+#include "avatar/train/view_camera.h"
+
+namespace headforge {
+
+torch::Tensor AvatarDataset::Vertices(const torch::Tensor& expression) const {
+  return identity_vertices + torch::matmul(expression_basis, expression.to(expression_basis.dtype())).view({-1, 3});
+}
+
+torch::Tensor ImageFromBytes(const torch::Tensor& bytes) { return bytes.to(torch::kFloat32).div(255.0).contiguous(); }
+
+torch::Tensor PoseCondition(const double rotation[9], const double translation[3]) {
+  // Row-major rotation: its first two columns, then the translation.
+  return torch::tensor({rotation[0], rotation[3], rotation[6], rotation[1], rotation[4], rotation[7], translation[0],
+                        translation[1], translation[2]},
+                       torch::kFloat32);
+}
+
+SplatCamera OrbitCamera(const SplatCamera& camera, double yaw_deg, double pitch_deg) {
+  const double yaw = yaw_deg * M_PI / 180, pitch = pitch_deg * M_PI / 180;
+  // world_from_cam' = O world_from_cam, so cam_from_world' = cam_from_world O^T,
+  // with O turning +z toward +x (yaw) and toward +y (pitch).
+  const Eigen::Matrix3d o = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()) *
+                             Eigen::AngleAxisd(-pitch, Eigen::Vector3d::UnitX()))
+                                .toRotationMatrix();
+  // Turning the camera about the origin keeps its translation.
+  Eigen::Isometry3d turned = CameraPose(camera);
+  turned.linear() = turned.linear() * o.transpose();
+  SplatCamera out = camera;
+  SetCameraPose(turned, &out);
+  return out;
+}
+
+}  // namespace headforge

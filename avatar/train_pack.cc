@@ -1,0 +1,80 @@
+// Training from a pack (avatar_train.h's TrainFromPack): needs LibTorch alone.
+#include <torch/torch.h>
+
+#include <nlohmann/json.hpp>
+
+#include "avatar/avatar_train.h"
+#include "avatar/gaussian_style/trainer.h"
+#include "avatar/torch_runtime.h"
+#include "avatar/train/dataset_pack.h"
+#include "avatar/train/image_file.h"
+#include "core/log.h"
+
+namespace headforge {
+
+namespace {
+
+// `settings` ("field=value") over `options`' JSON form; a value that does not
+// parse as JSON is a string.
+Status ApplySettings(const std::vector<std::string>& settings, nlohmann::json* options) {
+  for (const std::string& setting : settings) {
+    const size_t eq = setting.find('=');
+    const std::string key = setting.substr(0, eq);
+    if (eq == std::string::npos || !options->contains(key))
+      return Status::InvalidArgument("--set " + setting + ": no option '" + key +
+                                     "' (the names are headforge train's options with _ for -: max_minutes, "
+                                     "decoder_steps, ...)");
+    nlohmann::json value = nlohmann::json::parse(setting.substr(eq + 1), nullptr, /*allow_exceptions=*/false);
+    if (value.is_discarded()) value = setting.substr(eq + 1);
+    const nlohmann::json& old = (*options)[key];
+    const bool fits = (old.is_number() && value.is_number()) || old.type() == value.type();
+    if (!fits)
+      return Status::InvalidArgument("--set " + setting + ": " + key + " takes a " + std::string(old.type_name()) +
+                                     " such as " + old.dump());
+    (*options)[key] = value;
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& settings, const fs::path& out_dir,
+                     Progress* progress, TrainSummary* summary) {
+  UseTensorThreads();
+  AvatarDataset data;
+  nlohmann::json recorded;
+  HF_RETURN_IF_ERROR(ReadDatasetPack(pack, &data, &recorded));
+  TrainOptions options;
+  try {
+    nlohmann::json resolved = ToJson(TrainOptionsFromJson(recorded));
+    HF_RETURN_IF_ERROR(ApplySettings(settings, &resolved));
+    options = TrainOptionsFromJson(resolved);
+  } catch (const nlohmann::json::exception& e) {
+    return Status::DataError(pack.string() + ": its training options do not read (" + e.what() +
+                             "); write the pack again with this version's headforge pack");
+  }
+  // A generator file named in the pack must be on this machine too.
+  if (!options.decoder_init.empty()) {
+    std::error_code ec;
+    if (!fs::is_regular_file(options.decoder_init, ec))
+      return Status::InvalidArgument("pack: its --decoder-init " + options.decoder_init +
+                                     " is not on this machine; put it at the same path");
+  }
+  HF_RETURN_IF_ERROR(options.Check().WithContext(pack.string()));
+  if (options.model != "gaussian-style")
+    return Status::InvalidArgument(pack.string() + " is for the " + options.model +
+                                   " model; only gaussian-style trains from a pack");
+  if (options.decoder_steps > 0 && options.adversarial_weight > 0 && !data.train.empty() &&
+      !data.train.front().uv_map.defined())
+    return Status::InvalidArgument(pack.string() + " has no UV maps for stage 3's discriminator: write it with "
+                                   "--decoder-steps (and an --adversarial-weight above 0), or set "
+                                   "adversarial_weight=0");
+  HF_LOG(Info) << "train: " << data.train.size() << " training and " << data.test.size() << " held-out views at "
+               << data.width << "x" << data.height << " from " << pack.string() << " on " << options.device;
+  if (!ImageFilesWritten())
+    HF_LOG(Info) << "train: this build writes no images (previews, held_out/): headforge render --held-out "
+                    "--side-by-side draws them once the model is in its workspace";
+  return TrainGaussianStyleRun(options, data, out_dir, progress, summary);
+}
+
+}  // namespace headforge

@@ -1,8 +1,5 @@
 #include "calibration/colmap_runner.h"
 
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
@@ -17,6 +14,7 @@
 #include "core/image_io.h"
 #include "core/log.h"
 #include "core/parallel.h"
+#include "core/process.h"
 
 namespace headforge {
 
@@ -48,28 +46,14 @@ namespace {
 // Runs `args` with stdout and stderr appended to `log`; the environment gets
 // QT_QPA_PLATFORM=offscreen so no display is needed.
 Status RunTool(const std::vector<std::string>& args, const fs::path& log) {
-  const pid_t pid = fork();
-  if (pid < 0) return Status::Internal("fork failed");
-  if (pid == 0) {
-    FILE* out = std::fopen(log.c_str(), "a");
-    if (out) {
-      dup2(fileno(out), 1);
-      dup2(fileno(out), 2);
-    }
-    setenv("QT_QPA_PLATFORM", "offscreen", 1);
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    execvp(argv[0], argv.data());
-    _exit(127);
-  }
-  int status = 0;
-  waitpid(pid, &status, 0);
-  if (WIFEXITED(status) && WEXITSTATUS(status) == 127)
+  int exit_code = 0;
+  const Status run = RunProgram(args, log, &exit_code, {{"QT_QPA_PLATFORM", "offscreen"}});
+  if (run.code() == Status::Code::kNotFound)
     return Status::NotFound("cannot run " + args[0] + " (install Debian's colmap package)");
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
-    return Status::DataError("colmap " + args[1] + " failed (exit " +
-                             std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "); see " + log.string());
+  HF_RETURN_IF_ERROR(run);
+  if (exit_code != 0)
+    return Status::DataError("colmap " + args[1] + " failed (exit " + std::to_string(exit_code) + "); see " +
+                             log.string());
   return Status::Ok();
 }
 

@@ -44,6 +44,10 @@ nlohmann::json CameraJson(const IngestedCapture& capture, const IngestedCamera& 
                          {"median_sharpness", cam.median_sharpness},
                          {"masks", cam.masks},
                          {"frames", frames}};
+  if (cam.decoder_errors > 0) {
+    json["decoder_errors"] = cam.decoder_errors;
+    json["decoder_error"] = cam.decoder_error;
+  }
   if (cam.fixed_crop) {
     CropWindow crop;
     crop.x0 = cam.crop_x0;
@@ -159,6 +163,8 @@ Status ReadIngestedCapture(const fs::path& workspace, IngestedCapture* capture) 
       cam.source_fps = c.at("source_fps").get<double>();
       cam.offset = c.at("offset").get<int>();
       cam.median_sharpness = c.at("median_sharpness").get<double>();
+      cam.decoder_errors = c.value("decoder_errors", 0);
+      cam.decoder_error = c.value("decoder_error", std::string());
       cam.masks = c.at("masks").get<std::string>();
       cam.source_width = c.at("source_size")[0].get<int>();
       cam.source_height = c.at("source_size")[1].get<int>();

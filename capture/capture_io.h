@@ -34,6 +34,10 @@ struct IngestedCamera {
   double source_fps = 0.0;
   int offset = 0;                           // source frames, for synchronisation
   double median_sharpness = 0.0;
+  // ffmpeg's decoder errors in the source video (CheckVideoStream): damaged
+  // or truncated data, where frames may be missing or garbled.
+  int decoder_errors = 0;
+  std::string decoder_error;                // the first
   std::string masks = "grabcut";            // grabcut or user
   int width = 0, height = 0;                // frame size
   int source_width = 0, source_height = 0;  // source image size

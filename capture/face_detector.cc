@@ -193,7 +193,12 @@ Status FaceDetector::Create(const FaceDetectorOptions& options,
     return Status::Ok();
   }
   const std::string path = options.UltraFaceModelPath();
-  HF_RETURN_IF_ERROR(CheckReadableFile(path, "UltraFace model"));
+  if (Status readable = CheckReadableFile(path, "UltraFace model"); !readable.ok()) {
+    if (readable.code() != Status::Code::kNotFound) return readable;
+    return Status::NotFound(readable.message() +
+                            " (it is in the shared data folder: give --data DIR, or --detector dlib-hog to detect "
+                            "faces without it)");
+  }
   cv::dnn::Net net;
   try {
     net = cv::dnn::readNetFromONNX(path);

@@ -1,12 +1,16 @@
 #include "capture/frame_source.h"
 
+#include <unistd.h>
+
 #include <algorithm>
-#include <opencv2/imgcodecs.hpp>
+#include <atomic>
+#include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
 #include "core/image_io.h"
+#include "core/process.h"
 
 namespace headforge {
 
@@ -26,20 +30,54 @@ cv::Mat ToBgr8(const cv::Mat& image) {
   return out;
 }
 
+// The kinds of the streams ffprobe finds in `path` ("video", "audio", ...);
+// none when it finds none or cannot be run.
+std::vector<std::string> StreamKinds(const fs::path& path) {
+  static std::atomic<int> counter{0};
+  const fs::path log = fs::temp_directory_path() / ("hf_streams_" + std::to_string(::getpid()) + "_" +
+                                                    std::to_string(counter++) + ".txt");
+  std::error_code ec;
+  fs::remove(log, ec);
+  int exit_code = 0;
+  std::vector<std::string> kinds;
+  if (RunProgram({"ffprobe", "-v", "quiet", "-show_entries", "stream=codec_type", "-of", "csv=p=0", path.string()},
+                 log, &exit_code)
+          .ok() &&
+      exit_code == 0) {
+    std::ifstream in(log);
+    for (std::string line; std::getline(in, line);)
+      if (!line.empty()) kinds.push_back(line);
+  }
+  fs::remove(log, ec);
+  return kinds;
+}
+
+// Why `path` gives no frame: no video stream at all, or a stream ffmpeg cannot decode.
+Status NoFrames(const std::string& path, const std::string& otherwise) {
+  const std::vector<std::string> kinds = StreamKinds(path);
+  if (!kinds.empty() && std::find(kinds.begin(), kinds.end(), "video") == kinds.end()) {
+    std::string list;
+    for (const std::string& k : kinds) list += (list.empty() ? "" : ", ") + k;
+    return Status::DataError(path + " holds no video stream (only " + list + "); give a video file or a folder of "
+                             "images");
+  }
+  return Status::DataError(otherwise);
+}
+
 class VideoFrameSource : public FrameSource {
  public:
   Status OpenVideo(const fs::path& path) {
     path_ = path.string();
     if (!capture_.open(path_, cv::CAP_FFMPEG))
-      return Status::DataError("cannot decode " + path_ +
-                               ": ffmpeg does not recognise it as a video (corrupt, truncated or an "
-                               "unsupported format? try re-encoding it with ffmpeg)");
+      return NoFrames(path_, "cannot decode " + path_ +
+                                 ": ffmpeg does not recognise it as a video (corrupt, truncated or an "
+                                 "unsupported format? try re-encoding it with ffmpeg)");
     fps_ = capture_.get(cv::CAP_PROP_FPS);
     if (!(fps_ > 0.0 && fps_ < 1000.0)) fps_ = 25.0;
     frame_count_hint_ = std::max<int64_t>(0, static_cast<int64_t>(capture_.get(cv::CAP_PROP_FRAME_COUNT)));
     // Decode the first frame now so a file without decodable frames fails early.
     if (!capture_.read(first_) || first_.empty())
-      return Status::DataError(path_ + " holds no decodable video frame (corrupt or empty file?)");
+      return NoFrames(path_, path_ + " holds no decodable video frame (corrupt, truncated or empty file?)");
     first_ = ToBgr8(first_);
     size_ = first_.size();
     return Status::Ok();
@@ -136,6 +174,37 @@ Status FrameSource::Open(const fs::path& path, double folder_fps,
   auto video = std::make_unique<VideoFrameSource>();
   HF_RETURN_IF_ERROR(video->OpenVideo(path));
   *source = std::move(video);
+  return Status::Ok();
+}
+
+Status CheckVideoStream(const fs::path& video, StreamCheck* check) {
+  *check = StreamCheck();
+  static std::atomic<int> counter{0};
+  const fs::path log = fs::temp_directory_path() / ("hf_stream_check_" + std::to_string(::getpid()) + "_" +
+                                                    std::to_string(counter++) + ".log");
+  std::error_code ec;
+  fs::remove(log, ec);
+  int exit_code = 0;
+  const Status run = RunProgram({"ffmpeg", "-nostdin", "-hide_banner", "-v", "error", "-i", video.string(), "-map",
+                                 "0:v:0", "-f", "null", "-"},
+                                log, &exit_code);
+  if (run.code() == Status::Code::kNotFound) return Status::Ok();  // no ffmpeg: unchecked
+  HF_RETURN_IF_ERROR(run);
+  check->checked = true;
+  std::ifstream in(log);
+  for (std::string line; std::getline(in, line);) {
+    if (line.empty()) continue;
+    if (check->errors++ == 0) {
+      // "[mpeg1video @ 0x55d0c0a5c400] ac-tex damaged at 6 15" -> "ac-tex damaged at 6 15"
+      const size_t close = line.find("] ");
+      check->first_error = line[0] == '[' && close != std::string::npos ? line.substr(close + 2) : line;
+    }
+  }
+  fs::remove(log, ec);
+  if (exit_code != 0 && check->errors == 0) {
+    check->errors = 1;
+    check->first_error = "ffmpeg stopped with exit code " + std::to_string(exit_code);
+  }
   return Status::Ok();
 }
 

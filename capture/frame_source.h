@@ -47,6 +47,16 @@ class FrameSource {
   int64_t frame_count_hint_ = 0;
 };
 
+// What ffmpeg's decoder says of a video file's first video stream, decoded
+// whole: its errors (damaged or truncated data) and the first of them.
+// OpenCV's decoding, which ingest uses, drops damaged frames without a word.
+struct StreamCheck {
+  bool checked = false;     // false: the ffmpeg program could not be run
+  int errors = 0;           // error lines ffmpeg printed (or 1 when it failed without one)
+  std::string first_error;  // without ffmpeg's "[decoder @ address]" prefix
+};
+Status CheckVideoStream(const fs::path& video, StreamCheck* check);
+
 // Image extensions an image folder may hold.
 const std::vector<std::string>& ImageExtensions();
 

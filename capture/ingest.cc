@@ -54,6 +54,7 @@ Status IngestOptions::Check() const {
   if (mask.attempts < 1) return Status::InvalidArgument("--mask-attempts must be at least 1");
   if (min_face_fraction < 0.0 || min_face_fraction > 1.0)
     return Status::InvalidArgument("--min-face-fraction must be in [0, 1]");
+  if (!(min_face_px >= 0)) return Status::InvalidArgument("--min-face must be zero or positive (pixels)");
   return detector.Check();
 }
 
@@ -115,6 +116,10 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
   o->Add("ingest.min_face_fraction", &in->min_face_fraction,
          "Warn when the face is found in fewer than this fraction of a camera's frames.",
          "min-face-fraction");
+  o->Add("ingest.min_face_px", &in->min_face_px,
+         "Refuse a camera whose face spans fewer source pixels than this (its 68 landmarks' extent, median over "
+         "the frames): too small to track or build an avatar from (0: no limit).",
+         "min-face");
   o->Add("ingest.seed", &in->seed, "Seed of the automatic mask's random initialisation.", "seed");
 }
 
@@ -149,7 +154,9 @@ std::string IngestSummary::OneLine() const {
                 "%d of %d frames kept (%d blurred, %d missing in a camera), %d camera(s), "
                 "landmarks on %d, face lost on %d, crop %s",
                 kept, sampled, dropped_blur, dropped_missing, cameras, with_landmarks, face_lost, crop.c_str());
-  return text;
+  std::string line = text;
+  for (const std::string& d : damaged) line += "; DAMAGED INPUT: " + d;
+  return line;
 }
 
 namespace {
@@ -170,6 +177,7 @@ struct FrameAnalysis {
 struct Camera {
   std::string name;
   std::unique_ptr<FrameSource> source;
+  StreamCheck stream;  // ffmpeg's verdict on a video source
   int offset = 0;
   std::map<int, FrameAnalysis> analysis;  // sample index k -> analysis
   double median_sharpness = 0.0;
@@ -338,14 +346,27 @@ struct CameraPlan {
   std::vector<fs::path> user_masks;
 };
 
-// Opens every input first, so that a bad one fails before any work.
-Status OpenCameras(const IngestOptions& options, std::vector<Camera>* cameras) {
+// Opens every input first, so that a bad one fails before any work, and has
+// ffmpeg decode each video whole: damage OpenCV would pass over silently is
+// said in the log and the summary.
+Status OpenCameras(const IngestOptions& options, std::vector<Camera>* cameras, IngestSummary* summary) {
   cameras->resize(options.inputs.size());
   for (size_t c = 0; c < options.inputs.size(); ++c) {
     Camera& cam = (*cameras)[c];
     cam.name = CameraName(static_cast<int>(c));
     cam.offset = options.offsets.empty() ? 0 : options.offsets[c];
     HF_RETURN_IF_ERROR(FrameSource::Open(options.inputs[c], options.folder_fps, &cam.source));
+    if (!cam.source->is_folder()) {
+      HF_RETURN_IF_ERROR(CheckVideoStream(options.inputs[c], &cam.stream));
+      if (!cam.stream.checked) HF_LOG(Debug) << "ingest: no ffmpeg program to check " << cam.source->path();
+      if (cam.stream.errors > 0) {
+        const std::string what = cam.source->path() + ": ffmpeg's decoder reports " +
+                                 std::to_string(cam.stream.errors) + " error(s) (first: " + cam.stream.first_error +
+                                 "): the file is damaged or truncated, and frames may be missing or garbled";
+        HF_LOG(Warning) << "ingest: " << what << "; re-export or re-encode it if you can";
+        summary->damaged.push_back(what);
+      }
+    }
     const double first_fps = (*cameras)[0].source->fps();
     if (c > 0 && std::abs(cam.source->fps() - first_fps) > 0.01 * first_fps)
       HF_LOG(Warning) << cam.source->path() << " runs at " << cam.source->fps() << " fps, the first input at "
@@ -462,12 +483,28 @@ Status PlanFaces(const IngestOptions& options, const std::vector<Camera>& camera
     plan.faces = SelectFaces(frames);
     const int found = static_cast<int>(
         std::count_if(plan.faces.begin(), plan.faces.end(), [](auto* f) { return f != nullptr; }));
-    if (found == 0)
+    if (found == 0) {
+      if (cam.stream.errors > 0)
+        return Status::DataError("no face found in " + cam.source->path() + ", which is damaged or truncated "
+                                 "(ffmpeg: " + cam.stream.first_error + "): re-export or re-encode the video");
       return Status::DataError(
           "no face found in " + cam.source->path() + " (" + std::to_string(kept.size()) +
           " frames examined). Try: --detector dlib-hog or ultraface-640 (small faces), a lower "
           "--detector-threshold, a video where the face is frontal and well lit, or a higher "
           "resolution source");
+    }
+    if (options.min_face_px > 0) {
+      std::vector<double> sizes;
+      for (const FaceCandidate* f : plan.faces)
+        if (f) sizes.push_back(FaceFrameOf(f->landmarks).size);
+      std::nth_element(sizes.begin(), sizes.begin() + sizes.size() / 2, sizes.end());
+      const double size = sizes[sizes.size() / 2];
+      if (size < options.min_face_px)
+        return Status::DataError(cam.source->path() + ": the face spans only " + std::to_string(int(size + 0.5)) +
+                                 " px of the source (its landmarks, median over the frames): too small to track "
+                                 "and to build an avatar from; use a closer or higher-resolution video, or "
+                                 "--min-face " + std::to_string(int(size)) + " to go on anyway");
+    }
     summary->face_lost += static_cast<int>(kept.size()) - found;
     summary->with_landmarks += found;
     if (found < options.min_face_fraction * kept.size())
@@ -581,6 +618,8 @@ IngestedCamera CameraRecord(const IngestOptions& options, const std::string& cro
   record.source_height = cam.source->size().height;
   record.offset = cam.offset;
   record.median_sharpness = cam.median_sharpness;
+  record.decoder_errors = cam.stream.errors;
+  record.decoder_error = cam.stream.first_error;
   record.masks = options.masks.empty() ? "grabcut" : "user";
   record.fixed_crop = crop_mode != "frame";
   const CropWindow& first = plan.crops[0];
@@ -656,7 +695,7 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
   threads = std::max(1, threads);
   *summary = IngestSummary();
   std::vector<Camera> cameras;
-  HF_RETURN_IF_ERROR(OpenCameras(options, &cameras));
+  HF_RETURN_IF_ERROR(OpenCameras(options, &cameras, summary));
   const double source_fps = cameras[0].source->fps();
   if (options.fps > source_fps * 1.001)
     HF_LOG(Warning) << "--fps " << options.fps << " exceeds the source's " << source_fps

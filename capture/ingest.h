@@ -57,6 +57,10 @@ struct IngestOptions {
   double folder_fps = 25.0;
   // Warn when the face is found in fewer than this fraction of a camera's frames.
   double min_face_fraction = 0.5;
+  // Refuse a camera whose face, where found, spans fewer source pixels than
+  // this (the 68 landmarks' extent, median over the frames): too small to
+  // track, and to build an avatar from. 0: no limit.
+  double min_face_px = 40;
   // Seed of the mask segmentation's random initialisation.
   int seed = 0;
 
@@ -81,6 +85,8 @@ struct IngestSummary {
   int with_landmarks = 0;    // kept frames (over all cameras) with landmarks
   int cameras = 0;
   std::string crop;          // the crop used ("auto" resolved)
+  // One line per input video ffmpeg's decoder found damaged or truncated.
+  std::vector<std::string> damaged;
   std::string OneLine() const;
 };
 

@@ -23,7 +23,10 @@ Status ReadArtefact(const fs::path& path, int version, const std::string& stage,
     return Status::NotFound("no " + path.filename().string() + " in " + path.parent_path().string() +
                             " (run headforge " + stage + " first)");
   }
-  HF_RETURN_IF_ERROR(ReadJson(path, json));
+  if (Status read = ReadJson(path, json); !read.ok()) {
+    if (read.code() != Status::Code::kDataError) return read;
+    return Status::DataError(read.message() + "; run headforge " + stage + " again to rewrite it");
+  }
   const auto it = json->find("version");
   if (it == json->end() || !it->is_number_integer() || it->get<int>() != version) {
     const std::string found = it == json->end() || !it->is_number_integer() ? "no version" : "version " + it->dump();

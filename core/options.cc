@@ -267,10 +267,10 @@ Status OptionSet::Parse(const std::vector<std::string>& args) {
   for (const auto& option : options_) {
     if (option->key == "config") continue;
     const po::variable_value* value = find(*option);
-    const char* origin = "command line";
+    std::string origin = "command line";
     if (!value && from_file.count(option->key)) {
       value = &from_file[option->key];
-      origin = "config file";
+      origin = "config file " + config_path_;
     }
     if (!value) continue;
     Status status = option->set(Tokens(*value));

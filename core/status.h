@@ -39,10 +39,13 @@ class Status {
     return Status(code_, std::move(message));
   }
 
-  // Prefixes the message with context ("ingest: " + message).
+  // Prefixes the message with context ("ingest: " + message), once: a
+  // message that already starts with it is left as it is.
   Status WithContext(const std::string& context) const {
     if (ok()) return *this;
-    return Status(code_, context + ": " + message_);
+    const std::string prefix = context + ": ";
+    if (message_.compare(0, prefix.size(), prefix) == 0) return *this;
+    return Status(code_, prefix + message_);
   }
 
  private:

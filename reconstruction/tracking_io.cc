@@ -72,6 +72,11 @@ Status ReadTracking(const fs::path& path, TrackingFile* tracking) {
     for (const auto& f : j.at("frames")) {
       TrackedFrame frame;
       frame.frame = f.at("frame").get<int>();
+      // A value that is not a number (a NaN written as null) names its frame.
+      for (const auto& [name, value] : f.at("expression").items())
+        if (!value.is_number())
+          return Status::DataError(path.string() + ": frame " + std::to_string(frame.frame) + " has " + name + " = " +
+                                   value.dump() + ", not a number; run headforge track again");
       frame.head_motion = PoseFromJson(f.at("head_motion"));
       const auto& weights = f.at("expression");
       frame.expression.resize(Eigen::Index(t.expression_names.size()));

@@ -4,6 +4,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "avatar/gan_avatar/avatar_io.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "core/json_io.h"
 #include "reconstruction/tracking_io.h"
@@ -76,6 +77,24 @@ Status ExportAvatarWeights(const fs::path& workspace, const fs::path& model_dir,
       {"model.*", "the networks' parameters, named by their module path"}};
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   HF_RETURN_IF_ERROR(SaveAvatarSafetensors(avatar, config, out_dir));
+  if (files) {
+    files->push_back("weights.safetensors");
+    files->push_back("config.json");
+  }
+  return Status::Ok();
+}
+
+Status ExportGanWeights(const fs::path& workspace, const fs::path& model_dir, const fs::path& out_dir,
+                        std::vector<std::string>* files) {
+  TrackingFile tracking;
+  HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", &tracking));
+  const nlohmann::json extra = {
+      {"face_model", fs::path(tracking.face_model).filename().string()},
+      {"identity", std::vector<double>(tracking.identity.data(), tracking.identity.data() + tracking.identity.size())},
+      {"condition",
+       "the expression mapping takes the expression weights in expression_mapping's order, in [0, 1]; the head "
+       "pose is the camera's, in the head frame of the face model"}};
+  HF_RETURN_IF_ERROR(ExportGanAvatarWeights(model_dir, extra, out_dir));
   if (files) {
     files->push_back("weights.safetensors");
     files->push_back("config.json");

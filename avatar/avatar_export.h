@@ -35,5 +35,10 @@ Status PoseAvatarSplats(const fs::path& workspace, const fs::path& model_dir, co
 // names). LoadAvatar and `headforge render --model` read the folder back.
 Status ExportAvatarWeights(const fs::path& workspace, const fs::path& model_dir, const fs::path& out_dir,
                            std::vector<std::string>* files);
+// The same for a gan-avatar model: the generator, the mean latent and the
+// expression mapping, with the expressions' names and the face model's
+// identity; `headforge render --model` reads the folder back.
+Status ExportGanWeights(const fs::path& workspace, const fs::path& model_dir, const fs::path& out_dir,
+                        std::vector<std::string>* files);
 
 }  // namespace headforge

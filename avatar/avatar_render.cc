@@ -71,6 +71,8 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
     loading.resolution = options.resolution > 0 ? options.resolution : std::max(gan.out_width, gan.out_height);
     loading.min_train_frames = 1;
+    loading.holdout = gan.holdout;
+    loading.holdout_cameras = gan.holdout_cameras;
     HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, &own).WithContext("render"));
     draw = [&](const torch::Tensor& condition, const SplatCamera& camera) { return gan.Draw(condition, camera); };
   } else {

@@ -28,6 +28,12 @@ bool Wants(const ExportOptions& options, const std::string& format) {
          std::find(options.formats.begin(), options.formats.end(), "all") != options.formats.end();
 }
 
+// A gan-avatar model trained in `dir` (its config.json names the model).
+bool IsTrainedGan(const fs::path& dir) {
+  nlohmann::json config;
+  return ReadJson(dir / "config.json", &config).ok() && config.value("model", "") == "gan-avatar";
+}
+
 // The splats as 3D Gaussian Splatting's PLY: log scales, logit opacity, and
 // the colour as the degree-0 coefficient.
 GaussianCloud ToCloud(const AvatarSplats& s) {
@@ -71,6 +77,8 @@ Status ExportOptions::Check() const {
   if (bake_views < 1) return Status::InvalidArgument("export: --bake-views must be at least 1");
   if (!(orbit_deg >= 0 && orbit_deg <= 180)) return Status::InvalidArgument("export: --orbit-deg must lie in [0, 180]");
   if (splat_frame < -1) return Status::InvalidArgument("export: --splat-frame is a frame number, or -1 for the neutral pose");
+  if (model != "auto" && model != "gaussian-style" && model != "gan-avatar")
+    return Status::InvalidArgument("export: --model must be auto, gaussian-style or gan-avatar, not '" + model + "'");
   return Status::Ok();
 }
 
@@ -90,6 +98,10 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "The orbit video swings the camera this many degrees each way; 180 turns it all the way round; 0 chooses: "
          "45 for a capture from one side, 180 for one whose cameras go more than half way round the head.",
          "orbit-deg");
+  o->Add("export.model", &e->model,
+         "The trained model the Gaussians, weights and videos come from: gaussian-style, gan-avatar, or auto "
+         "(gaussian-style when it is trained, else gan-avatar). The gan-avatar model has no Gaussians to write.",
+         "export-model");
   o->Add("export.drive", &e->drive,
          "A tracked workspace whose expressions drive this avatar in a cross-reenactment video.", "drive");
   o->Add("export.chart_js", &e->chart_js, "Chart.js's UMD build, inlined into report.html for its plots.",
@@ -112,24 +124,29 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
   ExportOptions options = requested;
   const auto start = std::chrono::steady_clock::now();
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
-  const fs::path model_dir = workspace / "models" / "gaussian_style";
-  const bool trained = fs::exists(model_dir / "config.json");
-  // Refused before anything is written: the formats that need a trained model.
-  bool needs_model = Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos");
-  if (needs_model && !trained && fs::exists(workspace / "models" / "gan_avatar" / "config.json")) {
-    // A gan-avatar model alone: its Gaussians, weights and videos cannot be
-    // exported yet; the mesh avatar, the viewer and the report can.
-    HF_LOG(Warning) << "export: the gan-avatar model's weights and videos cannot be exported yet; writing the mesh "
-                       "avatar, the viewer and the report without them";
+  // The model the Gaussians, weights and videos come from.
+  const fs::path gaussian_dir = workspace / "models" / "gaussian_style", gan_dir = workspace / "models" / "gan_avatar";
+  std::error_code ec;
+  const bool gaussian_trained = fs::exists(gaussian_dir / "config.json", ec), gan_trained = IsTrainedGan(gan_dir);
+  const bool gan = options.model == "gan-avatar" || (options.model == "auto" && !gaussian_trained && gan_trained);
+  const fs::path model_dir = gan ? gan_dir : gaussian_dir;
+  const bool trained = gan ? gan_trained : gaussian_trained;
+  if (gan && Wants(options, "gaussians")) {
+    if (options.formats == std::vector<std::string>{"gaussians"})
+      return Status::InvalidArgument("export: the gan-avatar model is a volume and has no Gaussians to write");
+    HF_LOG(Info) << "export: the gan-avatar model is a volume, not Gaussians: no gaussians.ply or gaussians.glb";
     std::vector<std::string> kept;
-    for (const char* f : {"mesh", "viewer", "report"})
-      if (Wants(options, f)) kept.push_back(f);
+    for (const char* f : kFormats)
+      if (std::string(f) != "gaussians" && Wants(options, f)) kept.push_back(f);
     options.formats = kept;
-    needs_model = false;
   }
+  // Refused before anything is written: the formats that need a trained model.
+  const bool needs_model = Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos");
   if (needs_model && !trained)
-    return Status::NotFound("no trained avatar in " + model_dir.string() +
-                            " (run headforge train first, or export --formats mesh report alone)");
+    return Status::NotFound("no trained avatar in " + model_dir.string() + " (run headforge train" +
+                            (gan ? " --model gan-avatar" : "") + " first, or export --formats mesh report alone)");
+  if (needs_model)
+    HF_LOG(Info) << "export: the " << (gan ? "gan-avatar" : "gaussian-style") << " model in " << model_dir.string();
   ExportSummary out;
   if (Wants(options, "mesh")) {
     FaceModel model;
@@ -152,7 +169,11 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
   }
   if (Wants(options, "weights")) {
     std::vector<std::string> files;
-    HF_RETURN_IF_ERROR(ExportAvatarWeights(workspace, model_dir, out_dir / "weights", &files));
+    if (gan) {
+      HF_RETURN_IF_ERROR(ExportGanWeights(workspace, model_dir, out_dir / "weights", &files));
+    } else {
+      HF_RETURN_IF_ERROR(ExportAvatarWeights(workspace, model_dir, out_dir / "weights", &files));
+    }
     for (const std::string& f : files) out.files.push_back("weights/" + f);
   }
   if (Wants(options, "videos")) {

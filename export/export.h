@@ -29,6 +29,10 @@ struct ExportOptions {
   // cameras go more than half way round the head.
   double orbit_deg = 0;
   std::string drive;         // a tracked workspace whose expressions drive a cross-reenactment video
+  // Which trained model the Gaussians, weights and videos come from:
+  // gaussian-style, gan-avatar, or auto (gaussian-style when it is trained,
+  // else gan-avatar).
+  std::string model = "auto";
   std::string device = "cpu";
   std::string chart_js = kDefaultChartJs;            // inlined into report.html
   std::string playcanvas_js = kDefaultPlayCanvasJs;  // inlined into viewer/index.html

@@ -139,13 +139,21 @@ Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const Rep
     data["tracking"] = {{"residual", residual}, {"curves", curves}};
   }
   // Training: the loss and the held-out PSNR against wall time.
-  const fs::path model = workspace / "models" / "gaussian_style";
+  // The gaussian-style model's when it is trained, else the gan-avatar model's.
+  fs::path model = workspace / "models" / "gaussian_style";
   nlohmann::json eval;
-  const bool trained = ReadJson(model / "eval.json", &eval).ok();
+  bool trained = ReadJson(model / "eval.json", &eval).ok();
+  if (!trained) {
+    model = workspace / "models" / "gan_avatar";
+    trained = ReadJson(model / "eval.json", &eval).ok();
+  }
   if (trained) {
     nlohmann::json loss = nlohmann::json::array(), held = nlohmann::json::array();
     for (const nlohmann::json& line : JsonLines(model / "stats.jsonl")) {
-      if (line.contains("loss")) loss.push_back({{"x", line.value("seconds", 0.0) / 60}, {"y", line["loss"]}});
+      // The gan-avatar model's lines name the generator's loss, or the warm-up's L1.
+      std::string key = "loss";
+      if (!line.contains(key)) key = line.value("phase", "") == "adversarial" ? "loss_g" : "recon_l1";
+      if (line.contains(key)) loss.push_back({{"x", line.value("seconds", 0.0) / 60}, {"y", line[key]}});
       if (line.contains("test_psnr_masked"))
         held.push_back({{"x", line.value("seconds", 0.0) / 60}, {"y", line["test_psnr_masked"]}});
     }

@@ -26,12 +26,14 @@ class ExportJob : public StageJob {
   // report need only tracking), so its files enter the fingerprint here:
   // training again makes export run again.
   Status AddInputs(Hasher* hasher) const override {
-    const fs::path model = fs::path(workspace_) / "models" / "gaussian_style";
-    for (const char* file : {"config.json", "model.pt"}) {
-      if (fs::exists(model / file)) {
-        HF_RETURN_IF_ERROR(hasher->AddFileStamp(model / file));
-      } else {
-        hasher->Add(std::string("no ") + file);
+    for (const char* folder : {"gaussian_style", "gan_avatar"}) {
+      const fs::path model = fs::path(workspace_) / "models" / folder;
+      for (const char* file : {"config.json", "model.pt"}) {
+        if (fs::exists(model / file)) {
+          HF_RETURN_IF_ERROR(hasher->AddFileStamp(model / file));
+        } else {
+          hasher->Add(std::string("no ") + folder + "/" + file);
+        }
       }
     }
     return Status::Ok();

@@ -198,15 +198,38 @@ TEST_F(GanAvatarTrain, RenderDrawsItFromTurnedCamerasAndDrivenByAnotherCapture) 
   EXPECT_EQ(cv::imread((ws / "renders" / "frame_000110.png").string()).cols, 96);
 }
 
-TEST_F(GanAvatarTrain, ExportWritesTheMeshAvatarAndTheReportAndSaysWhatItLeavesOut) {
+// Export of a workspace whose only model is gan-avatar: the mesh avatar and
+// the report, the model's weights (which render the same image as the
+// trained folder) and its videos; no Gaussians, which it does not have.
+TEST_F(GanAvatarTrain, ExportWritesTheModelsWeightsAndVideosAndNoGaussians) {
   ASSERT_EQ(first_.code, 0) << first_.err;
   const fs::path ws = CopyOf(reference_, Scratch("export"));
   const Result r = Headforge({"export", "--workspace", ws.string(), "--texture-size", "64", "--bake-views", "4"});
   ASSERT_EQ(r.code, 0) << r.err;
-  EXPECT_NE(r.err.find("gan-avatar model's weights and videos cannot be exported yet"), std::string::npos) << r.err;
-  EXPECT_TRUE(fs::exists(ws / "export" / "avatar_mesh.glb"));
-  EXPECT_TRUE(fs::exists(ws / "export" / "report.html"));
-  EXPECT_FALSE(fs::exists(ws / "export" / "gaussians.glb"));
+  EXPECT_NE(r.err.find("no gaussians.ply"), std::string::npos) << r.err;
+  const fs::path out = ws / "export";
+  for (const char* file : {"avatar_mesh.glb", "report.html", "weights/weights.safetensors", "weights/config.json",
+                           "videos/self_reenactment.mp4", "videos/orbit.mp4"})
+    EXPECT_TRUE(fs::exists(out / file)) << file;
+  EXPECT_FALSE(fs::exists(out / "gaussians.glb"));
+  nlohmann::json config;
+  ASSERT_TRUE(ReadJson(out / "weights" / "config.json", &config).ok());
+  EXPECT_EQ(config["model"], "gan-avatar");
+  EXPECT_TRUE(config.contains("identity"));
+  // The exported weights draw what the trained folder draws.
+  const auto render = [&](const fs::path& model, const std::string& into) {
+    const Result rendered = Headforge({"render", "--workspace", ws.string(), "--frames", "110", "--model",
+                                       model.string(), "--out", (ws / into).string()});
+    EXPECT_EQ(rendered.code, 0) << rendered.err;
+    return Slurp(ws / into / "frame_000110.png");
+  };
+  const std::string trained = render(ws / "models" / "gan_avatar", "from_trained");
+  ASSERT_FALSE(trained.empty());
+  EXPECT_EQ(render(out / "weights", "from_export"), trained);
+  // Asking for Gaussians alone from it is refused.
+  const Result gaussians = Headforge({"export", "--workspace", ws.string(), "--formats", "gaussians"});
+  EXPECT_EQ(gaussians.code, 2);
+  EXPECT_NE(gaussians.err.find("has no Gaussians"), std::string::npos) << gaussians.err;
 }
 
 TEST(GanAvatarOptions, ARenderSizeThatDoesNotDivideTheOutputIsRefused) {

@@ -29,11 +29,17 @@ Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avata
     avatar->out_height = config.at("output_size").at(1);
     avatar->background = config.at("background");
     avatar->expressions = int64_t(config.at("expression_mapping").at("expressions").size());
+    if (config.contains("training")) {
+      avatar->holdout = config.at("training").value("holdout", avatar->holdout);
+      avatar->holdout_cameras =
+          config.at("training").value("holdout_cameras", std::vector<std::string>());
+    }
   } catch (const nlohmann::json::exception& e) {
     return Status::DataError(dir.string() + "/config.json: " + e.what());
   }
   Checkpoint weights;
-  HF_RETURN_IF_ERROR(Checkpoint::Load(dir / "model.pt", &weights));
+  fs::path file;
+  HF_RETURN_IF_ERROR(Checkpoint::LoadModelWeights(dir, &weights, &file));
   avatar->generator = GanGenerator(arch);
   if (!weights.GetModule("generator.", avatar->generator.get()) || !weights.Get("w_average", &avatar->w_average))
     return damaged;
@@ -45,6 +51,23 @@ Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avata
   avatar->generator->to(device);
   avatar->w_average = avatar->w_average.to(device);
   return Status::Ok();
+}
+
+Status ExportGanAvatarWeights(const fs::path& model_dir, const nlohmann::json& extra, const fs::path& out_dir) {
+  nlohmann::json config;
+  HF_RETURN_IF_ERROR(ReadJson(model_dir / "config.json", &config));
+  Checkpoint weights;
+  fs::path file;
+  HF_RETURN_IF_ERROR(Checkpoint::LoadModelWeights(model_dir, &weights, &file));
+  config.update(extra);
+  config["tensors"] = {
+      {"generator.*", "the 3D GAN's generator (mapping z -> w, plane synthesis, decoder MLP, super-resolution), "
+                      "named by module path"},
+      {"w_average", "[w_dim] the running mean of w: the avatar's latent without an expression"},
+      {"mapping.*", "the expression mapping, expression weights -> w (when trained)"}};
+  HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
+  HF_RETURN_IF_ERROR(weights.SaveSafetensors(out_dir / "weights.safetensors", {{"format", "pt"}, {"model", "gan-avatar"}}));
+  return WriteJsonAtomic(out_dir / "config.json", config, 2);
 }
 
 torch::Tensor GanAvatar::Draw(const torch::Tensor& e, const SplatCamera& camera) {

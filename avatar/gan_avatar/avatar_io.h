@@ -5,6 +5,11 @@
 
 #include <torch/types.h>
 
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
 #include "avatar/gan_avatar/expression_mapping.h"
 #include "avatar/gan_avatar/model.h"
 #include "core/fs.h"
@@ -19,6 +24,9 @@ struct GanAvatar {
   int render_width = 0, render_height = 0, out_width = 0, out_height = 0;
   double background = 0.5;
   int64_t expressions = 0;
+  // What training held out: the last fraction of the frames and whole cameras.
+  double holdout = 0.2;
+  std::vector<std::string> holdout_cameras;
 
   // The image [3, H, W] (on the CPU, in [0, 1]) for `expressions` [E] (the
   // mean latent when undefined or without a mapping) from `camera`, a camera
@@ -29,6 +37,10 @@ struct GanAvatar {
 
 // True when `dir`'s config.json names the gan-avatar model.
 bool IsGanAvatarFolder(const fs::path& dir);
+// From model.pt, or weights.safetensors as export writes it.
 Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avatar);
+// The model in `model_dir` as weights.safetensors + config.json (its own,
+// with `extra` merged in and the tensors described) in `out_dir`.
+Status ExportGanAvatarWeights(const fs::path& model_dir, const nlohmann::json& extra, const fs::path& out_dir);
 
 }  // namespace headforge

@@ -216,17 +216,10 @@ Status SaveAvatarSafetensors(const GaussianStyleAvatar& avatar, const nlohmann::
 Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar* avatar, TrainOptions* options) {
   nlohmann::json config;
   HF_RETURN_IF_ERROR(ReadArtefact(dir / "config.json", 1, "train", &config));
-  // model.pt as train writes it, or weights.safetensors as export does.
   Checkpoint c;
-  SafeTensorsFile safe;
-  const bool from_safetensors = !fs::exists(dir / "model.pt") && fs::exists(dir / "weights.safetensors");
-  const fs::path weights = dir / (from_safetensors ? "weights.safetensors" : "model.pt");
-  HF_RETURN_IF_ERROR(from_safetensors ? ReadSafetensors(weights, &safe) : Checkpoint::Load(weights, &c));
-  const auto get = [&](const std::string& name, torch::Tensor* t) {
-    if (!from_safetensors) return c.Get(name, t);
-    const SafeTensor* s = safe.Find(name);
-    return s != nullptr && FromSafeTensor(*s, t);
-  };
+  fs::path weights;
+  HF_RETURN_IF_ERROR(Checkpoint::LoadModelWeights(dir, &c, &weights));
+  const auto get = [&](const std::string& name, torch::Tensor* t) { return c.Get(name, t); };
   GaussianStyleAvatar out;
   try {
     out.model = GaussianStyle(OptionsFromJson(config.at("architecture")), config.at("frames").get<int64_t>());

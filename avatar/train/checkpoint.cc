@@ -4,6 +4,9 @@
 
 #include <sstream>
 
+#include "avatar/train/tensor_safetensors.h"
+#include "core/safetensors.h"
+
 namespace headforge {
 namespace {
 
@@ -108,6 +111,35 @@ Status Checkpoint::Load(const fs::path& path, Checkpoint* checkpoint) {
   } catch (const c10::Error& e) {
     return Status::DataError(path.string() + " is not a readable checkpoint (" + e.what_without_backtrace() +
                              "); delete it to start over");
+  }
+  *checkpoint = std::move(out);
+  return Status::Ok();
+}
+
+Status Checkpoint::SaveSafetensors(const fs::path& path, const std::map<std::string, std::string>& metadata) const {
+  SafeTensorsFile file;
+  file.metadata = metadata;
+  try {
+    for (const auto& [name, tensor] : tensors_) file.tensors.push_back(ToSafeTensor(name, tensor));
+  } catch (const c10::Error& e) {
+    return Status::Internal(e.what_without_backtrace());
+  }
+  return WriteSafetensors(path, file);
+}
+
+Status Checkpoint::LoadModelWeights(const fs::path& dir, Checkpoint* checkpoint, fs::path* file) {
+  std::error_code ec;
+  *file = dir / "model.pt";
+  if (fs::exists(*file, ec) || !fs::exists(dir / "weights.safetensors", ec)) return Load(*file, checkpoint);
+  *file = dir / "weights.safetensors";
+  SafeTensorsFile safe;
+  HF_RETURN_IF_ERROR(ReadSafetensors(*file, &safe));
+  Checkpoint out;
+  for (const SafeTensor& t : safe.tensors) {
+    torch::Tensor value;
+    if (!FromSafeTensor(t, &value))
+      return Status::DataError(file->string() + ": " + t.name + " has a type (" + t.dtype + ") this reader does not take");
+    out.Put(t.name, value);
   }
   *checkpoint = std::move(out);
   return Status::Ok();

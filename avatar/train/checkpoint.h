@@ -38,6 +38,13 @@ class Checkpoint {
   // DataError when the file is not a checkpoint (damaged, another format).
   static Status Load(const fs::path& path, Checkpoint* checkpoint);
 
+  // The tensors alone as a .safetensors file (the portable weights export
+  // writes), with `metadata` in its header.
+  Status SaveSafetensors(const fs::path& path, const std::map<std::string, std::string>& metadata) const;
+  // A model folder's weights: model.pt as train writes it, or, without one,
+  // weights.safetensors as export does; *file says which was read.
+  static Status LoadModelWeights(const fs::path& dir, Checkpoint* checkpoint, fs::path* file);
+
  private:
   std::map<std::string, torch::Tensor> tensors_;
   std::map<std::string, int64_t> integers_;

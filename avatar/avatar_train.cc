@@ -83,6 +83,10 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.mesh_riding", &t->mesh_riding,
          "Bind the Gaussians to the tracked mesh's triangles; the network predicts changes in their frames.",
          "mesh-riding");
+  o->Add("train.latent_dropout", &t->latent_dropout,
+         "Stage 2: the share of training views drawn with frame 0's latent, the one held-out frames and render use, "
+         "instead of their own (0: each its own, as the paper).",
+         "latent-dropout");
   o->Add("train.region_weight", &t->region_weight, "Weight of stage 2's L1 on the eyes' and mouth's crops (0: none).",
          "region-weight");
   o->Add("train.ssim_weight", &t->ssim_weight, "Loss = (1 - w) L1 + w (1 - SSIM).", "ssim-weight");
@@ -133,6 +137,10 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.ada_target", &t->ada_target,
          "gan-avatar: the adaptive augmentation raises its probability while E[sign D(real)] is above this.",
          "ada-target");
+  o->Add("train.collapse_steps", &t->collapse_steps,
+         "gan-avatar and stage 3: discriminator steps in a row telling every real image from every generated one "
+         "before a mode-collapse warning in the log and stats.jsonl (0: never).",
+         "collapse-steps");
   o->Add("train.coarse_samples", &t->coarse_samples, "gan-avatar: stratified samples per ray.", "samples");
   o->Add("train.fine_samples", &t->fine_samples, "gan-avatar: importance samples per ray (0: none).",
          "fine-samples");

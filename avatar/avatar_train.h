@@ -33,6 +33,10 @@ struct TrainOptions {
   bool deform = true;           // stage 2; false trains stage 1 alone
   bool mesh_riding = false;     // Gaussians bound to the tracked mesh's triangles
   double region_weight = 1.0;   // stage 2's L1 on the eyes' and mouth's crops (0: none)
+  // Stage 2: the share of training views drawn with frame 0's latent (the
+  // one inference uses) instead of their own, so that the expression must
+  // come from the tracked condition (0: the paper's, every view its own).
+  double latent_dropout = 0;
   double ssim_weight = 0.2;     // loss = (1 - w) L1 + w (1 - SSIM)
   double holdout = 0.2;         // the last fraction of the frames, never trained on
   std::vector<std::string> holdout_cameras;  // cameras never trained on, scored with the held-out frames
@@ -58,6 +62,9 @@ struct TrainOptions {
   double r1_gamma = 0.2;
   int r1_every = 4;
   double ada_target = 0.6;
+  // Discriminator steps in a row telling every real image from every
+  // generated one before a mode-collapse warning (0: never).
+  int collapse_steps = 200;
   int coarse_samples = 24, fine_samples = 24;
   // gan-avatar's expression mapping: renders sampled and tracked, steps,
   // loss ("image": photometric, the paper's; "latent": the ablation), and

@@ -17,11 +17,11 @@ bool IsPowerOfTwo(int v) { return v > 0 && (v & (v - 1)) == 0; }
 }  // namespace
 
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(TrainOptions, model, preset, device, resolution, steps,
-    max_minutes, canonical_fraction, deform, mesh_riding, region_weight, ssim_weight, holdout, holdout_cameras,
-    init_gaussians, max_gaussians, densify_from, densify_until, densify_every, grad_threshold, lr_network,
-    lr_means, lr_quats, lr_scales, lr_opacity, lr_features, feature_channels, triplane_resolution, latent_dim,
-    render_resolution, batch, reconstruction_steps, recon_weight, adversarial_ramp, lr_discriminator, r1_gamma,
-    r1_every, ada_target, coarse_samples, fine_samples, mapping_samples, mapping_steps, mapping_loss,
+    max_minutes, canonical_fraction, deform, mesh_riding, region_weight, latent_dropout, ssim_weight, holdout,
+    holdout_cameras, init_gaussians, max_gaussians, densify_from, densify_until, densify_every, grad_threshold,
+    lr_network, lr_means, lr_quats, lr_scales, lr_opacity, lr_features, feature_channels, triplane_resolution,
+    latent_dim, render_resolution, batch, reconstruction_steps, recon_weight, adversarial_ramp, lr_discriminator,
+    r1_gamma, r1_every, ada_target, collapse_steps, coarse_samples, fine_samples, mapping_samples, mapping_steps, mapping_loss,
     landmark_model, decoder_steps, prior_steps, pti_steps, pti_frames, decoder_resolution, projected_blocks,
     adversarial_weight, perceptual_weight, decoder_ada, full_tune, decoder_init, log_every, eval_every,
     preview_every, checkpoint_every, seed)
@@ -40,6 +40,8 @@ Status TrainOptions::Check() const {
   if (!(max_minutes >= 0)) return Status::InvalidArgument("train: --max-minutes must be zero or positive");
   if (!(canonical_fraction >= 0 && canonical_fraction <= 1))
     return Status::InvalidArgument("train: --canonical-fraction must be in [0, 1]");
+  if (!(latent_dropout >= 0 && latent_dropout <= 1))
+    return Status::InvalidArgument("train: --latent-dropout must be in [0, 1]");
   if (!(region_weight >= 0) || !(ssim_weight >= 0 && ssim_weight <= 1))
     return Status::InvalidArgument("train: --region-weight must be >= 0 and --ssim-weight in [0, 1]");
   if (!(holdout > 0 && holdout < 0.9)) return Status::InvalidArgument("train: --holdout must be in (0, 0.9)");
@@ -87,6 +89,7 @@ Status TrainOptions::Check() const {
     if (!decoder_init.empty() && !fs::is_regular_file(decoder_init, ec))
       return Status::InvalidArgument("train: --decoder-init: no file " + decoder_init);
   }
+  if (collapse_steps < 0) return Status::InvalidArgument("train: --collapse-steps must be zero or positive");
   if (log_every < 1 || eval_every < 0 || preview_every < 0 || checkpoint_every < 1)
     return Status::InvalidArgument("train: --log-every and --checkpoint-every must be >= 1, the others >= 0");
   return Status::Ok();

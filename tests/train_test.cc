@@ -609,6 +609,11 @@ TEST_F(DecoderStage, TrainsInFourPhasesAndScoresTheDecodedImageBesideStageTwos) 
     const std::string phase = line["phase"];
     if (phases.empty() || phases.back() != phase) phases.push_back(phase);
     if (phase == "fuse") fuse_l1.push_back(line["l1"]);
+    // The discriminators' accuracies, which the mode-collapse watch reads.
+    if (phase == "prior" || phase == "fuse") {
+      EXPECT_GE(line["d_real_accuracy"].get<double>(), 0.0) << line;
+      EXPECT_LE(line["d_fake_accuracy"].get<double>(), 1.0) << line;
+    }
   }
   EXPECT_EQ(phases, (std::vector<std::string>{"prior", "pti-invert", "pti-tune", "fuse"}));
   ASSERT_EQ(fuse_l1.size(), 3u);

@@ -23,6 +23,7 @@
 #include "avatar/train/adam.h"
 #include "avatar/train/checkpoint.h"
 #include "avatar/train/device.h"
+#include "avatar/train/gan_watch.h"
 #include "avatar/train/image_file.h"
 #include "avatar/train/loop.h"
 #include "core/json_io.h"
@@ -54,7 +55,7 @@ class GanTrainer {
  public:
   GanTrainer(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model, torch::Device device)
       : options_(options), data_(data), model_(model), device_(device), gen_(at::detail::createCPUGenerator(options.seed)),
-        adam_g_(0.0, 0.99), adam_d_(0.0, 0.99), ada_(options.ada_target) {}
+        adam_g_(0.0, 0.99), adam_d_(0.0, 0.99), ada_(options.ada_target), watch_(options.collapse_steps) {}
 
   Status Start(const fs::path& checkpoint, StatsLog* stats);
   Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
@@ -97,6 +98,8 @@ class GanTrainer {
   std::vector<torch::Tensor> g_params_, d_params_;
   Adam adam_g_, adam_d_;
   nn::AdaController ada_;
+  CollapseWatch watch_;
+  std::string warning_;                   // a collapse warning to log at the end of the step
   torch::Tensor frame_codes_;             // [frames, z_dim]: the warm-up's latent per frame
   double mapping_loss_ = 0;               // the mapping's last loss
   RenderExpressions samples_;
@@ -233,8 +236,11 @@ void GanTrainer::Step(int step) {
   }
   state_.loss_g += loss_g.item<double>();
   state_.loss_d += loss_d.item<double>();
-  state_.real_accuracy += (real_logits > 0).to(torch::kFloat64).mean().item<double>();
-  state_.fake_accuracy += (fake_logits < 0).to(torch::kFloat64).mean().item<double>();
+  const double real_accuracy = (real_logits > 0).to(torch::kFloat64).mean().item<double>();
+  const double fake_accuracy = (fake_logits < 0).to(torch::kFloat64).mean().item<double>();
+  state_.real_accuracy += real_accuracy;
+  state_.fake_accuracy += fake_accuracy;
+  if (watch_.Observe(real_accuracy, fake_accuracy)) warning_ = watch_.Warning("the gan-avatar model");
   ++state_.count;
 }
 
@@ -311,7 +317,7 @@ Status GanTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) cons
   c.Put("frame_codes", frame_codes_);
   c.Put("generator_state", gen_.get_state());
   c.Put("sums", torch::tensor({state_.loss_g, state_.loss_d, state_.r1, state_.real_accuracy, state_.fake_accuracy,
-                               double(state_.count), double(state_.r1_count), state_.recon_l1},
+                               double(state_.count), double(state_.r1_count), state_.recon_l1, double(watch_.run())},
                               torch::kFloat64));
   c.Put("seconds", state_.seconds + SecondsSince(start_));
   c.Put("stats_lines", int64_t(stats_lines));
@@ -325,7 +331,7 @@ Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   int64_t step = 0, lines = 0;
   torch::Tensor generator_state, ada, sums;
   if (!c.Get("step", &step) || !c.Get("generator_state", &generator_state) || !c.Get("stats_lines", &lines) ||
-      !c.Get("ada", &ada) || !c.Get("sums", &sums) || sums.numel() < 8 || !c.Get("seconds", &state_.seconds) ||
+      !c.Get("ada", &ada) || !c.Get("sums", &sums) || sums.numel() < 9 || !c.Get("seconds", &state_.seconds) ||
       !c.Get("w_average", &avatar_.w_average))
     return damaged;
   if (!c.GetModule("generator.", avatar_.generator.get()) || !c.GetModule("discriminator.", discriminator_.get()))
@@ -341,6 +347,7 @@ Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   state_.count = int64_t(s[5]);
   state_.r1_count = int64_t(s[6]);
   state_.recon_l1 = s[7];
+  watch_.set_run(int(s[8]));
   {
     torch::NoGradGuard no_grad;
     torch::Tensor codes;
@@ -367,6 +374,11 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
       return Status::Internal("train: the GAN's losses became non-finite at step " + std::to_string(step) +
                               "; lower --lr-network and --lr-discriminator or raise --r1-gamma (a changed option "
                               "starts training over)");
+    }
+    if (!warning_.empty()) {
+      HF_LOG(Warning) << "train: step " << step << ": " << warning_;
+      stats->Append(nlohmann::json{{"step", step}, {"warning", warning_}}.dump());
+      warning_.clear();
     }
     state_.step = step;
     progress->Advance();

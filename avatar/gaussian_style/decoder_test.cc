@@ -49,6 +49,29 @@ TEST(StyleDecoder, AFreshDecoderDrawsWhatItsGeneratorDrawsAtItsLatent) {
   EXPECT_GT(fused, 0);
 }
 
+// Hard inputs: a splat image of zeros (nothing splatted, not even the
+// background), one saturated at 1 and one far beyond: the decoded image
+// and every gradient stay finite.
+TEST(StyleDecoder, ZeroAndSaturatedSplatImagesStayFinite) {
+  torch::manual_seed(24);
+  StyleDecoder decoder(TinyDecoder());
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& item : decoder->named_parameters())
+      if (item.key().find("second") != std::string::npos) item.value().normal_(0, 0.1);  // projections live
+  }
+  for (const double value : {0.0, 1.0, 1e4}) {
+    const torch::Tensor splat = torch::full({1, 6, 32, 32}, value).requires_grad_(true);
+    const torch::Tensor out = decoder->forward(splat);
+    ASSERT_TRUE(torch::isfinite(out).all().item<bool>()) << value;
+    out.abs().mean().backward();
+    EXPECT_TRUE(torch::isfinite(splat.grad()).all().item<bool>()) << value;
+    for (const torch::Tensor& t : decoder->FusionParameters())
+      if (t.grad().defined()) EXPECT_TRUE(torch::isfinite(t.grad()).all().item<bool>()) << value;
+    decoder->zero_grad();
+  }
+}
+
 TEST(SquareCanvas, DrawsTheCamerasImageScaledAndCentred) {
   SplatCamera camera;
   camera.width = 40;

@@ -27,6 +27,7 @@
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/adam.h"
 #include "avatar/train/checkpoint.h"
+#include "avatar/train/gan_watch.h"
 #include "avatar/train/image_file.h"
 #include "avatar/train/loop.h"
 #include "core/log.h"
@@ -86,7 +87,8 @@ class DecoderTrainer {
       : options_(options), data_(data), avatar_(avatar),
         device_(avatar->gaussians.params.means.device()), gen_(at::detail::createCPUGenerator(options.seed + 3)),
         adam_prior_g_(0.0, 0.99), adam_prior_d_(0.0, 0.99), adam_fuse_d_(0.0, 0.99),
-        ada_prior_(options.ada_target), ada_fuse_(options.ada_target) {
+        ada_prior_(options.ada_target), ada_fuse_(options.ada_target), prior_watch_(options.collapse_steps),
+        fuse_watch_(options.collapse_steps) {
     side_ = options.decoder_resolution > 0 ? options.decoder_resolution : options.resolution;
     prior_end_ = options.decoder_init.empty() ? options.prior_steps : 0;
     invert_end_ = prior_end_ + (options.full_tune ? 0 : options.pti_steps);
@@ -110,9 +112,10 @@ class DecoderTrainer {
   double PriorStep(int step);
   double InvertOrTune(bool tune);
   double FuseStep(int step);
-  // The discriminator's step on `real` and `fake` (detached), with lazy R1.
-  double DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, nn::AdaController& ada, const torch::Tensor& real,
-                           const torch::Tensor& fake, int step);
+  // The discriminator's step on `real` and `fake` (detached), with lazy R1;
+  // its accuracies go to the stats and to `watch`.
+  double DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, nn::AdaController& ada, CollapseWatch& watch,
+                           const std::string& what, const torch::Tensor& real, const torch::Tensor& fake, int step);
   void ChoosePtiFrames();
   Status SaveCheckpoint(const fs::path& path, size_t stats_lines) const;
   Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
@@ -131,10 +134,12 @@ class DecoderTrainer {
   std::vector<int64_t> usable_;          // training views with reliable tracking
   Adam adam_prior_g_, adam_prior_d_, adam_invert_, adam_tune_, adam_fuse_, adam_fuse_d_;
   nn::AdaController ada_prior_, ada_fuse_;
+  CollapseWatch prior_watch_, fuse_watch_;
+  std::string warning_;                  // a collapse warning to log at the end of the step
   int step_ = 0;
   torch::Tensor order_;
-  double loss_sum_ = 0, d_sum_ = 0, l1_sum_ = 0;
-  int64_t count_ = 0;
+  double loss_sum_ = 0, d_sum_ = 0, l1_sum_ = 0, real_accuracy_sum_ = 0, fake_accuracy_sum_ = 0;
+  int64_t count_ = 0, d_count_ = 0;
   double seconds_ = 0;
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
 };
@@ -239,7 +244,8 @@ Status DecoderTrainer::Start(const fs::path& checkpoint, const fs::path& stage2_
 }
 
 double DecoderTrainer::DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, nn::AdaController& ada,
-                                         const torch::Tensor& real, const torch::Tensor& fake, int step) {
+                                         CollapseWatch& watch, const std::string& what, const torch::Tensor& real,
+                                         const torch::Tensor& fake, int step) {
   const double p = options_.decoder_ada ? ada.p() : 0.0;
   const torch::Tensor fake_logits = d.forward(nn::Augment(fake.detach(), p, 3, gen_));
   const bool r1_now = options_.r1_gamma > 0 && step % options_.r1_every == 0;
@@ -256,6 +262,12 @@ double DecoderTrainer::DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, n
   adam.Step();
   adam.ZeroGrad();
   ada.Observe(real_logits);
+  const double real_accuracy = (real_logits > 0).to(torch::kFloat64).mean().item<double>();
+  const double fake_accuracy = (fake_logits < 0).to(torch::kFloat64).mean().item<double>();
+  real_accuracy_sum_ += real_accuracy;
+  fake_accuracy_sum_ += fake_accuracy;
+  ++d_count_;
+  if (watch.Observe(real_accuracy, fake_accuracy)) warning_ = watch.Warning(what);
   return loss.item<double>();
 }
 
@@ -276,7 +288,7 @@ double DecoderTrainer::PriorStep(int step) {
   adam_prior_g_.Step();
   adam_prior_g_.ZeroGrad();
   adam_prior_d_.ZeroGrad();
-  d_sum_ += DiscriminatorStep(*prior_d_, adam_prior_d_, ada_prior_, real, fake, step);
+  d_sum_ += DiscriminatorStep(*prior_d_, adam_prior_d_, ada_prior_, prior_watch_, "stage 3's prior", real, fake, step);
   adam_prior_g_.ZeroGrad();
   return loss_g.item<double>();
 }
@@ -334,7 +346,7 @@ double DecoderTrainer::FuseStep(int step) {
   adam_fuse_.ZeroGrad();
   if (adversarial) {
     adam_fuse_d_.ZeroGrad();
-    d_sum_ += DiscriminatorStep(*fuse_d_, adam_fuse_d_, ada_fuse_, real, fake, step);
+    d_sum_ += DiscriminatorStep(*fuse_d_, adam_fuse_d_, ada_fuse_, fuse_watch_, "stage 3's fusion", real, fake, step);
     adam_fuse_.ZeroGrad();
   }
   l1_sum_ += l1.item<double>();
@@ -395,6 +407,9 @@ Status DecoderTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) 
   c.Put("d_sum", d_sum_);
   c.Put("l1_sum", l1_sum_);
   c.Put("count", count_);
+  c.Put("discriminator_sums", torch::tensor({real_accuracy_sum_, fake_accuracy_sum_, double(d_count_),
+                                             double(prior_watch_.run()), double(fuse_watch_.run())},
+                                            torch::kFloat64));
   c.Put("seconds", seconds());
   c.Put("stats_lines", int64_t(stats_lines));
   return c.Save(path);
@@ -406,11 +421,12 @@ Status DecoderTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   const Status damaged =
       Status::DataError(path.string() + " is not this stage 3's checkpoint; delete it to start stage 3 over");
   int64_t step = 0, lines = 0;
-  torch::Tensor generator, ada_prior, ada_fuse, pti_w;
+  torch::Tensor generator, ada_prior, ada_fuse, pti_w, d_sums;
   if (!c.Get("step", &step) || !c.Get("generator", &generator) || !c.Get("stats_lines", &lines) ||
       !c.Get("pti_w", &pti_w) || !c.Get("ada_prior", &ada_prior) || !c.Get("ada_fuse", &ada_fuse) ||
       !c.Get("loss_sum", &loss_sum_) || !c.Get("d_sum", &d_sum_) || !c.Get("l1_sum", &l1_sum_) ||
-      !c.Get("count", &count_) || !c.Get("seconds", &seconds_) || !pti_w.sizes().equals(pti_w_.sizes()))
+      !c.Get("count", &count_) || !c.Get("seconds", &seconds_) || !pti_w.sizes().equals(pti_w_.sizes()) ||
+      !c.Get("discriminator_sums", &d_sums) || d_sums.numel() != 5)
     return damaged;
   if (!c.GetModule("model.", avatar_->model.get()) || !c.GetModule("decoder.", avatar_->decoder.get()) ||
       !c.GetModule("prior_d.", prior_d_.get()) || !c.GetModule("fuse_d.", fuse_d_.get()))
@@ -428,6 +444,12 @@ Status DecoderTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   };
   ada_prior_.Restore(values(ada_prior));
   ada_fuse_.Restore(values(ada_fuse));
+  const std::vector<double> d = values(d_sums);
+  real_accuracy_sum_ = d[0];
+  fake_accuracy_sum_ = d[1];
+  d_count_ = int64_t(d[2]);
+  prior_watch_.set_run(int(d[3]));
+  fuse_watch_.set_run(int(d[4]));
   gen_.set_state(generator);
   if (!c.Get("order", &order_)) order_ = torch::Tensor();
   step_ = int(step);
@@ -469,22 +491,31 @@ Status DecoderTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint
     loss_sum_ += loss;
     ++count_;
     step_ = step;
+    if (!warning_.empty()) {
+      HF_LOG(Warning) << "train: step " << step << ": " << warning_;
+      stats->Append(nlohmann::json{{"step", step}, {"stage", 3}, {"warning", warning_}}.dump());
+      warning_.clear();
+    }
     progress->Advance();
     const bool last = step == total_;
     const bool phase_end = last || PhaseOf(step + 1) != phase;
     if (step % options_.log_every == 0 || phase_end) {
-      const double n = double(std::max<int64_t>(count_, 1));
-      stats->Append(nlohmann::json{{"step", step},
-                                   {"stage", 3},
-                                   {"phase", PhaseName(phase)},
-                                   {"loss", loss_sum_ / n},
-                                   {"loss_d", d_sum_ / n},
-                                   {"l1", l1_sum_ / n},
-                                   {"augment_p", phase == Phase::kPrior ? ada_prior_.p() : ada_fuse_.p()},
-                                   {"seconds", seconds()}}
-                        .dump());
-      loss_sum_ = d_sum_ = l1_sum_ = 0;
-      count_ = 0;
+      const double n = double(std::max<int64_t>(count_, 1)), nd = double(std::max<int64_t>(d_count_, 1));
+      nlohmann::json line = {{"step", step},
+                             {"stage", 3},
+                             {"phase", PhaseName(phase)},
+                             {"loss", loss_sum_ / n},
+                             {"loss_d", d_sum_ / n},
+                             {"l1", l1_sum_ / n},
+                             {"augment_p", phase == Phase::kPrior ? ada_prior_.p() : ada_fuse_.p()},
+                             {"seconds", seconds()}};
+      if (d_count_ > 0) {
+        line["d_real_accuracy"] = real_accuracy_sum_ / nd;
+        line["d_fake_accuracy"] = fake_accuracy_sum_ / nd;
+      }
+      stats->Append(line.dump());
+      loss_sum_ = d_sum_ = l1_sum_ = real_accuracy_sum_ = fake_accuracy_sum_ = 0;
+      count_ = d_count_ = 0;
     }
     if (phase_end || (options_.preview_every > 0 && step % options_.preview_every == 0))
       HF_RETURN_IF_ERROR(WritePreview(out_dir / "previews", step));

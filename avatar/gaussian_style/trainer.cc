@@ -164,7 +164,11 @@ double Trainer::Step(int step) {
   const bool stage2 = deform_now(step);
   // A random background each step: only the head may be opaque.
   const torch::Tensor background = torch::rand({3}, gen_).to(device_);
-  const PosedGaussians posed = avatar_.Pose(data_, view.condition, view.frame, stage2);
+  // Frame 0's latent in place of the view's own, for --latent-dropout of them.
+  int64_t latent = view.frame;
+  if (stage2 && options_.latent_dropout > 0 && torch::rand({1}, gen_).item<double>() < options_.latent_dropout)
+    latent = 0;
+  const PosedGaussians posed = avatar_.Pose(data_, view.condition, latent, stage2);
   const SplatRenderResult out = RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities,
                                                 posed.features.slice(1, 0, 3), background, view.view);
   out.means2d.retain_grad();

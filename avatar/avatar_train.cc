@@ -81,7 +81,8 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
          "canonical-fraction");
   o->Add("train.deform", &t->deform, "Train stage 2, the attention deformation (false: stage 1 only).", "deform");
   o->Add("train.mesh_riding", &t->mesh_riding,
-         "Bind the Gaussians to the tracked mesh's triangles; the network predicts changes in their frames.",
+         "Bind the Gaussians to the tracked mesh's triangles, which the tracked expressions move; the network "
+         "predicts changes in their frames. --mesh-riding=false: the paper's deformation in canonical space.",
          "mesh-riding");
   o->Add("train.latent_dropout", &t->latent_dropout,
          "Stage 2: the share of training views drawn with frame 0's latent, the one held-out frames and render use, "

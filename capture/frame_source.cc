@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -30,26 +32,47 @@ cv::Mat ToBgr8(const cv::Mat& image) {
   return out;
 }
 
-// The kinds of the streams ffprobe finds in `path` ("video", "audio", ...);
-// none when it finds none or cannot be run.
-std::vector<std::string> StreamKinds(const fs::path& path) {
+// The lines ffprobe prints for `args` (after the program's name and before
+// the path); none when it fails or cannot be run.
+std::vector<std::string> ProbeLines(const std::vector<std::string>& args, const fs::path& path) {
   static std::atomic<int> counter{0};
-  const fs::path log = fs::temp_directory_path() / ("hf_streams_" + std::to_string(::getpid()) + "_" +
+  const fs::path log = fs::temp_directory_path() / ("hf_probe_" + std::to_string(::getpid()) + "_" +
                                                     std::to_string(counter++) + ".txt");
   std::error_code ec;
   fs::remove(log, ec);
+  std::vector<std::string> command = {"ffprobe", "-v", "quiet"};
+  command.insert(command.end(), args.begin(), args.end());
+  command.push_back(path.string());
   int exit_code = 0;
-  std::vector<std::string> kinds;
-  if (RunProgram({"ffprobe", "-v", "quiet", "-show_entries", "stream=codec_type", "-of", "csv=p=0", path.string()},
-                 log, &exit_code)
-          .ok() &&
-      exit_code == 0) {
+  std::vector<std::string> lines;
+  if (RunProgram(command, log, &exit_code).ok() && exit_code == 0) {
     std::ifstream in(log);
     for (std::string line; std::getline(in, line);)
-      if (!line.empty()) kinds.push_back(line);
+      if (!line.empty()) lines.push_back(line);
   }
   fs::remove(log, ec);
-  return kinds;
+  return lines;
+}
+
+// The kinds of the streams ffprobe finds in `path` ("video", "audio", ...).
+std::vector<std::string> StreamKinds(const fs::path& path) {
+  return ProbeLines({"-show_entries", "stream=codec_type", "-of", "csv=p=0"}, path);
+}
+
+// The presentation times of the first video stream's packets, sorted, in
+// seconds (read from the container, nothing decoded); empty when a packet has
+// none or ffprobe cannot be run.
+std::vector<double> PacketTimes(const fs::path& path) {
+  std::vector<double> times;
+  for (const std::string& line :
+       ProbeLines({"-select_streams", "v:0", "-show_entries", "packet=pts_time", "-of", "csv=p=0"}, path)) {
+    char* end = nullptr;
+    const double t = std::strtod(line.c_str(), &end);
+    if (end == line.c_str() || !std::isfinite(t)) return {};  // "N/A"
+    times.push_back(t);
+  }
+  std::sort(times.begin(), times.end());
+  return times;
 }
 
 // Why `path` gives no frame: no video stream at all, or a stream ffmpeg cannot decode.
@@ -80,6 +103,7 @@ class VideoFrameSource : public FrameSource {
       return NoFrames(path_, path_ + " holds no decodable video frame (corrupt, truncated or empty file?)");
     first_ = ToBgr8(first_);
     size_ = first_.size();
+    SetTimestamps(PacketTimes(path));
     return Status::Ok();
   }
 
@@ -158,6 +182,29 @@ class FolderFrameSource : public FrameSource {
 };
 
 }  // namespace
+
+void FrameSource::SetTimestamps(std::vector<double> times) {
+  timestamps_.clear();
+  variable_rate_ = false;
+  mean_fps_ = short_interval_ = long_interval_ = 0.0;
+  if (times.size() < 3) return;
+  for (double& t : times) t -= times.front();
+  std::vector<double> intervals;
+  for (size_t i = 1; i < times.size(); ++i) intervals.push_back(times[i] - times[i - 1]);
+  std::sort(intervals.begin(), intervals.end());
+  short_interval_ = intervals[intervals.size() / 20];
+  long_interval_ = intervals[intervals.size() - 1 - intervals.size() / 20];
+  if (!(short_interval_ > 0.0) || !(times.back() > 0.0)) return;  // repeated timestamps: not to be trusted
+  timestamps_ = std::move(times);
+  mean_fps_ = (timestamps_.size() - 1) / timestamps_.back();
+  // Rounding of a constant rate to the container's time base stays far below this.
+  variable_rate_ = long_interval_ > 1.25 * short_interval_;
+}
+
+double FrameSource::TimeOf(int64_t index) const {
+  if (index >= 0 && static_cast<size_t>(index) < timestamps_.size()) return timestamps_[index];
+  return fps_ > 0.0 ? index / fps_ : 0.0;
+}
 
 Status FrameSource::Open(const fs::path& path, double folder_fps,
                          std::unique_ptr<FrameSource>* source) {

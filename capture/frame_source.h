@@ -39,12 +39,33 @@ class FrameSource {
   // Source file of frame `index` for image folders ("" for videos).
   virtual std::string FrameName(int64_t index) const { return ""; }
 
+  // Presentation time of frame `index` in seconds from the first frame: the
+  // container's timestamps where ffprobe gives them, else index / fps().
+  double TimeOf(int64_t index) const;
+  // True when the container's frame intervals vary (a phone's variable frame
+  // rate): frames are then sampled by their timestamps, at mean_fps() or less.
+  bool variable_rate() const { return variable_rate_; }
+  // The timestamps TimeOf reads (sorted; empty when unknown).
+  const std::vector<double>& timestamps() const { return timestamps_; }
+  // Frames per second over the whole stream (timestamps), else fps().
+  double mean_fps() const { return mean_fps_ > 0.0 ? mean_fps_ : fps_; }
+  // The timestamps' shortest and longest frame interval (5th and 95th
+  // percentiles), in seconds; 0 without timestamps.
+  double short_interval() const { return short_interval_; }
+  double long_interval() const { return long_interval_; }
+
  protected:
   std::string path_;
   double fps_ = 0.0;
   cv::Size size_;
   bool is_folder_ = false;
   int64_t frame_count_hint_ = 0;
+  std::vector<double> timestamps_;  // seconds from the first frame, sorted; empty when unknown
+  bool variable_rate_ = false;
+  double mean_fps_ = 0.0, short_interval_ = 0.0, long_interval_ = 0.0;
+
+  // Sets the timestamps and what follows from them.
+  void SetTimestamps(std::vector<double> times);
 };
 
 // What ffmpeg's decoder says of a video file's first video stream, decoded

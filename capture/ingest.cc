@@ -156,6 +156,7 @@ std::string IngestSummary::OneLine() const {
                 kept, sampled, dropped_blur, dropped_missing, cameras, with_landmarks, face_lost, crop.c_str());
   std::string line = text;
   for (const std::string& d : damaged) line += "; DAMAGED INPUT: " + d;
+  for (const std::string& f : faces) line += "; " + f;
   return line;
 }
 
@@ -183,27 +184,54 @@ struct Camera {
   double median_sharpness = 0.0;
 };
 
-// The source frame index of sample k in the reference (first) camera.
+// The source frame index of sample k in the reference (first) camera: every
+// source/--fps-th frame, or for a variable frame rate the frame nearest each
+// multiple of 1/rate() on the timestamps' axis.
 class SamplePlan {
  public:
-  SamplePlan(const IngestOptions& options, double source_fps) {
-    step_ = options.fps > 0.0 ? std::max(1.0, source_fps / options.fps) : 1.0;
-    first_ = options.start * source_fps;
-    last_ = options.end > 0.0 ? options.end * source_fps : 1e300;
+  SamplePlan(const IngestOptions& options, const FrameSource& reference) {
     max_frames_ = options.max_frames > 0 ? options.max_frames : (1 << 30);
+    if (!reference.variable_rate()) {
+      const double source_fps = reference.fps();
+      rate_ = options.fps > 0.0 ? std::min(options.fps, source_fps) : source_fps;
+      step_ = options.fps > 0.0 ? std::max(1.0, source_fps / options.fps) : 1.0;
+      first_ = options.start * source_fps;
+      last_ = options.end > 0.0 ? options.end * source_fps : 1e300;
+      return;
+    }
+    by_time_ = true;
+    rate_ = options.fps > 0.0 ? std::min(options.fps, reference.mean_fps()) : reference.mean_fps();
+    const std::vector<double>& times = reference.timestamps();
+    const double end = std::min(options.end > 0.0 ? options.end : 1e300, times.back() + 0.5 / rate_);
+    int64_t previous = -1;
+    for (int64_t k = 0; static_cast<int>(indices_.size()) < max_frames_; ++k) {
+      const double t = options.start + k / rate_;
+      if (t >= end) break;
+      // The frame nearest t.
+      size_t i = std::lower_bound(times.begin(), times.end(), t) - times.begin();
+      if (i == times.size() || (i > 0 && t - times[i - 1] < times[i] - t)) --i;
+      if (static_cast<int64_t>(i) <= previous) continue;  // a gap in the stream: no new frame near t
+      indices_.push_back(static_cast<int64_t>(i));
+      previous = static_cast<int64_t>(i);
+    }
   }
   // -1 when sample k lies outside the range.
   int64_t SourceIndex(int k) const {
     if (k >= max_frames_) return -1;
+    if (by_time_) return static_cast<size_t>(k) < indices_.size() ? indices_[k] : -1;
     const double index = std::ceil(first_ + k * step_ - 1e-9);
     if (index >= last_) return -1;
     return static_cast<int64_t>(index);
   }
   int max_frames() const { return max_frames_; }
+  // Samples per second of the capture.
+  double rate() const { return rate_; }
 
  private:
-  double step_, first_, last_;
+  double step_ = 1.0, first_ = 0.0, last_ = 1e300, rate_ = 0.0;
   int max_frames_;
+  bool by_time_ = false;
+  std::vector<int64_t> indices_;  // by_time_: sample -> source frame
 };
 
 std::string CameraName(int index) { return "cam" + std::to_string(index); }
@@ -298,28 +326,90 @@ float Iou(const cv::Rect2f& a, const cv::Rect2f& b) {
   return uni > 0 ? inter / uni : 0.0f;
 }
 
-// Picks one face per frame, following the previous frame's face when several
-// are visible; nullptr when none is usable.
-std::vector<const FaceCandidate*> SelectFaces(const std::vector<const FrameAnalysis*>& frames) {
-  std::vector<const FaceCandidate*> chosen(frames.size(), nullptr);
-  const FaceCandidate* previous = nullptr;
+// One camera's face in each kept frame. Faces are linked from frame to frame
+// into tracks (a face overlapping a track's last box continues it); the track
+// with the most detection weight (size x score, summed over its frames: the
+// largest, most persistent face) is followed. Tracks that never share a frame
+// with it and are of its size are taken as the same face come back elsewhere.
+struct FaceChoice {
+  std::vector<const FaceCandidate*> faces;  // per frame; nullptr where the followed face is not seen
+  int others = 0;                           // other faces seen beside the followed one
+  int followed_frames = 0, other_frames = 0;  // frames of the followed face; of the strongest other
+  float followed_width = 0, other_width = 0;  // their median landmark widths, source px
+};
+
+FaceChoice SelectFaces(const std::vector<const FrameAnalysis*>& frames) {
+  struct Track {
+    std::vector<std::pair<size_t, const FaceCandidate*>> members;  // (frame, face)
+    double weight = 0.0;
+    float MedianWidth() const {
+      std::vector<float> w;
+      for (const auto& m : members) w.push_back(LandmarkBounds(m.second->landmarks).width);
+      std::nth_element(w.begin(), w.begin() + w.size() / 2, w.end());
+      return w[w.size() / 2];
+    }
+  };
+  constexpr size_t kMaxGap = 10;       // frames a track may go unseen and still continue
+  constexpr float kMinOverlap = 0.2f;  // IoU with the track's last box
+  std::vector<Track> tracks;
   for (size_t i = 0; i < frames.size(); ++i) {
-    const FaceCandidate* best = nullptr;
-    float best_score = -1.0f;
-    for (const auto& c : frames[i]->faces) {
-      if (!c.plausible) continue;
-      const cv::Rect2f box = LandmarkBounds(c.landmarks);
-      float score = c.detection.score * std::sqrt(box.area());
-      if (previous) score *= 0.1f + Iou(box, LandmarkBounds(previous->landmarks));
-      if (score > best_score) {
-        best_score = score;
-        best = &c;
+    std::vector<const FaceCandidate*> candidates;
+    for (const auto& c : frames[i]->faces)
+      if (c.plausible) candidates.push_back(&c);
+    auto weight = [](const FaceCandidate* c) {
+      return c->detection.score * std::sqrt(LandmarkBounds(c->landmarks).area());
+    };
+    std::sort(candidates.begin(), candidates.end(),
+              [&](auto* a, auto* b) { return weight(a) > weight(b); });
+    std::vector<bool> continued(tracks.size(), false);
+    for (const FaceCandidate* c : candidates) {
+      const cv::Rect2f box = LandmarkBounds(c->landmarks);
+      int best = -1;
+      float best_overlap = kMinOverlap;
+      for (size_t t = 0; t < tracks.size(); ++t) {
+        const auto& last = tracks[t].members.back();
+        if (continued[t] || i - last.first > kMaxGap) continue;
+        const float overlap = Iou(box, LandmarkBounds(last.second->landmarks));
+        if (overlap > best_overlap) {
+          best_overlap = overlap;
+          best = static_cast<int>(t);
+        }
+      }
+      if (best < 0) {
+        best = static_cast<int>(tracks.size());
+        tracks.emplace_back();
+        continued.push_back(false);
+      }
+      continued[best] = true;
+      tracks[best].members.emplace_back(i, c);
+      tracks[best].weight += weight(c);
+    }
+  }
+  FaceChoice choice;
+  choice.faces.assign(frames.size(), nullptr);
+  if (tracks.empty()) return choice;
+  std::sort(tracks.begin(), tracks.end(), [](const Track& a, const Track& b) { return a.weight > b.weight; });
+  const float width = tracks[0].MedianWidth();
+  std::vector<bool> seen(frames.size(), false);
+  for (size_t t = 0; t < tracks.size(); ++t) {
+    bool shares_frame = false;
+    for (const auto& m : tracks[t].members) shares_frame = shares_frame || seen[m.first];
+    const float w = tracks[t].MedianWidth();
+    if (t == 0 || (!shares_frame && w > width / 1.5f && w < width * 1.5f)) {
+      for (const auto& [i, c] : tracks[t].members) {
+        choice.faces[i] = c;
+        seen[i] = true;
+      }
+    } else if (tracks[t].members.size() >= 3) {  // fewer: a stray detection, not a face worth a word
+      if (choice.others++ == 0) {
+        choice.other_frames = static_cast<int>(tracks[t].members.size());
+        choice.other_width = w;
       }
     }
-    chosen[i] = best;
-    if (best) previous = best;
   }
-  return chosen;
+  choice.followed_frames = static_cast<int>(std::count(seen.begin(), seen.end(), true));
+  choice.followed_width = width;
+  return choice;
 }
 
 Status LoadUserMasks(const IngestOptions& options, const std::string& camera, int cameras,
@@ -480,7 +570,18 @@ Status PlanFaces(const IngestOptions& options, const std::vector<Camera>& camera
     CameraPlan& plan = (*plans)[c];
     std::vector<const FrameAnalysis*> frames;
     for (int k : kept) frames.push_back(&cam.analysis.at(k));
-    plan.faces = SelectFaces(frames);
+    const FaceChoice choice = SelectFaces(frames);
+    plan.faces = choice.faces;
+    if (choice.others > 0) {
+      char text[300];
+      std::snprintf(text, sizeof(text),
+                    "%s: %d faces seen; following the largest, most persistent one (in %d of %zu frames, %.0f px "
+                    "wide); %d other%s ignored (the strongest in %d frames, %.0f px wide)",
+                    cam.name.c_str(), choice.others + 1, choice.followed_frames, kept.size(), choice.followed_width,
+                    choice.others, choice.others > 1 ? "s" : "", choice.other_frames, choice.other_width);
+      HF_LOG(Info) << "ingest: " << text;
+      summary->faces.push_back(text);
+    }
     const int found = static_cast<int>(
         std::count_if(plan.faces.begin(), plan.faces.end(), [](auto* f) { return f != nullptr; }));
     if (found == 0) {
@@ -636,7 +737,7 @@ IngestedCamera CameraRecord(const IngestOptions& options, const std::string& cro
     IngestedFrame f;
     f.index = static_cast<int>(i);
     f.source_frame = static_cast<int>(a.source_index);
-    f.time_s = a.source_index / cam.source->fps();
+    f.time_s = cam.source->TimeOf(a.source_index);
     f.sharpness = std::round(a.sharpness * 10.0) / 10.0;
     if (cam.source->is_folder()) f.source_file = cam.source->FrameName(a.source_index);
     if (crop_mode == "frame") f.crop = crop;
@@ -659,13 +760,12 @@ IngestedCamera CameraRecord(const IngestOptions& options, const std::string& cro
 }
 
 // Crops for `crop_mode`, pass 2, and capture.json / landmarks.json.
-Status WriteOutputs(const IngestOptions& options, const std::string& crop_mode, const std::vector<Camera>& cameras,
-                    std::vector<CameraPlan>* plans, const std::vector<int>& kept,
+Status WriteOutputs(const IngestOptions& options, double rate, const std::string& crop_mode,
+                    const std::vector<Camera>& cameras, std::vector<CameraPlan>* plans, const std::vector<int>& kept,
                     const std::vector<DroppedSample>& dropped, const IngestSummary& summary, const fs::path& out_dir,
                     int threads, Progress* progress) {
   IngestedCapture capture;
-  const double source_fps = cameras[0].source->fps();
-  capture.fps = options.fps > 0.0 ? std::min(options.fps, source_fps) : source_fps;
+  capture.fps = rate;
   capture.resolution = options.resolution;
   capture.crop_mode = crop_mode;
   capture.samples = kept;
@@ -696,11 +796,19 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
   *summary = IngestSummary();
   std::vector<Camera> cameras;
   HF_RETURN_IF_ERROR(OpenCameras(options, &cameras, summary));
-  const double source_fps = cameras[0].source->fps();
+  const FrameSource& reference = *cameras[0].source;
+  if (reference.variable_rate()) {
+    char text[200];
+    std::snprintf(text, sizeof(text), "%.1f to %.1f fps, %.2f on average", 1.0 / reference.long_interval(),
+                  1.0 / reference.short_interval(), reference.mean_fps());
+    HF_LOG(Info) << "ingest: " << reference.path() << " has a variable frame rate (" << text
+                 << "): frames are sampled by their timestamps";
+  }
+  const double source_fps = reference.variable_rate() ? reference.mean_fps() : reference.fps();
   if (options.fps > source_fps * 1.001)
     HF_LOG(Warning) << "--fps " << options.fps << " exceeds the source's " << source_fps
                     << " fps; every source frame is used";
-  const SamplePlan plan(options, source_fps);
+  const SamplePlan plan(options, reference);
   HF_RETURN_IF_ERROR(AnalyseCameras(options, plan, threads, progress, &cameras));
   std::vector<int> kept;
   std::vector<DroppedSample> dropped;
@@ -713,7 +821,7 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
                     : cameras.size() > 1 ? "auto: several cameras keep the whole frame, whose background COLMAP needs"
                                          : "auto: one camera";
   HF_RETURN_IF_ERROR(
-      WriteOutputs(options, crop_mode, cameras, &plans, kept, dropped, *summary, out_dir, threads, progress));
+      WriteOutputs(options, plan.rate(), crop_mode, cameras, &plans, kept, dropped, *summary, out_dir, threads, progress));
   if (options.crop == "auto" && cameras.size() == 1) {
     // A moving camera goes to COLMAP, which needs the background the crop
     // around the head leaves out: measure the motion on what was written, and
@@ -730,7 +838,7 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
       fs::remove_all(out_dir / "frames", ec);
       fs::remove_all(out_dir / "masks", ec);
       HF_RETURN_IF_ERROR(
-          WriteOutputs(options, crop_mode, cameras, &plans, kept, dropped, *summary, out_dir, threads, progress));
+          WriteOutputs(options, plan.rate(), crop_mode, cameras, &plans, kept, dropped, *summary, out_dir, threads, progress));
     } else {
       why = "auto: one fixed camera; " + motion.Describe();
     }

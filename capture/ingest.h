@@ -87,6 +87,8 @@ struct IngestSummary {
   std::string crop;          // the crop used ("auto" resolved)
   // One line per input video ffmpeg's decoder found damaged or truncated.
   std::vector<std::string> damaged;
+  // One line per camera where several faces were seen: which one is followed.
+  std::vector<std::string> faces;
   std::string OneLine() const;
 };
 

@@ -78,14 +78,18 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
          "rig's size between its instants.",
          "max-instant-shift");
   o->Add("calibrate.head_pose.focal", &c->head_pose.focal,
-         "Head-pose mode: focal length in frame pixels; 0 estimates it.", "focal");
+         "Head-pose mode: focal length in frame pixels (the ingested frames'); 0 estimates it.", "focal");
+  o->Add("calibrate.head_pose.fov", &c->head_pose.fov_deg,
+         "Head-pose mode: the source video's horizontal field of view in degrees, for a known lens (a phone's main "
+         "camera about 65-70, a webcam 60-80); sets the focal length instead of estimating it (0: estimate).",
+         "fov");
   o->Add("calibrate.head_pose.smoothness", &c->head_pose.smoothness,
          "Head-pose mode: weight of temporal smoothness (0: none).", "smoothness");
   o->Add("calibrate.head_pose.robust_px", &c->head_pose.robust_px,
          "Head-pose mode: Huber scale of landmark residuals (px).", "robust-px");
   o->Add("calibrate.head_pose.refine", &c->head_pose.refine,
          "Head-pose mode: face-model refines the focal length and poses by fitting the face model's identity and "
-         "expressions too (unless --focal is given); off keeps the fit to the mean face's landmarks.",
+         "expressions too (unless --focal or --fov is given); off keeps the fit to the mean face's landmarks.",
          "head-pose-refine");
   o->Add("calibrate.head_pose.refine_rounds", &c->head_pose.refine_rounds,
          "Head-pose mode: face-model fits at most, each started from the cameras the last one left, until the "
@@ -118,6 +122,12 @@ Status HeadPoseCameras(const CalibrateOptions& options, const IngestedCapture& c
   for (const auto& f : cam.frames) landmarks.push_back(f.landmarks);
   const Eigen::Vector2d principal(cam.SourceCentreX(), cam.SourceCentreY());
   HeadPoseOptions head_pose = options.head_pose;
+  if (head_pose.fov_deg > 0) {
+    head_pose.focal = FocalFromFov(head_pose.fov_deg, cam.source_width, cam.crop_scale);
+    head_pose.fov_deg = 0;
+    HF_LOG(Info) << "calibrate: --fov " << options.head_pose.fov_deg << " over " << cam.source_width
+                 << " source px: focal " << head_pose.focal << " frame px";
+  }
   head_pose.landmark_points = DetectorLandmarkPoints(model, options.landmark_embedding);
   HeadPoseResult result;
   HF_RETURN_IF_ERROR(EstimateHeadPoseCameras(model, landmarks, cam.width, cam.height, principal, head_pose, &result));

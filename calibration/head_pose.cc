@@ -14,12 +14,20 @@ namespace headforge {
 
 Status HeadPoseOptions::Check() const {
   if (focal < 0) return Status::InvalidArgument("head-pose focal must be >= 0 (0 estimates it)");
+  if (!(fov_deg >= 0 && fov_deg < 180))
+    return Status::InvalidArgument("--fov must be a horizontal field of view in degrees, between 0 and 180");
+  if (focal > 0 && fov_deg > 0) return Status::InvalidArgument("give --focal or --fov, not both");
   if (!(robust_px > 0)) return Status::InvalidArgument("head-pose robust scale must be positive");
   if (jaw_weight < 0 || smoothness < 0) return Status::InvalidArgument("head-pose weights must be >= 0");
   if (refine != "face-model" && refine != "off")
     return Status::InvalidArgument("head-pose refine must be face-model or off");
   if (refine_rounds < 1) return Status::InvalidArgument("head-pose refine rounds must be at least 1");
   return Status::Ok();
+}
+
+double FocalFromFov(double fov_deg, int source_width, double crop_scale) {
+  constexpr double kPi = 3.14159265358979323846;
+  return 0.5 * source_width / std::tan(0.5 * fov_deg * kPi / 180.0) * crop_scale;
 }
 
 namespace {

@@ -17,6 +17,9 @@ namespace headforge {
 
 struct HeadPoseOptions {
   double focal = 0.0;            // pixels; 0 estimates it over the sequence
+  // The source video's horizontal field of view in degrees, where the user
+  // knows the lens (0: unknown); sets `focal` through the crop. Not with focal.
+  double fov_deg = 0.0;
   double robust_px = 3.0;        // Huber loss scale on landmark residuals
   double jaw_weight = 0.3;       // weight of the jaw contour (0-16): detectors follow the silhouette
   double smoothness = 1.0;       // weight of the temporal smoothness term (0: none)
@@ -31,7 +34,14 @@ struct HeadPoseOptions {
   // landmark_embedding.h); empty: the model's landmark vertices.
   std::vector<Eigen::Vector3d> landmark_points;
   Status Check() const;
+  // True when the focal length is given (focal or fov_deg), not estimated.
+  bool FocalGiven() const { return focal > 0 || fov_deg > 0; }
 };
+
+// The focal length in frame pixels of a lens with horizontal field of view
+// `fov_deg` over a source `source_width` pixels wide, cropped and scaled by
+// `crop_scale` (frame pixels per source pixel).
+double FocalFromFov(double fov_deg, int source_width, double crop_scale);
 
 struct HeadPoseResult {
   double focal = 0.0;

@@ -436,7 +436,8 @@ Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCaptu
                           int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary,
                           bool* applied) {
   if (applied) *applied = false;
-  if (summary->mode != "head-pose" || calibrate.head_pose.refine != "face-model" || calibrate.head_pose.focal > 0)
+  if (summary->mode != "head-pose" || calibrate.head_pose.refine != "face-model" ||
+      calibrate.head_pose.FocalGiven())
     return Status::Ok();
   TrackOptions fit;
   fit.threads = threads > 0 ? threads : HardwareThreads();

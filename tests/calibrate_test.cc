@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
+#include <cmath>
 #include <cstring>
 #include <map>
 #include <random>
@@ -362,6 +363,39 @@ TEST(Calibrate, HeadPoseCamerasOnAGridClipReprojectTheLandmarks) {
   EXPECT_DOUBLE_EQ(aligned.head_from_world.scale, 1.0);
   EXPECT_GT(aligned.median_mm, 0.0);
   EXPECT_LT(aligned.median_mm, 10.0);
+}
+
+// A user who knows the lens gives its field of view: the focal length is
+// set from it through the crop (and the estimate within 10% of it, for the
+// field of view the estimate itself implies).
+TEST(Calibrate, AKnownFieldOfViewSetsTheFocalLength) {
+  const fs::path dir = Scratch("grid_fov");
+  IngestOptions ingest;
+  ingest.inputs = {(kData / "video" / "grid" / "lbax4n.mpg").string()};
+  ingest.max_frames = 20;
+  ResolveIngestDefaults(DefaultDataDir(), &ingest);
+  NullProgress progress;
+  IngestSummary summary;
+  ASSERT_TRUE(RunIngest(ingest, dir / "workspace", 2, &progress, &summary).ok());
+  IngestedCapture capture;
+  ASSERT_TRUE(ReadIngestedCapture(dir / "workspace", &capture).ok());
+  const IngestedCamera& cam = capture.cameras[0];
+  CalibrateOptions options;
+  options.mode = "head-pose";
+  options.head_pose.fov_deg = 50.0;
+  CameraSet cameras;
+  CalibrateSummary result;
+  ASSERT_TRUE(RunCalibrate(options, capture, Model(), dir / "fov", &progress, &cameras, &result).ok());
+  // 50 degrees over the 360 source pixels: 386 px, times the crop's scale.
+  const double expected = 180.0 / std::tan(25.0 * 3.14159265358979323846 / 180.0) * cam.crop_scale;
+  EXPECT_NEAR(result.focal, expected, 1e-6 * expected);
+  EXPECT_NEAR(cameras.cameras[0].fx, expected, 1e-6 * expected);
+  EXPECT_LT(result.reprojection_source_px, 4.0);
+  options.head_pose.focal = 900;  // both: refused
+  EXPECT_FALSE(options.Check().ok());
+  options.head_pose.focal = 0;
+  options.head_pose.fov_deg = 180;
+  EXPECT_FALSE(options.Check().ok());
 }
 
 TEST(Calibrate, AutoModeFallsBackToHeadPoseWhenColmapFails) {

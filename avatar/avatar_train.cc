@@ -7,6 +7,7 @@
 #include "avatar/train/dataset_pack.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/loop.h"
+#include "core/camera_set.h"
 #include "core/log.h"
 #include "core/paths.h"
 
@@ -65,7 +66,9 @@ const GanPreset kGanPresets[] = {
 void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.model", &t->model,
          "Avatar model: gaussian-style (Gaussians driven by the tracked expressions) or gan-avatar (a 3D GAN of the "
-         "subject trained on frames and cameras alone, driven through an expression mapping).",
+         "subject trained on frames and cameras alone, driven through an expression mapping); the train stage's "
+         "auto chooses gan-avatar for several cameras or views spread 120 degrees or more round the head (a 360-degree "
+         "or multi-view capture), else gaussian-style.",
          "model");
   o->Add("train.preset", &t->preset,
          "draft (2 CPU cores, 256 px, within 15 min), standard (one GPU, 512 px), high (the paper's scale); it sets "
@@ -246,6 +249,27 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* t) {
   fill("train.decoder_steps", &t->decoder_steps, preset->decoder_steps);
   fill("train.prior_steps", &t->prior_steps, preset->prior_steps);
   fill("train.pti_steps", &t->pti_steps, preset->pti_steps);
+  return Status::Ok();
+}
+
+Status ChooseModel(const fs::path& workspace, std::string* model, std::string* why) {
+  CameraSet cameras;
+  HF_RETURN_IF_ERROR(CameraSet::Read(workspace / "cameras_head.json", &cameras)
+                         .WithContext("train: --model auto reads the aligned cameras (run headforge align)"));
+  const double spread = cameras.AzimuthSpreadDeg();
+  char text[160];
+  if (cameras.cameras.size() > 1) {
+    std::snprintf(text, sizeof(text), "%zu cameras: a multi-view capture", cameras.cameras.size());
+    *model = "gan-avatar";
+  } else if (spread >= kAutoGanSpreadDeg) {
+    std::snprintf(text, sizeof(text), "one camera whose views spread %.0f deg round the head", spread);
+    *model = "gan-avatar";
+  } else {
+    std::snprintf(text, sizeof(text), "one camera, its views within %.0f deg of one another (%s cameras)", spread,
+                  cameras.mode.c_str());
+    *model = "gaussian-style";
+  }
+  *why = text;
   return Status::Ok();
 }
 

@@ -108,6 +108,14 @@ void AddTrainOptions(OptionSet* options, TrainOptions* train);
 // Gives the preset's values to the options `parsed` says nobody set.
 Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* train);
 
+// The model `--model auto` (the train stage's default) trains on an aligned
+// workspace: gan-avatar when its cameras are several, or its views spread
+// kAutoGanSpreadDeg or more round the head (a 360-degree or multi-view
+// capture), else gaussian-style (one fixed camera, or one that moves a
+// little); `why` says which in a few words.
+constexpr double kAutoGanSpreadDeg = 120.0;
+Status ChooseModel(const fs::path& workspace, std::string* model, std::string* why);
+
 struct TrainSummary {
   int steps = 0, resumed_from = 0;
   double seconds = 0;           // training time, over every attempt

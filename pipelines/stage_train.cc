@@ -1,6 +1,8 @@
 // The train stage's job: the avatar model trained on the tracked workspace,
-// into models/<model>/.
+// into models/<model>/. Its --model defaults to auto: the model is chosen
+// from the aligned cameras when the stage runs (ChooseModel), and said.
 #include "avatar/avatar_train.h"
+#include "core/log.h"
 #include "pipelines/stage_jobs.h"
 
 namespace headforge {
@@ -8,24 +10,57 @@ namespace {
 
 class TrainJob : public StageJob {
  public:
+  TrainJob() { options_.model = "auto"; }
   void AddOptions(OptionSet* options) override { AddTrainOptions(options, &options_); }
-  void Resolve(const StageSettings&, const OptionSet& parsed) override { preset_ = ApplyTrainPreset(parsed, &options_); }
+  void Resolve(const StageSettings&, const OptionSet& parsed) override {
+    // Each model's preset differs: resolve both now, while `parsed` says
+    // which options were given, and pick one when the cameras are known.
+    for (const char* model : {"gaussian-style", "gan-avatar"}) {
+      if (options_.model != "auto" && options_.model != model) continue;
+      TrainOptions resolved = options_;
+      resolved.model = model;
+      if (Status s = ApplyTrainPreset(parsed, &resolved); !s.ok() && preset_.ok()) preset_ = s;
+      resolved_.push_back(resolved);
+    }
+  }
   Status Check() const override {
     HF_RETURN_IF_ERROR(preset_);
-    return options_.Check();
+    if (resolved_.empty()) return options_.Check();  // an unknown model: says which ones there are
+    // With auto, options only one model takes (a render size for the
+    // gan-avatar's volume) are fine until the model is chosen; Run checks
+    // the chosen one's again.
+    Status first;
+    for (const TrainOptions& t : resolved_) {
+      const Status s = t.Check();
+      if (s.ok()) return s;
+      if (first.ok()) first = s;
+    }
+    return options_.model == "auto" ? first.WithContext("--model auto: no model takes these options") : first;
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
-    const std::string folder = options_.model == "gan-avatar" ? "gan_avatar" : "gaussian_style";
+    std::string model = options_.model, why = "as asked";
+    if (model == "auto") HF_RETURN_IF_ERROR(ChooseModel(env.workspace->root(), &model, &why));
+    const TrainOptions* options = nullptr;
+    for (const TrainOptions& t : resolved_)
+      if (t.model == model) options = &t;
+    if (!options) return Status::Internal("train: no options resolved for " + model);
+    if (Status s = options->Check(); !s.ok())
+      return s.WithContext("--model auto chose " + model + " (" + why + "); give --model to choose");
+    HF_LOG(Info) << "train: " << model << " (" << (options_.model == "auto" ? "--model auto: " : "") << why
+                 << (options_.model == "auto" ? "; --model gaussian-style or gan-avatar chooses" : "") << ")";
+    const std::string folder = model == "gan-avatar" ? "gan_avatar" : "gaussian_style";
     TrainSummary summary;
-    HF_RETURN_IF_ERROR(RunTrain(options_, env.workspace->root(), env.settings->face_model,
+    HF_RETURN_IF_ERROR(RunTrain(*options, env.workspace->root(), env.settings->face_model,
                                 context.staging / "models" / folder, env.progress, &summary));
     result->outputs = {"models/" + folder};
-    result->message = options_.model + " (" + options_.preset + "): " + summary.OneLine();
+    result->message = model + " (" + options->preset + (options_.model == "auto" ? ", auto: " + why : "") +
+                      "): " + summary.OneLine();
     return Status::Ok();
   }
 
  private:
   TrainOptions options_;
+  std::vector<TrainOptions> resolved_;  // per model that may run
   Status preset_;
 };
 

@@ -17,6 +17,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "avatar/avatar_train.h"
+#include "core/camera_set.h"
 #include "core/face_model.h"
 #include "core/fs.h"
 #include "core/json_io.h"
@@ -146,8 +148,11 @@ TEST_F(TrainStage, RunChainsTrainAfterTrackAndSkipsItWhenNothingChanged) {
   ASSERT_EQ(first.code, 0) << first.err;
   EXPECT_NE(first.err.find("track: up to date"), std::string::npos) << first.err;
   EXPECT_TRUE(fs::exists(ws / kModelDir / "model.pt"));
+  // --model auto chose the gaussian-style model for the one fixed camera, and said so.
+  EXPECT_NE(first.err.find("train: gaussian-style (--model auto: one camera"), std::string::npos) << first.err;
   const Result status = Headforge({"status", ws.string()});
   EXPECT_NE(status.out.find("train      done"), std::string::npos) << status.out;
+  EXPECT_NE(status.out.find("auto: one camera"), std::string::npos) << status.out;
 
   const auto trained_at = fs::last_write_time(ws / kModelDir / "model.pt");
   const Result again = Headforge(args);
@@ -704,6 +709,67 @@ TEST_F(DecoderStage, APackTrainedByHeadforgeTrainGivesTheSameModelAsTheTrainStag
                               (ws / "renders").string()});
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(fs::exists(ws / "renders" / "frame_000110.png"));
+}
+
+// --model auto: the model follows from the aligned cameras.
+TEST(ModelChoice, OneFixedCameraGetsGaussianStyleAndAllRoundOrSeveralGetGanAvatar) {
+  const fs::path dir = fs::temp_directory_path() / "hf_model_choice";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  // Cameras on a circle of 1 m round the head's +y axis, looking at it, at
+  // the azimuths given (degrees), each its own camera or all one camera.
+  auto write = [&](const std::vector<double>& azimuths, bool one_camera, const std::string& mode) {
+    CameraSet set;
+    set.mode = mode;
+    set.frame = "head";
+    for (size_t i = 0; i < azimuths.size(); ++i) {
+      const double a = azimuths[i] * 3.14159265358979323846 / 180.0;
+      const Eigen::Vector3d centre(std::sin(a), 0.0, std::cos(a));
+      const Eigen::Vector3d z = -centre, y(0, -1, 0), x = y.cross(z);
+      Eigen::Matrix3d r;
+      r.row(0) = x;
+      r.row(1) = y;
+      r.row(2) = z;
+      CameraView v;
+      v.camera = one_camera ? "cam0" : "cam" + std::to_string(i);
+      v.frame = one_camera ? int(i) : 0;
+      v.registered = true;
+      v.cam_from_world.linear() = r;
+      v.cam_from_world.translation() = -r * centre;
+      set.views.push_back(v);
+      if (!one_camera || i == 0) {
+        CameraIntrinsics in;
+        in.name = v.camera;
+        in.model = "PINHOLE";
+        in.width = in.height = 256;
+        in.fx = in.fy = 300;
+        in.cx = in.cy = 127.5;
+        set.cameras.push_back(in);
+      }
+    }
+    ASSERT_TRUE(set.Write(dir / "cameras_head.json").ok());
+  };
+  std::string model, why;
+  write({0, 2, -3, 5, 1}, true, "head-pose");  // a fixed camera, the head turning a little
+  ASSERT_TRUE(ChooseModel(dir, &model, &why).ok());
+  EXPECT_EQ(model, "gaussian-style") << why;
+  std::vector<double> ring;
+  for (int a = 0; a < 360; a += 20) ring.push_back(a);
+  write(ring, true, "colmap");  // one camera walked round the head
+  ASSERT_TRUE(ChooseModel(dir, &model, &why).ok());
+  EXPECT_EQ(model, "gan-avatar") << why;
+  EXPECT_NE(why.find("round the head"), std::string::npos) << why;
+  write({0, 10, 20, 30, 40, 50, 60, 70, 80, 90}, true, "colmap");  // a quarter of the way round
+  ASSERT_TRUE(ChooseModel(dir, &model, &why).ok());
+  EXPECT_EQ(model, "gaussian-style") << why;
+  write({-30, 30}, false, "rig");  // two cameras
+  ASSERT_TRUE(ChooseModel(dir, &model, &why).ok());
+  EXPECT_EQ(model, "gan-avatar") << why;
+  EXPECT_NE(why.find("2 cameras"), std::string::npos) << why;
+  fs::remove(dir / "cameras_head.json");
+  const Status missing = ChooseModel(dir, &model, &why);
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.message().find("headforge align"), std::string::npos) << missing.message();
 }
 
 TEST(PackBadInput, WhatCannotBePackedOrTrainedSaysWhy) {

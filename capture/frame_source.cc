@@ -65,7 +65,11 @@ std::vector<std::string> StreamKinds(const fs::path& path) {
 std::vector<double> PacketTimes(const fs::path& path) {
   std::vector<double> times;
   for (const std::string& line :
-       ProbeLines({"-select_streams", "v:0", "-show_entries", "packet=pts_time", "-of", "csv=p=0"}, path)) {
+       ProbeLines({"-select_streams", "v:0", "-show_entries", "packet=pts_time,flags", "-of", "csv=p=0"}, path)) {
+    // "0.040000,K__": packets flagged D (discarded: an edit list cut them)
+    // never become frames.
+    const size_t comma = line.find(',');
+    if (comma != std::string::npos && line.find('D', comma) != std::string::npos) continue;
     char* end = nullptr;
     const double t = std::strtod(line.c_str(), &end);
     if (end == line.c_str() || !std::isfinite(t)) return {};  // "N/A"
@@ -197,12 +201,14 @@ void FrameSource::SetTimestamps(std::vector<double> times) {
   if (!(short_interval_ > 0.0) || !(times.back() > 0.0)) return;  // repeated timestamps: not to be trusted
   timestamps_ = std::move(times);
   mean_fps_ = (timestamps_.size() - 1) / timestamps_.back();
-  // Rounding of a constant rate to the container's time base stays far below this.
-  variable_rate_ = long_interval_ > 1.25 * short_interval_;
+  // A phone's jitter round a constant rate (33 +- 5 ms) stays below this.
+  variable_rate_ = long_interval_ > 1.5 * short_interval_;
 }
 
 double FrameSource::TimeOf(int64_t index) const {
-  if (index >= 0 && static_cast<size_t>(index) < timestamps_.size()) return timestamps_[index];
+  // A constant rate is timed by index: the packets need not map one to one
+  // onto the frames OpenCV decodes, and only a variable rate needs them.
+  if (variable_rate_ && index >= 0 && static_cast<size_t>(index) < timestamps_.size()) return timestamps_[index];
   return fps_ > 0.0 ? index / fps_ : 0.0;
 }
 

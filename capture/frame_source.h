@@ -39,8 +39,8 @@ class FrameSource {
   // Source file of frame `index` for image folders ("" for videos).
   virtual std::string FrameName(int64_t index) const { return ""; }
 
-  // Presentation time of frame `index` in seconds from the first frame: the
-  // container's timestamps where ffprobe gives them, else index / fps().
+  // Presentation time of frame `index` in seconds from the first frame: for
+  // a variable frame rate the container's timestamps, else index / fps().
   double TimeOf(int64_t index) const;
   // True when the container's frame intervals vary (a phone's variable frame
   // rate): frames are then sampled by their timestamps, at mean_fps() or less.

@@ -60,7 +60,9 @@ Status IngestOptions::Check() const {
 
 void AddIngestOptions(OptionSet* o, IngestOptions* in) {
   o->Add("ingest.video", &in->inputs, "Video file or image folder, one per camera.", "video");
-  o->Add("ingest.fps", &in->fps, "Frames per second to sample; 0 keeps every source frame.", "fps");
+  o->Add("ingest.fps", &in->fps,
+         "Frames per second to sample; 0 keeps every source frame (a variable frame rate: sampled at its mean rate).",
+         "fps");
   o->Add("ingest.max_frames", &in->max_frames, "Most frames to sample; 0 for no bound.",
          "max-frames");
   o->Add("ingest.start", &in->start, "Start of the time range to sample, seconds.", "start");
@@ -362,8 +364,15 @@ FaceChoice SelectFaces(const std::vector<const FrameAnalysis*>& frames) {
     std::sort(candidates.begin(), candidates.end(),
               [&](auto* a, auto* b) { return weight(a) > weight(b); });
     std::vector<bool> continued(tracks.size(), false);
+    std::vector<cv::Rect2f> taken;  // this frame's faces so far
     for (const FaceCandidate* c : candidates) {
       const cv::Rect2f box = LandmarkBounds(c->landmarks);
+      // A second detection of a face already taken (the detector's
+      // suppression lets some through) is not another face.
+      bool duplicate = false;
+      for (const cv::Rect2f& t : taken) duplicate = duplicate || Iou(box, t) > 0.5f;
+      if (duplicate) continue;
+      taken.push_back(box);
       int best = -1;
       float best_overlap = kMinOverlap;
       for (size_t t = 0; t < tracks.size(); ++t) {

@@ -18,6 +18,7 @@
 #include <Eigen/Geometry>
 
 #include "avatar/gan_avatar/avatar_io.h"
+#include "avatar/model_folder.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/device.h"
@@ -58,11 +59,9 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
   DatasetOptions loading;
   loading.images = options.side_by_side;
   AvatarDataset own, drive;
-  fs::path model_dir = options.model.empty() ? workspace / "models" / "gaussian_style" : fs::path(options.model);
-  std::error_code ec;
-  if (options.model.empty() && !fs::exists(model_dir / "config.json", ec) &&
-      IsGanAvatarFolder(workspace / "models" / "gan_avatar"))
-    model_dir = workspace / "models" / "gan_avatar";
+  // Not told: the model trained last.
+  fs::path model_dir = options.model.empty() ? LatestModelFolder(workspace) : fs::path(options.model);
+  if (model_dir.empty()) model_dir = workspace / "models" / "gaussian_style";
   // What draws one image: (condition [E + 9], camera) -> [3, H, W] on the CPU.
   std::function<torch::Tensor(const torch::Tensor&, const SplatCamera&)> draw;
   if (IsGanAvatarFolder(model_dir)) {

@@ -8,6 +8,7 @@
 
 #include "avatar/avatar_export.h"
 #include "avatar/avatar_render.h"
+#include "avatar/model_folder.h"
 #include "core/camera_set.h"
 #include "core/face_model.h"
 #include "core/json_io.h"
@@ -128,7 +129,9 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
   const fs::path gaussian_dir = workspace / "models" / "gaussian_style", gan_dir = workspace / "models" / "gan_avatar";
   std::error_code ec;
   const bool gaussian_trained = fs::exists(gaussian_dir / "config.json", ec), gan_trained = IsTrainedGan(gan_dir);
-  const bool gan = options.model == "gan-avatar" || (options.model == "auto" && !gaussian_trained && gan_trained);
+  // auto: the model trained last (a workspace may hold both).
+  const bool gan = options.model == "gan-avatar" ||
+                   (options.model == "auto" && gan_trained && LatestModelFolder(workspace) == gan_dir);
   const fs::path model_dir = gan ? gan_dir : gaussian_dir;
   const bool trained = gan ? gan_trained : gaussian_trained;
   if (gan && Wants(options, "gaussians")) {

@@ -10,6 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "avatar/model_folder.h"
 #include "capture/capture_io.h"
 #include "core/camera_set.h"
 #include "core/json_io.h"
@@ -139,14 +140,11 @@ Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const Rep
     data["tracking"] = {{"residual", residual}, {"curves", curves}};
   }
   // Training: the loss and the held-out PSNR against wall time.
-  // The gaussian-style model's when it is trained, else the gan-avatar model's.
-  fs::path model = workspace / "models" / "gaussian_style";
+  // The model trained last (the one export takes).
+  const fs::path latest = LatestModelFolder(workspace);
+  const fs::path model = latest.empty() ? workspace / "models" / "gaussian_style" : latest;
   nlohmann::json eval;
-  bool trained = ReadJson(model / "eval.json", &eval).ok();
-  if (!trained) {
-    model = workspace / "models" / "gan_avatar";
-    trained = ReadJson(model / "eval.json", &eval).ok();
-  }
+  const bool trained = ReadJson(model / "eval.json", &eval).ok();
   if (trained) {
     nlohmann::json loss = nlohmann::json::array(), held = nlohmann::json::array();
     for (const nlohmann::json& line : JsonLines(model / "stats.jsonl")) {

@@ -18,6 +18,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "avatar/avatar_train.h"
+#include "avatar/model_folder.h"
 #include "core/camera_set.h"
 #include "core/face_model.h"
 #include "core/fs.h"
@@ -770,6 +771,26 @@ TEST(ModelChoice, OneFixedCameraGetsGaussianStyleAndAllRoundOrSeveralGetGanAvata
   const Status missing = ChooseModel(dir, &model, &why);
   ASSERT_FALSE(missing.ok());
   EXPECT_NE(missing.message().find("headforge align"), std::string::npos) << missing.message();
+}
+
+// A workspace holding both models (trained with one, then with --model auto
+// choosing the other): export, the report and render take the one trained last.
+TEST(ModelChoice, TheModelTrainedLastIsTheOneExportedAndRendered) {
+  const fs::path ws = fs::temp_directory_path() / "hf_latest_model";
+  fs::remove_all(ws);
+  EXPECT_TRUE(LatestModelFolder(ws).empty());
+  const fs::path gaussian = ws / "models" / "gaussian_style", gan = ws / "models" / "gan_avatar";
+  fs::create_directories(gaussian);
+  fs::create_directories(gan);
+  ASSERT_TRUE(WriteFileAtomic(gaussian / "config.json", "{}").ok());
+  EXPECT_EQ(LatestModelFolder(ws), gaussian);
+  ASSERT_TRUE(WriteFileAtomic(gan / "config.json", "{}").ok());
+  const auto now = fs::file_time_type::clock::now();
+  fs::last_write_time(gaussian / "config.json", now - std::chrono::hours(1));
+  fs::last_write_time(gan / "config.json", now);
+  EXPECT_EQ(LatestModelFolder(ws), gan);
+  fs::last_write_time(gaussian / "config.json", now + std::chrono::seconds(1));
+  EXPECT_EQ(LatestModelFolder(ws), gaussian);
 }
 
 TEST(PackBadInput, WhatCannotBePackedOrTrainedSaysWhy) {

@@ -116,8 +116,13 @@ TEST(KillAnywhere, EveryStageOfAGridRunResumesToTheSameOutputs) {
     ASSERT_TRUE(KillInside(args, ws, stage, delay, log))
         << "the run ended before it was killed in " << stage << ":\n" << Slurp(log);
     std::printf("killed %lld ms into %s\n", static_cast<long long>(delay.count()), stage);
+    // Interrupted, unless the kill came between one stage's end and the next's start.
     const Result status = Headforge({"status", ws.string()});
-    EXPECT_NE(status.out.find("interrupted"), std::string::npos) << stage << "\n" << status.out;
+    nlohmann::json after;
+    ASSERT_TRUE(ReadJson(ws / "workspace.json", &after).ok());
+    bool done = false;
+    for (const auto& s : after["stages"]) done = done || (s["name"] == stage && s["status"] == "done");
+    EXPECT_TRUE(done || status.out.find("interrupted") != std::string::npos) << stage << "\n" << status.out;
   }
   const Result last = Headforge(args);
   ASSERT_EQ(last.code, 0) << last.err;
@@ -178,8 +183,9 @@ TEST(KillAnywhere, CalibrateKilledWhileColmapRunsLeavesNoColmapBehindAndResumes)
   const std::vector<std::string> args = {"run", "--video", inputs[0], "--until", "calibrate", "--calibrate.mode",
                                          "colmap", "--workspace", ws.string()};
   std::mt19937 rng(Seed());
-  // Killed while COLMAP runs: at a random moment after its first program starts.
-  const auto delay = std::chrono::milliseconds(std::uniform_int_distribution<int>(0, 4000)(rng));
+  // Killed while COLMAP runs: at a random moment in the first second after its
+  // first program starts.
+  const auto delay = std::chrono::milliseconds(std::uniform_int_distribution<int>(0, 1000)(rng));
   const fs::path log = root / "killed.log";
   const pid_t pid = Spawn(args, log, log);
   std::chrono::steady_clock::time_point seen{};
@@ -191,7 +197,7 @@ TEST(KillAnywhere, CalibrateKilledWhileColmapRunsLeavesNoColmapBehindAndResumes)
     colmap = now;
     if (seen == std::chrono::steady_clock::time_point{}) seen = std::chrono::steady_clock::now();
     return std::chrono::steady_clock::now() - seen >= delay;
-  }, std::chrono::seconds(600), &status, std::chrono::milliseconds(1));
+  }, std::chrono::seconds(600), &status, std::chrono::milliseconds(10));
   ASSERT_TRUE(killed) << "the run ended before COLMAP ran long enough to be interrupted:\n" << Slurp(log);
   ASSERT_FALSE(colmap.empty());
   std::printf("killed %lld ms after COLMAP started (pid %d)\n", static_cast<long long>(delay.count()), colmap[0]);

@@ -31,9 +31,17 @@ Status RunProgram(const std::vector<std::string>& args, const fs::path& log, int
   envp.push_back(nullptr);
   // Everything the child needs is made before fork: between fork and exec it
   // calls only async-signal-safe functions.
-  const int log_fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  // Above 2, so that the child's dup2 onto 0, 1 and 2 never meets them (a
+  // caller with a closed stdin or stdout would have them handed out there).
+  auto above_stdio = [](int fd) {
+    if (fd < 0 || fd > 2) return fd;
+    const int moved = ::fcntl(fd, F_DUPFD_CLOEXEC, 3);
+    ::close(fd);
+    return moved;
+  };
+  const int log_fd = above_stdio(::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644));
   if (log_fd < 0) return Status::IoError("cannot write " + log.string() + ": " + std::strerror(errno));
-  const int null_fd = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+  const int null_fd = above_stdio(::open("/dev/null", O_RDONLY | O_CLOEXEC));
   int exec_error[2];  // the child writes exec's errno here when exec fails
   if (null_fd < 0 || ::pipe2(exec_error, O_CLOEXEC) != 0) {
     ::close(log_fd);

@@ -57,6 +57,26 @@ TEST(RunProgram, AMissingProgramIsNotFoundByName) {
   EXPECT_NE(status.message().find("hf-no-such-program"), std::string::npos);
 }
 
+// A caller whose stdin and stdout are closed: the log and /dev/null take fds 0
+// and 1, and the program still writes to the log.
+TEST(RunProgram, ACallerWithClosedStreamsStillGetsTheOutput) {
+  const fs::path log = Scratch("closed") / "log.txt";
+  const pid_t caller = ::fork();
+  ASSERT_GE(caller, 0);
+  if (caller == 0) {
+    ::close(0);
+    ::close(1);
+    int code = -2;
+    const bool ran = RunProgram({"sh", "-c", "echo to-out"}, log, &code).ok();
+    ::_exit(ran && code == 0 ? 0 : 1);
+  }
+  int status = 0;
+  ::waitpid(caller, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "the program failed with its output closed";
+  EXPECT_NE(Read(log).find("to-out"), std::string::npos) << Read(log);
+}
+
 // True when `pid` has ended (gone, or a zombie nobody has reaped yet).
 bool Ended(pid_t pid) {
   std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");

@@ -87,29 +87,12 @@ void SimulateAndIngest(const std::string& scene_text, const fs::path& dir, Inges
   }
 }
 
-const char* kSmallOrbit = R"(
-name = "small_orbit"
-fps = 25
-frames = 24
-seed = 2
-effects = []
-[subject]
-identity_seed = 21
-[appearance]
-texture_size = 512
-[background]
-type = "room"
-colour = [0.70, 0.65, 0.55]
-seed = 8
-[camera]
-rig = "orbit"
-radius = 0.8
-elevations = [0.0]
-[camera.intrinsics]
-width = 320
-height = 320
-fov_deg = 45.0
-)";
+// scenes/small_orbit.toml: 24 frames 15 degrees apart at 320 px.
+std::string SmallOrbit() {
+  std::string text;
+  EXPECT_TRUE(ReadFileToString(fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / "small_orbit.toml", &text).ok());
+  return text;
+}
 
 // Ingest's default crop keeps a moving camera's frames whole for COLMAP: it
 // crops around the head, sees the background move, and writes them again.
@@ -118,7 +101,7 @@ TEST(Calibrate, IngestKeepsAMovingCamerasFramesWhole) {
   IngestedCapture capture;
   nlohmann::json truth;
   IngestSummary summary;
-  SimulateAndIngest(kSmallOrbit, dir, &capture, &truth, {}, "auto", &summary);
+  SimulateAndIngest(SmallOrbit(), dir, &capture, &truth, {}, "auto", &summary);
   EXPECT_EQ(summary.crop, "none");
   ASSERT_EQ(capture.cameras.size(), 1u);
   EXPECT_EQ(capture.cameras[0].width, 320);
@@ -136,7 +119,7 @@ TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   const fs::path dir = Scratch("orbit");
   IngestedCapture capture;
   nlohmann::json truth;
-  std::string scene = kSmallOrbit;
+  std::string scene = SmallOrbit();
   scene.replace(scene.find("frames = 24"), 11, "frames = 36");
   SimulateAndIngest(scene.c_str(), dir, &capture, &truth);
   // Auto mode sees the camera move: frames a quarter of the orbit apart share
@@ -235,7 +218,7 @@ TEST(FacePoints, LieOnTheTrueFace) {
   const fs::path dir = Scratch("face_points");
   IngestedCapture capture;
   nlohmann::json truth;
-  SimulateAndIngest(kSmallOrbit, dir, &capture, &truth);
+  SimulateAndIngest(SmallOrbit(), dir, &capture, &truth);
   CameraSet cameras;
   cameras.cameras = {CameraIntrinsics::FromJson(truth["cameras"][0])};  // cam0, no distortion
   for (const auto& frame : truth["frames"]) {
@@ -288,7 +271,7 @@ TEST(Calibrate, SequentialMatchingThatBreaksFallsBackToEveryPair) {
   for (int i = 0; i < 12; ++i) order.insert(order.end(), {i, i + 12});  // 0, 12, 1, 13, ...: 180 deg jumps
   IngestedCapture capture;
   nlohmann::json truth;
-  SimulateAndIngest(kSmallOrbit, dir, &capture, &truth, order);
+  SimulateAndIngest(SmallOrbit(), dir, &capture, &truth, order);
   CalibrateOptions options;
   options.mode = "colmap";
   options.colmap.executable = DefaultColmapExecutable();
@@ -326,17 +309,23 @@ TEST(Calibrate, SequentialMatchingThatBreaksFallsBackToEveryPair) {
   }
 }
 
-TEST(Calibrate, HeadPoseCamerasOnAGridClipReprojectTheLandmarks) {
-  const fs::path dir = Scratch("grid");
+// The first `frames` frames of the GRID clip lbax4n ingested into dir/workspace.
+void IngestGridClip(const fs::path& dir, int frames, IngestedCapture* capture) {
   IngestOptions ingest;
   ingest.inputs = {(kData / "video" / "grid" / "lbax4n.mpg").string()};
-  ingest.max_frames = 40;
+  ingest.max_frames = frames;
   ResolveIngestDefaults(DefaultDataDir(), &ingest);
   NullProgress progress;
   IngestSummary summary;
   ASSERT_TRUE(RunIngest(ingest, dir / "workspace", 2, &progress, &summary).ok());
+  ASSERT_TRUE(ReadIngestedCapture(dir / "workspace", capture).ok());
+}
+
+TEST(Calibrate, HeadPoseCamerasOnAGridClipReprojectTheLandmarks) {
+  const fs::path dir = Scratch("grid");
   IngestedCapture capture;
-  ASSERT_TRUE(ReadIngestedCapture(dir / "workspace", &capture).ok());
+  ASSERT_NO_FATAL_FAILURE(IngestGridClip(dir, 40, &capture));
+  NullProgress progress;
   CalibrateOptions options;  // auto: a still background means a fixed camera
   CameraSet cameras;
   CalibrateSummary result;
@@ -366,19 +355,12 @@ TEST(Calibrate, HeadPoseCamerasOnAGridClipReprojectTheLandmarks) {
 }
 
 // A user who knows the lens gives its field of view: the focal length is
-// set from it through the crop (and the estimate within 10% of it, for the
-// field of view the estimate itself implies).
+// set from it through the crop.
 TEST(Calibrate, AKnownFieldOfViewSetsTheFocalLength) {
   const fs::path dir = Scratch("grid_fov");
-  IngestOptions ingest;
-  ingest.inputs = {(kData / "video" / "grid" / "lbax4n.mpg").string()};
-  ingest.max_frames = 20;
-  ResolveIngestDefaults(DefaultDataDir(), &ingest);
-  NullProgress progress;
-  IngestSummary summary;
-  ASSERT_TRUE(RunIngest(ingest, dir / "workspace", 2, &progress, &summary).ok());
   IngestedCapture capture;
-  ASSERT_TRUE(ReadIngestedCapture(dir / "workspace", &capture).ok());
+  ASSERT_NO_FATAL_FAILURE(IngestGridClip(dir, 20, &capture));
+  NullProgress progress;
   const IngestedCamera& cam = capture.cameras[0];
   CalibrateOptions options;
   options.mode = "head-pose";

@@ -144,38 +144,15 @@ TEST(KillAnywhere, EveryStageOfAGridRunResumesToTheSameOutputs) {
   EXPECT_NE(again.err.find("up to date"), std::string::npos) << again.err;
 }
 
-// A small orbit of a still head in a room: COLMAP calibrates it.
-const char* kOrbit = R"(
-name = "kill_orbit"
-fps = 25
-frames = 16
-seed = 2
-effects = []
-[subject]
-identity_seed = 21
-[appearance]
-texture_size = 512
-[background]
-type = "room"
-colour = [0.70, 0.65, 0.55]
-seed = 8
-[camera]
-rig = "orbit"
-radius = 0.8
-elevations = [0.0]
-[camera.intrinsics]
-width = 320
-height = 320
-fov_deg = 45.0
-)";
 
 TEST(KillAnywhere, CalibrateKilledWhileColmapRunsLeavesNoColmapBehindAndResumes) {
   const fs::path root = fs::temp_directory_path() / "hf_kill_anywhere_colmap";
   fs::remove_all(root);
   fs::create_directories(root);
-  ASSERT_TRUE(WriteFileAtomic(root / "orbit.toml", kOrbit).ok());
+  // The first 16 frames of the tests' small orbit (scenes/small_orbit.toml).
   const Result simulated =
-      Headforge({"simulate", "--scene", (root / "orbit.toml").string(), "--out", (root / "sim").string()});
+      Headforge({"simulate", "--scene", (fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / "small_orbit.toml").string(),
+                 "--frames", "16", "--out", (root / "sim").string()});
   ASSERT_EQ(simulated.code, 0) << simulated.err;
   const fs::path ws = root / "ws";
   const std::vector<std::string> inputs = SimulatedInputs(root / "sim");

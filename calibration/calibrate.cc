@@ -1,6 +1,7 @@
 #include "calibration/calibrate.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <map>
@@ -83,6 +84,13 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
          "Head-pose mode: the source video's horizontal field of view in degrees, for a known lens (a phone's main "
          "camera about 65-70, a webcam 60-80); sets the focal length instead of estimating it (0: estimate).",
          "fov");
+  o->Add("calibrate.head_pose.prior_fov", &c->head_pose.prior_fov_deg,
+         "Head-pose mode: an estimated focal length is held toward a lens of this horizontal field of view "
+         "(degrees, over the source video) where the landmarks leave it undetermined (a head that barely turns).",
+         "focal-prior-fov");
+  o->Add("calibrate.head_pose.prior_sigma", &c->head_pose.prior_sigma,
+         "Head-pose mode: the spread of that prior in log units (0.7: a factor of 2 either way); 0: no prior.",
+         "focal-prior-sigma");
   o->Add("calibrate.head_pose.smoothness", &c->head_pose.smoothness,
          "Head-pose mode: weight of temporal smoothness (0: none).", "smoothness");
   o->Add("calibrate.head_pose.robust_px", &c->head_pose.robust_px,
@@ -97,15 +105,30 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
          "head-pose-refine-rounds");
 }
 
+std::string FocalUncertaintyText(double log_sigma) {
+  if (!(log_sigma > 0)) return "";
+  char text[48];
+  std::snprintf(text, sizeof(text), " (+-%.1f%%)", 100 * (std::exp(log_sigma) - 1));
+  return text;
+}
+
 std::string CalibrateSummary::OneLine() const {
   char text[320];
   if (mode == "head-pose")
-    std::snprintf(text, sizeof(text), "head-pose: %d/%d frames, focal %.1f px, median landmark error %.2f px (%.2f source px)",
-                  registered, total, focal, reprojection_px, reprojection_source_px);
+    std::snprintf(text, sizeof(text),
+                  "head-pose: %d/%d frames, focal %.1f px%s, median landmark error %.2f px (%.2f source px)", registered,
+                  total, focal, FocalUncertaintyText(focal_log_sigma).c_str(), reprojection_px, reprojection_source_px);
   else
     std::snprintf(text, sizeof(text), "%s: %d/%d frames registered, reprojection %.2f px", mode.c_str(), registered,
                   total, reprojection_px);
   return std::string(text) + (reason.empty() ? "" : " (" + reason + ")");
+}
+
+double HeadPosePriorFocal(const HeadPoseOptions& options, const IngestedCapture& capture) {
+  if (!(options.prior_sigma > 0) || capture.cameras.empty()) return 0;
+  const IngestedCamera& cam = capture.cameras[0];
+  if (cam.source_width <= 0 || !(cam.crop_scale > 0)) return 0;
+  return FocalFromFov(options.prior_fov_deg, cam.source_width, cam.crop_scale);
 }
 
 namespace {
@@ -129,6 +152,7 @@ Status HeadPoseCameras(const CalibrateOptions& options, const IngestedCapture& c
                  << " source px: focal " << head_pose.focal << " frame px";
   }
   head_pose.landmark_points = DetectorLandmarkPoints(model, options.landmark_embedding);
+  head_pose.prior_focal = HeadPosePriorFocal(head_pose, capture);
   HeadPoseResult result;
   HF_RETURN_IF_ERROR(EstimateHeadPoseCameras(model, landmarks, cam.width, cam.height, principal, head_pose, &result));
   CameraSet set;
@@ -158,6 +182,7 @@ Status HeadPoseCameras(const CalibrateOptions& options, const IngestedCapture& c
   summary->registered = observed;
   summary->total = static_cast<int>(cam.frames.size());
   summary->focal = result.focal;
+  summary->focal_log_sigma = result.focal_log_sigma;
   summary->reprojection_px = result.median_px;
   summary->reprojection_source_px = result.median_px / cam.crop_scale;
   *cameras = std::move(set);

@@ -47,6 +47,7 @@ struct CalibrateSummary {
   double reprojection_px = 0.0;  // median landmark (head-pose) or mean SfM (colmap) reprojection error
   double reprojection_source_px = 0.0;  // the same in source-video pixels (head-pose)
   double focal = 0.0;     // head-pose: estimated focal length (frame pixels)
+  double focal_log_sigma = 0.0;  // head-pose: its standard deviation in log units (0: given, or not computed)
   // colmap: registered after sequential matching alone when every pair was
   // matched after it (ColmapOptions::exhaustive_fallback_max); -1 otherwise.
   int sequential_registered = -1;
@@ -58,6 +59,14 @@ struct CalibrateSummary {
 // Calibrates into `out_dir` (cameras.json, colmap/ when SfM ran).
 Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capture, const FaceModel& model,
                     const fs::path& out_dir, Progress* progress, CameraSet* cameras, CalibrateSummary* summary);
+
+// " (+-5.1%)" for a standard deviation of ln(focal) of 0.05; "" for 0.
+std::string FocalUncertaintyText(double log_sigma);
+
+// The focal length (frame pixels) at the centre of the head-pose prior:
+// options.prior_fov_deg over the capture's first camera, through its crop;
+// 0 when the prior is off or the capture has no camera.
+double HeadPosePriorFocal(const HeadPoseOptions& options, const IngestedCapture& capture);
 
 // Reads a rig file (JSON, or a COLMAP text model folder) into cameras for the
 // ingested views; intrinsics given in source pixels are mapped through ingest's crop.

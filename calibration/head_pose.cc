@@ -17,6 +17,8 @@ Status HeadPoseOptions::Check() const {
   if (!(fov_deg >= 0 && fov_deg < 180))
     return Status::InvalidArgument("--fov must be a horizontal field of view in degrees, between 0 and 180");
   if (focal > 0 && fov_deg > 0) return Status::InvalidArgument("give --focal or --fov, not both");
+  if (!(prior_fov_deg > 0 && prior_fov_deg < 180) || !(prior_sigma >= 0))
+    return Status::InvalidArgument("head-pose focal prior: the field of view must be in (0, 180) and sigma >= 0");
   if (!(robust_px > 0)) return Status::InvalidArgument("head-pose robust scale must be positive");
   if (jaw_weight < 0 || smoothness < 0) return Status::InvalidArgument("head-pose weights must be >= 0");
   if (refine != "face-model" && refine != "off")
@@ -150,7 +152,11 @@ Status EstimateHeadPoseCameras(const FaceModel& model, const std::vector<std::op
                                new ceres::HuberLoss(options.robust_px), &focal_param, poses[f].rotation,
                                poses[f].translation);
     }
-  if (options.focal > 0 || observed.size() < 2) problem.SetParameterBlockConstant(&focal_param);
+  const bool free_focal = options.focal <= 0 && observed.size() >= 2;
+  if (!free_focal) problem.SetParameterBlockConstant(&focal_param);
+  if (free_focal && options.prior_focal > 0 && options.prior_sigma > 0)
+    problem.AddResidualBlock(LogPriorCost::Create(options.prior_focal, options.robust_px / options.prior_sigma), nullptr,
+                             &focal_param);
   if (options.smoothness > 0)
     for (size_t a = 0; a + 1 < observed.size(); ++a) {
       const int f0 = observed[a], f1 = observed[a + 1];
@@ -170,6 +176,7 @@ Status EstimateHeadPoseCameras(const FaceModel& model, const std::vector<std::op
 
   HeadPoseResult out;
   out.focal = focal_param;
+  if (free_focal) out.focal_log_sigma = LogStandardDeviation(&problem, &focal_param, summary.final_cost);
   out.cam_from_head.resize(landmarks.size());
   out.observed.assign(landmarks.size(), false);
   out.rms_px.assign(landmarks.size(), 0.0);

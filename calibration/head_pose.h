@@ -20,6 +20,17 @@ struct HeadPoseOptions {
   // The source video's horizontal field of view in degrees, where the user
   // knows the lens (0: unknown); sets `focal` through the crop. Not with focal.
   double fov_deg = 0.0;
+  // A prior on an estimated focal length toward ordinary lenses: log-normal
+  // round a horizontal field of view of `prior_fov_deg` over the source video
+  // (60: phones and webcams), `prior_sigma` in log units (0.7: a factor of 2
+  // either way, about 32 to 98 degrees). Landmarks of a head that turns
+  // decide the focal length alone; where the head barely turns they leave it
+  // free and the prior holds it. prior_sigma 0: no prior.
+  double prior_fov_deg = 60.0;
+  double prior_sigma = 0.7;
+  // The prior's centre in frame pixels (FocalFromFov through ingest's crop),
+  // set by the caller; 0: no prior.
+  double prior_focal = 0.0;
   double robust_px = 3.0;        // Huber loss scale on landmark residuals
   double jaw_weight = 0.3;       // weight of the jaw contour (0-16): detectors follow the silhouette
   double smoothness = 1.0;       // weight of the temporal smoothness term (0: none)
@@ -45,6 +56,9 @@ double FocalFromFov(double fov_deg, int source_width, double crop_scale);
 
 struct HeadPoseResult {
   double focal = 0.0;
+  // The standard deviation of ln(focal) (0.05: about 5 %) from the fit's
+  // covariance; 0 when the focal length was given.
+  double focal_log_sigma = 0.0;
   std::vector<Eigen::Isometry3d> cam_from_head;  // per frame
   std::vector<bool> observed;                    // frame had landmarks (others are interpolated)
   std::vector<double> rms_px;                    // per observed frame

@@ -4,6 +4,10 @@
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
+#include <cmath>
+#include <utility>
+#include <vector>
+
 #include <Eigen/Core>
 
 namespace headforge {
@@ -131,5 +135,43 @@ struct PoseSmoothnessCost {
  private:
   double rotation_weight_, translation_weight_;
 };
+
+// A log-normal prior on a positive scale (a focal length, or a factor on
+// one): weight * ln(x / centre). With weight = sigma_px / sigma_log it is the
+// prior's share of a least-squares problem whose residuals are pixels of
+// noise sigma_px. Parameter: x[1].
+struct LogPriorCost {
+  LogPriorCost(double centre, double weight) : centre_(centre), weight_(weight) {}
+
+  template <typename T>
+  bool operator()(const T* x, T* residual) const {
+    residual[0] = T(weight_) * log(x[0] / T(centre_));
+    return true;
+  }
+
+  static ceres::CostFunction* Create(double centre, double weight) {
+    return new ceres::AutoDiffCostFunction<LogPriorCost, 1, 1>(new LogPriorCost(centre, weight));
+  }
+
+ private:
+  double centre_, weight_;
+};
+
+// The standard deviation of ln(x) for a solved problem's parameter x (one
+// value), from the inverse of J^T J at the solution, scaled by the residuals'
+// variance (final cost over the degrees of freedom); 0 when the problem has
+// no spare residuals or the covariance cannot be computed (a rank-deficient J).
+inline double LogStandardDeviation(ceres::Problem* problem, double* x, double final_cost) {
+  const int dof = problem->NumResiduals() - problem->NumParameters();
+  if (dof <= 0 || !(*x > 0)) return 0;
+  ceres::Covariance::Options options;
+  options.algorithm_type = ceres::SPARSE_QR;
+  ceres::Covariance covariance(options);
+  const std::vector<std::pair<const double*, const double*>> blocks = {{x, x}};
+  if (!covariance.Compute(blocks, problem)) return 0;
+  double variance = 0;
+  if (!covariance.GetCovarianceBlock(x, x, &variance) || !(variance >= 0)) return 0;
+  return std::sqrt(variance * 2 * final_cost / dof) / *x;
+}
 
 }  // namespace headforge

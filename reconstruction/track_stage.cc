@@ -383,7 +383,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
 
 Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capture, const TrackOptions& options,
                              const std::string& landmark_embedding, int max_rounds, double min_change,
-                             CameraSet* cameras, HeadPoseRefinement* result) {
+                             double prior_focal, CameraSet* cameras, HeadPoseRefinement* result) {
   if (cameras->mode != "head-pose" || cameras->frame != "head")
     return Status::InvalidArgument("the face-model refinement applies to head-pose cameras");
   if (capture.cameras.size() != 1 || cameras->cameras.size() != 1)
@@ -405,8 +405,12 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
     std::vector<TrackingView> views;
     std::vector<std::pair<int, int>> view_source;
     HF_RETURN_IF_ERROR(BuildTrackingViews(capture, *cameras, &views, &view_source));
+    fit.focal_prior_scale = prior_focal > 0 ? prior_focal / in.fx : 0;
+    // The uncertainty of the last round's estimate; which round is last shows only after it.
+    fit.focal_uncertainty = true;
     TrackResult tracked;
     HF_RETURN_IF_ERROR(TrackSequence(basis, views, capture.num_frames(), fit, &tracked));
+    out.focal_log_sigma = tracked.focal_log_sigma;
     in.fx *= tracked.focal_scale;
     in.fy *= tracked.focal_scale;
     // The camera dollies with the zoom (tracking_costs.h), and the fitted
@@ -441,18 +445,28 @@ Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCaptu
     return Status::Ok();
   TrackOptions fit;
   fit.threads = threads > 0 ? threads : HardwareThreads();
+  fit.focal_prior_sigma = calibrate.head_pose.prior_sigma;
+  const double prior_focal = HeadPosePriorFocal(calibrate.head_pose, capture);
   progress->Start("calibrate: refining with the face model", 0);
   HeadPoseRefinement refined;
   HF_RETURN_IF_ERROR(RefineHeadPoseCameras(model, capture, fit, calibrate.landmark_embedding,
-                                           calibrate.head_pose.refine_rounds, 0.01, cameras, &refined));
+                                           calibrate.head_pose.refine_rounds, 0.01, prior_focal, cameras, &refined));
   progress->Finish();
   if (!refined.settled)
     HF_LOG(Warning) << "calibrate: the focal length was still moving after " << refined.rounds
                     << " rounds of the face-model refinement (--head-pose-refine-rounds)";
   HF_LOG(Info) << "calibrate: the face model's identity and expressions move the focal length from "
-               << refined.focal_before << " to " << refined.focal_after << " px in " << refined.rounds
+               << refined.focal_before << " to " << refined.focal_after << " px"
+               << FocalUncertaintyText(refined.focal_log_sigma) << " in " << refined.rounds
                << " round(s) (landmark residual " << refined.median_residual_px << " px, " << refined.seconds << " s)";
   summary->focal = refined.focal_after;
+  summary->focal_log_sigma = refined.focal_log_sigma;
+  // A standard deviation of 15 % or more: the video does not fix the lens.
+  if (refined.focal_log_sigma > 0.14)
+    HF_LOG(Warning) << "calibrate: this video leaves the focal length poorly determined (" << refined.focal_after << " px"
+                    << FocalUncertaintyText(refined.focal_log_sigma)
+                    << "; the head barely turns or moves toward the camera): if you know the lens, give --fov DEG "
+                       "(the video's horizontal field of view) or --focal PX";
   summary->reprojection_px = refined.median_residual_px;
   if (!capture.cameras.empty() && capture.cameras[0].crop_scale > 0)
     summary->reprojection_source_px = refined.median_residual_px / capture.cameras[0].crop_scale;

@@ -66,6 +66,7 @@ struct HeadPoseRefinement {
   double median_residual_px = 0;             // landmark residual of the fit
   double seconds = 0;
   std::string solver_report;                 // Ceres' one-line summary
+  double focal_log_sigma = 0;                // the last fit's standard deviation of ln(focal); 0: not computed
 };
 
 // Head-pose cameras refined with the whole face model. Against the mean
@@ -79,10 +80,12 @@ struct HeadPoseRefinement {
 // fit stops in it, and a new fit started from the cameras it left (identity
 // and expressions from zero again) goes further along, so fits are repeated
 // until the focal length changes by less than `min_change` (relative) or
-// `max_rounds` have run.
+// `max_rounds` have run. Where the head barely turns the valley has no
+// floor; `prior_focal` (pixels; 0: none) holds the focal length near an
+// ordinary lens's there, with options.focal_prior_sigma (TrackOptions).
 Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capture, const TrackOptions& options,
                              const std::string& landmark_embedding, int max_rounds, double min_change,
-                             CameraSet* cameras, HeadPoseRefinement* result);
+                             double prior_focal, CameraSet* cameras, HeadPoseRefinement* result);
 
 // The calibrate stage's last step for head-pose cameras (calibrate's result
 // when it chose head-pose): RefineHeadPoseCameras as `calibrate.head_pose.refine`

@@ -176,6 +176,10 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   if (options.fit_focal) {
     problem.SetParameterLowerBound(&focal_scale, 0, 1.0 / options.max_focal_change);
     problem.SetParameterUpperBound(&focal_scale, 0, options.max_focal_change);
+    if (options.focal_prior_scale > 0 && options.focal_prior_sigma > 0)
+      problem.AddResidualBlock(LogPriorCost::Create(options.focal_prior_scale,
+                                                    options.robust_scale_px / options.focal_prior_sigma),
+                               nullptr, &focal_scale);
   } else {
     problem.SetParameterBlockConstant(&focal_scale);
   }
@@ -264,6 +268,8 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   out.dropped_views = out_dropped_views;
   if (!std::isfinite(focal_scale)) return Status::Internal("track: the focal length became non-finite");
   out.focal_scale = focal_scale;
+  if (options.fit_focal && options.focal_uncertainty)
+    out.focal_log_sigma = LogStandardDeviation(&problem, &focal_scale, summary.final_cost);
   out.identity = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
   out.iterations = static_cast<int>(summary.iterations.size());
   out.solver_report = summary.BriefReport();

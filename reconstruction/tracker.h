@@ -66,6 +66,14 @@ struct TrackOptions {
   // the head (head-pose cameras); only with the head's motion free.
   bool fit_focal = false;
   double max_focal_change = 3.0;
+  // With fit_focal: a log-normal prior on the factor, centred at
+  // `focal_prior_scale` (the prior's focal length over the cameras' current
+  // one; 0: no prior) with `focal_prior_sigma` in log units (weighted as
+  // residuals of robust_scale_px pixels); and whether to estimate the
+  // factor's uncertainty (TrackResult::focal_log_sigma).
+  double focal_prior_scale = 0.0;
+  double focal_prior_sigma = 0.7;
+  bool focal_uncertainty = false;
   // A frame that some camera sees within this yaw of frontal (degrees, with
   // the cameras' initial head pose) ignores its views beyond it.
   double max_fit_yaw_deg = 35.0;
@@ -97,6 +105,7 @@ struct TrackedFrame {
 struct TrackResult {
   Eigen::VectorXd identity;  // [K]
   double focal_scale = 1.0;  // factor on the cameras' focal lengths (1 unless fit_focal)
+  double focal_log_sigma = 0;  // its standard deviation in log units (TrackOptions::focal_uncertainty; else 0)
   std::vector<TrackedFrame> frames;
   double median_residual_px = 0;
   // Views dropped after a first fit because their landmarks disagreed with

@@ -476,6 +476,30 @@ TEST(Tracker, FocalLengthIsRecoveredWithTheWholeFaceModel) {
   EXPECT_FALSE(TrackSequence(Basis(), views, 60, options, &refused).ok());
 }
 
+// A head that holds still (only its expressions move) seen through a long
+// lens from afar, a broadcast close-up: the perspective across a face of
+// free identity hardly fixes the focal length there, the reported
+// uncertainty says so, and a prior toward an ordinary lens moves it there.
+TEST(Tracker, AStillHeadLeavesTheFocalLengthLooseAndThePriorPullsIt) {
+  TrackOptions options;
+  options.threads = 2;
+  options.fit_focal = true;
+  options.focal_uncertainty = true;
+  const Truth truth = MakeTruth(12, 0.0, 21);
+  std::vector<TrackingView> views = Observe(truth, {CameraAt(0, 3000, 1.8)}, 1.0, 22);
+  for (TrackingView& v : views) v.camera = CameraAt(0, 3900, 2.34);
+  TrackResult free, held;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 12, options, &free).ok());
+  options.focal_prior_scale = 1000.0 / 3900;  // centred on 1000 px
+  ASSERT_TRUE(TrackSequence(Basis(), views, 12, options, &held).ok());
+  std::printf("still head, true focal 3000 px: %.0f px (+-%.1f%%); with a prior at 1000 px: %.0f px (+-%.1f%%)\n",
+              3900 * free.focal_scale, 100 * free.focal_log_sigma, 3900 * held.focal_scale, 100 * held.focal_log_sigma);
+  // Loose: several percent (a turning head at 0.6 m: about 1 %, the test above).
+  EXPECT_GT(free.focal_log_sigma, 0.05);
+  EXPECT_LT(held.focal_scale, free.focal_scale);
+  EXPECT_LT(held.focal_log_sigma, free.focal_log_sigma);
+}
+
 TEST(Tracker, HeadHeldByTheCamerasStaysFixed) {
   // Head-pose calibration: each frame's camera carries the head's motion.
   Truth truth = MakeTruth(20, 1.0, 5);

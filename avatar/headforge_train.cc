@@ -2,6 +2,7 @@
 // (`headforge pack`), needing LibTorch alone, for a GPU machine that has
 // PyTorch but not the rest of HeadForge's stack. The output folder is what
 // `headforge train` writes into WORKSPACE/models/gaussian_style.
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -41,6 +42,7 @@ void PrintHelp() {
 
 int main(int argc, char** argv) {
   using namespace headforge;
+  std::signal(SIGXFSZ, SIG_IGN);  // a file-size limit fails the write (EFBIG), reported, not a kill
   std::string pack, out, level = "info";
   std::vector<std::string> settings;
   int threads = 0;

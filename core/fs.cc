@@ -16,6 +16,9 @@ namespace {
 std::string ErrnoText(int err) {
   if (err == ENOSPC) return "no space left on the device (free some disk space and run again)";
   if (err == EDQUOT) return "disk quota exceeded";
+  if (err == EFBIG)
+    return "the file would pass the largest size allowed (a file-size limit such as ulimit -f, or a full disk; "
+           "raise the limit or free space and run again)";
   if (err == EACCES || err == EPERM) return "permission denied";
   if (err == EROFS) return "read-only file system";
   return std::strerror(err);

@@ -292,6 +292,13 @@ Status RunStage(Workspace* workspace, const StageRun& run, const StageBody& body
     workspace->InterruptStage(stage, status.message(), seconds());
     return status.WithContext(stage);
   }
+  // A resumable stage that could not write (a full disk) keeps its staging
+  // and checkpoint, as an interruption does: with room again it resumes.
+  if (status.code() == Status::Code::kIoError && run.resumable) {
+    const std::string message = status.message() + "; the next run goes on from the stage's last checkpoint";
+    workspace->InterruptStage(stage, message, seconds());
+    return status.WithMessage(message).WithContext(stage);
+  }
   if (!status.ok()) {
     std::string message = status.message();
     workspace->FailStage(stage, &message, seconds());

@@ -3,6 +3,7 @@
 #include <opencv2/core/utility.hpp>
 
 #include <algorithm>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <iostream>
@@ -138,6 +139,10 @@ void PrintMainHelp() {
 
 int HeadForgeMain(int argc, char** argv) {
   std::vector<std::string> args(argv + 1, argv + argc);
+  // A file grown past a size limit (ulimit -f) fails its write with EFBIG,
+  // which is reported like a full disk, instead of killing the program with
+  // SIGXFSZ mid-stage; programs it starts (ffmpeg, COLMAP) inherit this.
+  std::signal(SIGXFSZ, SIG_IGN);
   if (args.empty() || args[0] == "--help" || args[0] == "-h" || args[0] == "help") {
     PrintMainHelp();
     return args.empty() ? kExitUsage : kExitOk;

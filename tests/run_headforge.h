@@ -74,6 +74,15 @@ inline Result Headforge(const std::vector<std::string>& args, const char* binary
   return r;
 }
 
+// headforge with `args` under a file-size limit of `kib` KiB (ulimit -f):
+// what a full disk does to the file being written.
+inline Result HeadforgeWithFileLimit(const std::vector<std::string>& args, int kib) {
+  std::vector<std::string> shell = {"-c", "ulimit -f " + std::to_string(kib) + " && exec \"$0\" \"$@\"",
+                                    HEADFORGE_BINARY};
+  shell.insert(shell.end(), args.begin(), args.end());
+  return Headforge(shell, "/bin/sh");
+}
+
 // Polls every `poll` until `ready()` holds (or `timeout` passes), then sends
 // `signal` to `pid` and waits for it to end. False when the process ended by
 // itself first. *status is its wait status either way.

@@ -41,6 +41,58 @@ std::vector<const AvatarView*> AllViews(const AvatarDataset& data) {
   return views;
 }
 
+// A trained avatar ready to draw, whichever model it is. The drawing
+// function points into the struct, which therefore stays where it was made.
+struct DrawableAvatar {
+  DrawableAvatar() = default;
+  DrawableAvatar(const DrawableAvatar&) = delete;
+  DrawableAvatar& operator=(const DrawableAvatar&) = delete;
+
+  GaussianStyleAvatar gaussian;
+  GanAvatar gan;
+  TrainOptions trained;
+  FaceModel model;
+  DatasetOptions loading;  // how `data` was read (and a driving workspace is)
+  AvatarDataset data;      // its workspace's views, held out as in training
+  double background = 1;   // the grey behind the head
+  // (condition [E + 9], camera) -> [3, H, W] on the CPU, in [0, 1].
+  std::function<torch::Tensor(const torch::Tensor&, const SplatCamera&)> draw;
+};
+
+// The model in `model_dir` ("": the workspace's model trained last), its
+// dataset at `resolution` (0: as trained; images only when asked for).
+// gaussian-style draws over `background`; gan-avatar over its own grey.
+Status LoadDrawableAvatar(const fs::path& workspace, fs::path model_dir, const std::string& face_model,
+                          torch::Device device, int resolution, bool images, double background, DrawableAvatar* a) {
+  if (model_dir.empty()) model_dir = LatestModelFolder(workspace);
+  if (model_dir.empty()) model_dir = workspace / "models" / "gaussian_style";
+  a->loading.images = images;
+  if (IsGanAvatarFolder(model_dir)) {
+    // The gan-avatar model: the tracked expression through its mapping.
+    HF_RETURN_IF_ERROR(LoadGanAvatar(model_dir, device, &a->gan));
+    HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &a->model));
+    a->loading.resolution = resolution > 0 ? resolution : std::max(a->gan.out_width, a->gan.out_height);
+    a->loading.min_train_frames = 1;
+    a->loading.holdout = a->gan.holdout;
+    a->loading.holdout_order = a->gan.holdout_order;
+    a->loading.holdout_cameras = a->gan.holdout_cameras;
+    HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, a->model, a->loading, &a->data).WithContext("render"));
+    a->background = a->gan.background;
+    a->draw = [a](const torch::Tensor& condition, const SplatCamera& camera) { return a->gan.Draw(condition, camera); };
+    return Status::Ok();
+  }
+  HF_RETURN_IF_ERROR(LoadTrained(workspace, model_dir, face_model, device, resolution, &a->loading, &a->gaussian,
+                                 &a->trained, &a->model, &a->data));
+  a->background = background;
+  const torch::Tensor grey = torch::full({3}, background, torch::TensorOptions().device(device));
+  a->draw = [a, grey](const torch::Tensor& condition, const SplatCamera& camera) {
+    torch::NoGradGuard no_grad;
+    GaussianStyleAvatar& g = a->gaussian;
+    return g.Draw(g.Pose(a->data, condition, 0, g.deform), camera, grey).clamp(0, 1).cpu();
+  };
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_model, const AvatarRenderOptions& options,
@@ -52,37 +104,15 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     return Status::InvalidArgument("render: --side-by-side and --held-out show the avatar's own frames; leave out --drive");
   if (options.orbit_deg < 0 || options.orbit_deg > 180 || options.orbit_steps < 2)
     return Status::InvalidArgument("render: --orbit takes a yaw in (0, 180] degrees and at least 2 steps");
-  GaussianStyleAvatar avatar;
-  GanAvatar gan;
-  TrainOptions trained;
-  FaceModel model;
-  DatasetOptions loading;
-  loading.images = options.side_by_side;
-  AvatarDataset own, drive;
-  // Not told: the model trained last.
-  fs::path model_dir = options.model.empty() ? LatestModelFolder(workspace) : fs::path(options.model);
-  if (model_dir.empty()) model_dir = workspace / "models" / "gaussian_style";
-  // What draws one image: (condition [E + 9], camera) -> [3, H, W] on the CPU.
-  std::function<torch::Tensor(const torch::Tensor&, const SplatCamera&)> draw;
-  if (IsGanAvatarFolder(model_dir)) {
-    // The gan-avatar model: the tracked expression through its mapping, over its own grey.
-    HF_RETURN_IF_ERROR(LoadGanAvatar(model_dir, device, &gan));
-    HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
-    loading.resolution = options.resolution > 0 ? options.resolution : std::max(gan.out_width, gan.out_height);
-    loading.min_train_frames = 1;
-    loading.holdout = gan.holdout;
-    loading.holdout_cameras = gan.holdout_cameras;
-    HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, &own).WithContext("render"));
-    draw = [&](const torch::Tensor& condition, const SplatCamera& camera) { return gan.Draw(condition, camera); };
-  } else {
-    HF_RETURN_IF_ERROR(LoadTrained(workspace, model_dir, face_model, device,
-                                   options.resolution, &loading, &avatar, &trained, &model, &own));
-    const torch::Tensor background = torch::full({3}, options.background, torch::TensorOptions().device(device));
-    draw = [&, background](const torch::Tensor& condition, const SplatCamera& camera) {
-      torch::NoGradGuard no_grad;
-      return avatar.Draw(avatar.Pose(own, condition, 0, avatar.deform), camera, background).clamp(0, 1).cpu();
-    };
-  }
+  fs::path model_dir = options.model.empty() ? fs::path() : fs::path(options.model);
+  DrawableAvatar avatar;
+  HF_RETURN_IF_ERROR(LoadDrawableAvatar(workspace, model_dir, face_model, device, options.resolution,
+                                        options.side_by_side, options.background, &avatar));
+  const AvatarDataset& own = avatar.data;
+  const FaceModel& model = avatar.model;
+  DatasetOptions loading = avatar.loading;
+  AvatarDataset drive;
+  const auto& draw = avatar.draw;
   const std::vector<const AvatarView*> own_views = AllViews(own);
   std::vector<const AvatarView*> drivers = own_views;
   if (!options.drive.empty()) {
@@ -95,7 +125,7 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
   std::vector<int> frames = options.frames;
   if (frames.empty())
     for (const auto& [frame, view] : by_frame)
-      if (!options.held_out || frame >= own.first_test_frame) frames.push_back(frame);
+      if (!options.held_out || own.HeldOut(frame)) frames.push_back(frame);
   // An orbit: one frame, the camera swung from 0 to +orbit, to -orbit and
   // back to 0; at 180, turned once all the way round.
   std::vector<double> yaws(frames.size(), options.yaw_deg);
@@ -128,7 +158,7 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     torch::Tensor render = draw(condition, camera);
     posing += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (options.side_by_side)
-      render = ComparisonStrip(render, driver.image, driver.mask, gan.generator ? gan.background : options.background);
+      render = ComparisonStrip(render, driver.image, driver.mask, avatar.background);
     const cv::Mat image = TensorToImage(render);
     if (options.video) {
       if (!video.isOpened()) {
@@ -176,20 +206,16 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
                        const fs::path& truth, const fs::path& write_dir, std::vector<NovelViewScore>* scores) {
   UseTensorThreads();
   torch::NoGradGuard no_grad;
-  GaussianStyleAvatar avatar;
-  TrainOptions trained;
-  FaceModel model;
-  DatasetOptions loading;
-  loading.images = false;
-  AvatarDataset data;
-  HF_RETURN_IF_ERROR(
-      LoadTrained(workspace, model_dir, face_model, torch::kCPU, 0, &loading, &avatar, &trained, &model, &data));
+  DrawableAvatar avatar;
+  HF_RETURN_IF_ERROR(LoadDrawableAvatar(workspace, model_dir, face_model, torch::kCPU, 0, false, 0.5, &avatar));
+  const AvatarDataset& data = avatar.data;
+  const DatasetOptions& loading = avatar.loading;
   nlohmann::json gt;
   HF_RETURN_IF_ERROR(ReadJson(truth / "ground_truth.json", &gt));
   if (data.test.empty()) return Status::DataError("novel views: the workspace has no held-out frames");
   if (!write_dir.empty()) HF_RETURN_IF_ERROR(EnsureDirectory(write_dir));
   const std::string trained_on = data.test.front().camera;
-  const torch::Tensor background = torch::full({3}, 0.5);
+  const torch::Tensor background = torch::full({3}, avatar.background);
   std::vector<NovelViewScore> out;
   std::vector<std::vector<ViewScores>> per_camera;
   try {
@@ -227,7 +253,6 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
       const Eigen::Isometry3d training_camera = IsometryFromJson(views.at(trained_on).at("cam_from_world"));
       const Eigen::Isometry3d world_from_head = training_camera.inverse() * CameraPose(view.view);
       const auto [azimuth0, elevation0] = AzimuthElevation(training_camera);
-      const PosedGaussians posed = avatar.Pose(data, view.condition, 0, avatar.deform);
       char file[32];
       std::snprintf(file, sizeof(file), "%06d.png", index);
       for (size_t k = 0; k < lenses.size(); ++k) {
@@ -238,7 +263,7 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
         out[k].pitch_deg = elevation - elevation0;
         SplatCamera camera = lenses[k];
         SetCameraPose(novel * world_from_head, &camera);
-        const torch::Tensor render = avatar.Draw(posed, camera, background).clamp(0, 1);
+        const torch::Tensor render = avatar.draw(view.condition, camera);
         const fs::path image_path = truth / cam.at("input").get<std::string>() / file;
         const fs::path mask_path = truth / "masks" / out[k].camera / file;
         cv::Mat image = cv::imread(image_path.string(), cv::IMREAD_COLOR);
@@ -251,7 +276,7 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
         per_camera[k].push_back(ScoreRender(render, target, cover, background));
         if (!write_dir.empty())
           HF_RETURN_IF_ERROR(WriteImageAtomic(write_dir / (out[k].camera + "_" + file),
-                                              TensorToImage(ComparisonStrip(render, target, cover, 0.5))));
+                                              TensorToImage(ComparisonStrip(render, target, cover, avatar.background))));
       }
     }
   } catch (const nlohmann::json::exception& e) {

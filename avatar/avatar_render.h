@@ -49,7 +49,8 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
 // avatar's head frame through the training camera (its estimated pose at that
 // frame and its true pose give the head frame in truth's world), with the
 // truth's intrinsics at the training resolution, and scored over the truth's
-// head mask (grey 0.5 behind it in both images) and over the frame.
+// head mask (grey 0.5 behind it in both images) and over the frame. Either
+// model; `model_dir` empty: the one trained last.
 struct NovelViewScore {
   std::string camera;
   double yaw_deg = 0, pitch_deg = 0;  // its centre round the head, from the training camera's

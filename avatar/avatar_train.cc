@@ -96,7 +96,11 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.region_weight", &t->region_weight, "Weight of stage 2's L1 on the eyes' and mouth's crops (0: none).",
          "region-weight");
   o->Add("train.ssim_weight", &t->ssim_weight, "Loss = (1 - w) L1 + w (1 - SSIM).", "ssim-weight");
-  o->Add("train.holdout", &t->holdout, "The last fraction of the frames, held out for evaluation.", "holdout");
+  o->Add("train.holdout", &t->holdout, "The fraction of the frames held out for evaluation.", "holdout");
+  o->Add("train.holdout_order", &t->holdout_order,
+         "Which frames: last (the last ones), interleaved (every round(1/holdout)-th: views between training views) "
+         "or auto (interleaved for one camera whose views circle the head 120 degrees or more, else last).",
+         "holdout-order");
   o->Add("train.holdout_cameras", &t->holdout_cameras,
          "Cameras held out whole (every frame of theirs scored, none trained on), comma-separated.",
          "holdout-cameras");
@@ -263,7 +267,7 @@ Status ChooseModel(const fs::path& workspace, std::string* model, std::string* w
   if (cameras.cameras.size() > 1) {
     std::snprintf(text, sizeof(text), "%zu cameras: a multi-view capture", cameras.cameras.size());
     *model = "gan-avatar";
-  } else if (spread >= kAutoGanSpreadDeg) {
+  } else if (cameras.WalksRoundTheHead()) {
     std::snprintf(text, sizeof(text), "one camera whose views spread %.0f deg round the head", spread);
     *model = "gan-avatar";
   } else {
@@ -284,13 +288,13 @@ Status LoadTrainingData(const TrainOptions& options, const fs::path& workspace, 
   DatasetOptions loading;
   loading.resolution = options.resolution;
   loading.holdout = options.holdout;
+  loading.holdout_order = options.holdout_order;
   loading.holdout_cameras = options.holdout_cameras;
   if (options.model == "gaussian-style" && options.decoder_steps > 0 && options.adversarial_weight > 0)
     loading.uv_map_side = options.decoder_resolution > 0 ? options.decoder_resolution : options.resolution;
   HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, data).WithContext("train"));
   HF_LOG(Info) << "train: " << data->train.size() << " training and " << data->test.size() << " held-out views at "
-               << data->width << "x" << data->height << " (frames " << data->first_test_frame << "-"
-               << data->num_frames - 1 << " held out)";
+               << data->width << "x" << data->height << " (held out: " << data->HeldOutText() << ")";
   return Status::Ok();
 }
 

@@ -41,7 +41,8 @@ struct TrainOptions {
   // come from the tracked condition (0: the paper's, every view its own).
   double latent_dropout = 0;
   double ssim_weight = 0.2;     // loss = (1 - w) L1 + w (1 - SSIM)
-  double holdout = 0.2;         // the last fraction of the frames, never trained on
+  double holdout = 0.2;         // the fraction of the frames never trained on
+  std::string holdout_order = "auto";  // which: last, interleaved or auto (DatasetOptions)
   std::vector<std::string> holdout_cameras;  // cameras never trained on, scored with the held-out frames
   int init_gaussians = 20000;   // sampled on the tracked mesh
   int64_t max_gaussians = 40000;
@@ -113,7 +114,6 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* train);
 // kAutoGanSpreadDeg or more round the head (a 360-degree or multi-view
 // capture), else gaussian-style (one fixed camera, or one that moves a
 // little); `why` says which in a few words.
-constexpr double kAutoGanSpreadDeg = 120.0;
 Status ChooseModel(const fs::path& workspace, std::string* model, std::string* why);
 
 struct TrainSummary {

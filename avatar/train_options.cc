@@ -18,7 +18,7 @@ bool IsPowerOfTwo(int v) { return v > 0 && (v & (v - 1)) == 0; }
 
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(TrainOptions, model, preset, device, resolution, steps,
     max_minutes, canonical_fraction, deform, mesh_riding, region_weight, latent_dropout, ssim_weight, holdout,
-    holdout_cameras, init_gaussians, max_gaussians, densify_from, densify_until, densify_every, grad_threshold,
+    holdout_order, holdout_cameras, init_gaussians, max_gaussians, densify_from, densify_until, densify_every, grad_threshold,
     lr_network, lr_means, lr_quats, lr_scales, lr_opacity, lr_features, feature_channels, triplane_resolution,
     latent_dim, render_resolution, batch, reconstruction_steps, recon_weight, adversarial_ramp, lr_discriminator,
     r1_gamma, r1_every, ada_target, collapse_steps, coarse_samples, fine_samples, mapping_samples, mapping_steps, mapping_loss,
@@ -45,6 +45,9 @@ Status TrainOptions::Check() const {
   if (!(region_weight >= 0) || !(ssim_weight >= 0 && ssim_weight <= 1))
     return Status::InvalidArgument("train: --region-weight must be >= 0 and --ssim-weight in [0, 1]");
   if (!(holdout > 0 && holdout < 0.9)) return Status::InvalidArgument("train: --holdout must be in (0, 0.9)");
+  if (holdout_order != "auto" && holdout_order != "last" && holdout_order != "interleaved")
+    return Status::InvalidArgument("train: --holdout-order must be auto, last or interleaved, not '" + holdout_order +
+                                   "'");
   if (init_gaussians < 1 || max_gaussians < init_gaussians)
     return Status::InvalidArgument("train: --init-gaussians must be positive and at most --max-gaussians");
   if (densify_every < 1) return Status::InvalidArgument("train: --densify-every must be at least 1");

@@ -82,6 +82,10 @@ double CameraSet::AzimuthSpreadDeg() const {
   return 360 - widest_gap;
 }
 
+bool CameraSet::WalksRoundTheHead() const {
+  return cameras.size() == 1 && AzimuthSpreadDeg() >= kWalkAroundSpreadDeg;
+}
+
 int CameraSet::registered() const {
   int n = 0;
   for (const auto& v : views) n += v.registered;

@@ -42,6 +42,11 @@ struct CameraView {
   Eigen::Vector3d Centre() const { return cam_from_world.inverse().translation(); }
 };
 
+// How far round the head one camera's views must spread to make a
+// walk-around: the train stage's model choice, the frames it holds out and
+// track's still head follow it.
+constexpr double kWalkAroundSpreadDeg = 120.0;
+
 struct CameraSet {
   static constexpr int kVersion = 1;  // of cameras.json; Read refuses another
   std::string mode;             // colmap, head-pose, rig
@@ -58,6 +63,9 @@ struct CameraSet {
   // neighbouring azimuths (0 for fewer than two views). About 0 for a fixed
   // camera, 360 for a capture all round the head.
   double AzimuthSpreadDeg() const;
+  // One camera whose views spread kWalkAroundSpreadDeg or more round the head:
+  // a camera carried round a head (a walk-around video), not a fixed one.
+  bool WalksRoundTheHead() const;
 
   Status Write(const fs::path& path) const;
   // Reads a file Write wrote, checking its version.

@@ -103,6 +103,8 @@ TEST(CameraSet, AzimuthSpreadMeasuresHowFarRoundTheHeadTheViewsGo) {
   CameraSet some = Ring({-90, 0, 90});
   some.views[2].registered = false;
   EXPECT_NEAR(some.AzimuthSpreadDeg(), 90.0, 1e-9);
+  EXPECT_FALSE(some.WalksRoundTheHead());
+  EXPECT_TRUE(Ring({-90, 0, 90, 180}).WalksRoundTheHead());
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 
 #include "capture/capture_io.h"
 #include "core/camera_set.h"
+#include "core/log.h"
 #include "core/mesh_renderer.h"
 #include "core/parallel.h"
 #include "export/gltf_builder.h"
@@ -247,7 +248,14 @@ Status BuildMeshAvatar(const fs::path& workspace, const FaceModel& model, const 
   std::vector<int> reliable;
   for (const TrackedFrame& f : tracking.frames)
     if (!f.interpolated && !f.low_confidence) reliable.push_back(f.frame);
-  if (reliable.empty()) return Status::DataError("every tracked frame is flagged unreliable; nothing to bake a texture from");
+  if (reliable.empty()) {
+    // A walk-around whose head is held still is flagged all over (the
+    // detector's landmarks on its sides), though its cameras place it well.
+    for (const TrackedFrame& f : tracking.frames) reliable.push_back(f.frame);
+    if (reliable.empty()) return Status::DataError("the tracking has no frames; nothing to bake a texture from");
+    HF_LOG(Warning) << "export mesh: every tracked frame is flagged unreliable (tracking.json); the texture is baked "
+                       "from frames spread over the whole capture instead";
+  }
   const int per_camera = std::max(1, options.bake_views / int(capture.cameras.size()));
   for (const IngestedCamera& cam : capture.cameras)
     for (int k = 0; k < std::min<int>(per_camera, int(reliable.size())); ++k)

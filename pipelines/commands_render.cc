@@ -52,8 +52,7 @@ int RenderCommand(const std::vector<std::string>& args) {
   const fs::path out_dir = out.empty() ? fs::path(common.workspace) / (truth.empty() ? "renders" : "novel_views")
                                        : fs::path(out);
   if (!truth.empty()) {
-    const fs::path model_dir =
-        render.model.empty() ? fs::path(common.workspace) / "models" / "gaussian_style" : fs::path(render.model);
+    const fs::path model_dir = render.model;  // empty: the model trained last
     std::vector<NovelViewScore> scores;
     if (Status s = ScoreNovelViews(common.workspace, model_dir, common.Settings().face_model, truth, out_dir, &scores);
         !s.ok())

@@ -126,6 +126,8 @@ Status TrackStageOptions::Check() const {
   if (!(grid_min_span_deg >= 0)) return Status::InvalidArgument("track: grid_min_span must be zero or positive");
   if (!(multiview_contour_weight >= 0))
     return Status::InvalidArgument("track: multiview_contour_weight must be zero or positive");
+  if (head_motion != "auto" && head_motion != "free" && head_motion != "still")
+    return Status::InvalidArgument("track: --head-motion must be auto, free or still, not '" + head_motion + "'");
   return Status::Ok();
 }
 
@@ -172,6 +174,11 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
   o->Add("track.refine_head_pose", &t->refine_head_pose,
          "With head-pose cameras, refine each frame's head pose with the fitted shape (false: hold it).",
          "refine-head-pose");
+  o->Add("track.head_motion", &t->head_motion,
+         "Each frame's head motion: free, still (held at rest; the cameras carry every change of view: a head that "
+         "holds still while the camera goes round it) or auto (still for one camera carried 120 degrees or more "
+         "round the head, free otherwise).",
+         "head-motion");
   o->Add("track.overlay", &t->overlay, "Write overlay_<camera>.mp4: the fitted mesh over the frames.", "overlay");
   o->Add("track.meshes", &t->meshes, "Write meshes/<frame>.obj: the fitted head per frame (head frame).",
          "meshes");
@@ -308,7 +315,9 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   }
   if (model.num_expressions() == 0) return Status::DataError("track: the face model has no expressions");
   TrackOptions fit = options.fit;
-  fit.fixed_head = cameras.mode == "head-pose" && !options.refine_head_pose;
+  const bool still = options.head_motion == "still" || (options.head_motion == "auto" && cameras.mode != "head-pose" &&
+                                                        cameras.WalksRoundTheHead());
+  fit.fixed_head = still || (cameras.mode == "head-pose" && !options.refine_head_pose && options.head_motion != "free");
 
   std::vector<TrackingView> views;
   std::vector<std::pair<int, int>> view_source;  // camera index, position in its frames
@@ -339,7 +348,8 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   const int num_frames = capture.num_frames();
   HF_LOG(Info) << "track: " << views.size() << " views of " << num_frames << " frames, " << options.fit.identity_modes
                << " identity modes, " << model.num_expressions() << " expressions"
-               << (fit.fixed_head ? ", head held by the head-pose cameras" : "");
+               << (still ? ", the head held still (one camera carried round it; --head-motion free fits its motion)"
+                   : fit.fixed_head ? ", head held by the head-pose cameras" : "");
   progress->Start("track: fitting", 0);
   TrackResult result;
   HF_RETURN_IF_ERROR(FitSequence(bases, fit, num_frames, &views, &result));

@@ -37,6 +37,14 @@ struct TrackStageOptions {
   // calibrated (on talking_static: blendshape errors 0.08-0.10 refined against
   // 0.10-0.12 held, head rotation 2.2 deg against 1.9 deg).
   bool refine_head_pose = true;
+  // Each frame's head motion: "free" (fitted per frame), "still" (held at
+  // rest: the cameras carry every change of view, for a head that holds
+  // still while the camera goes round it) or "auto" (still for one camera
+  // carried round the head, CameraSet::WalksRoundTheHead, where a frame's
+  // single view cannot tell its head's turn from its camera's and the
+  // detector's landmarks on the sides and the back are unreliable; free
+  // otherwise, held by head-pose cameras unless refine_head_pose).
+  std::string head_motion = "auto";
   bool overlay = true;   // overlay_<camera>.mp4
   bool meshes = false;   // meshes/<frame>.obj (fitted head, head frame)
 

@@ -24,7 +24,7 @@ struct TrackingFile {
   int identity_modes = 0;
   Eigen::VectorXd identity;                   // [identity_modes] in standard deviations
   std::vector<std::string> expression_names;  // the model's blendshapes, in its order
-  bool head_held_by_cameras = false;          // head-pose cameras carry the head's motion
+  bool head_held_by_cameras = false;          // the cameras carry the head's motion (head-pose cameras, or a still head)
   double median_residual_px = 0;
   int dropped_views = 0;
   std::string landmark_embedding;             // the embedding file used

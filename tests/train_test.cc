@@ -20,6 +20,7 @@
 
 #include "avatar/avatar_train.h"
 #include "avatar/model_folder.h"
+#include "avatar/train/dataset.h"
 #include "core/camera_set.h"
 #include "core/face_model.h"
 #include "core/fs.h"
@@ -829,6 +830,57 @@ TEST(ModelChoice, OneFixedCameraGetsGaussianStyleAndAllRoundOrSeveralGetGanAvata
   const Status missing = ChooseModel(dir, &model, &why);
   ASSERT_FALSE(missing.ok());
   EXPECT_NE(missing.message().find("headforge align"), std::string::npos) << missing.message();
+}
+
+// Which frames are held out: the last ones for a fixed camera; for one
+// camera walked round the head, frames spread over the circle, so that no
+// side of the head goes untrained (and the held-out views lie between
+// training views). --holdout-order chooses either.
+TEST(ModelChoice, HeldOutFramesAreSpreadRoundTheCircleOfAWalkAround) {
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("holdout_order"));
+  FaceModel model;
+  ASSERT_TRUE(FaceModel::Load(DefaultDataDir() + "/ict_facekit/ict_face_model.h5", &model).ok());
+  DatasetOptions loading;
+  loading.images = false;
+  loading.holdout = 0.2;
+  AvatarDataset data;
+  const auto held_frames = [&](const std::string& order) {
+    loading.holdout_order = order;
+    std::vector<int> held;
+    EXPECT_TRUE(LoadAvatarDataset(ws, model, loading, &data).ok()) << order;
+    for (const AvatarView& v : data.test) held.push_back(v.frame);
+    for (const AvatarView& v : data.train) EXPECT_FALSE(data.HeldOut(v.frame)) << v.frame;
+    return held;
+  };
+  std::vector<int> last, every5;
+  for (int f = 100; f < 125; ++f) last.push_back(f);
+  for (int f = 2; f < 125; f += 5) every5.push_back(f);
+  EXPECT_EQ(held_frames("auto"), last);  // talking_static: one fixed camera
+  EXPECT_EQ(data.HeldOutText(), "the last 25 of 125");
+  EXPECT_EQ(held_frames("interleaved"), every5);
+  EXPECT_EQ(data.HeldOutText(), "one frame in 5 from frame 2 (25 of 125)");
+
+  // The same frames seen by a camera circling the head once (the head frame's
+  // +y axis, 1 m out): auto spreads them.
+  CameraSet cameras;
+  ASSERT_TRUE(CameraSet::Read(ws / "cameras_head.json", &cameras).ok());
+  for (size_t i = 0; i < cameras.views.size(); ++i) {
+    const double a = 2 * 3.14159265358979323846 * double(i) / double(cameras.views.size());
+    const Eigen::Vector3d centre(std::sin(a), 0.0, std::cos(a));
+    const Eigen::Vector3d z = -centre, y(0, -1, 0), x = y.cross(z);
+    Eigen::Matrix3d r;
+    r << x.transpose(), y.transpose(), z.transpose();
+    cameras.views[i].cam_from_world.linear() = r;
+    cameras.views[i].cam_from_world.translation() = -r * centre;
+  }
+  cameras.mode = "colmap";
+  ASSERT_TRUE(cameras.Write(ws / "cameras_head.json").ok());
+  EXPECT_EQ(held_frames("auto"), every5);
+  EXPECT_EQ(held_frames("last"), last);
+  loading.holdout_order = "sideways";
+  const Status bad = LoadAvatarDataset(ws, model, loading, &data);
+  EXPECT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("auto, last or interleaved"), std::string::npos) << bad.message();
 }
 
 // A workspace holding both models (trained with one, then with --model auto

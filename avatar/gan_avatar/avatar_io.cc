@@ -31,6 +31,7 @@ Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avata
     avatar->expressions = int64_t(config.at("expression_mapping").at("expressions").size());
     if (config.contains("training")) {
       avatar->holdout = config.at("training").value("holdout", avatar->holdout);
+      avatar->holdout_order = config.at("training").value("holdout_order", avatar->holdout_order);
       avatar->holdout_cameras =
           config.at("training").value("holdout_cameras", std::vector<std::string>());
     }

@@ -26,6 +26,7 @@ struct GanAvatar {
   int64_t expressions = 0;
   // What training held out: the last fraction of the frames and whole cameras.
   double holdout = 0.2;
+  std::string holdout_order = "last";
   std::vector<std::string> holdout_cameras;
 
   // The image [3, H, W] (on the CPU, in [0, 1]) for `expressions` [E] (the

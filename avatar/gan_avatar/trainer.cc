@@ -514,8 +514,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
     cameras[name] = {{"views", list.size()}, {"psnr_masked", m.psnr_masked}, {"ssim_masked", m.ssim_masked}};
   }
   const nlohmann::json eval = {
-      {"held_out_frames", "the last " + std::to_string(data_.num_frames - data_.first_test_frame) + " of " +
-                              std::to_string(data_.num_frames)},
+      {"held_out_frames", data_.HeldOutText()},
       {"background", kBackground},
       {"latent", avatar_.mapping ? "the expression mapping (" + options_.mapping_loss +
                                  " loss) of each frame's tracked expression"
@@ -547,7 +546,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
       {"background", kBackground},
       {"training", {{"steps", state_.step}, {"batch", options_.batch}, {"seconds", state_.seconds},
                     {"seed", options_.seed}, {"preset", options_.preset}, {"holdout", options_.holdout},
-                    {"holdout_cameras", options_.holdout_cameras}}}};
+                    {"holdout_order", options_.holdout_order}, {"holdout_cameras", options_.holdout_cameras}}}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "config.json", config, 1));
   summary->steps = state_.step;
   summary->seconds = state_.seconds;

@@ -184,6 +184,7 @@ nlohmann::json ConfigJson(const GaussianStyleAvatar& avatar, const TrainOptions&
           {"deform", avatar.deform},
           {"resolution", options.resolution},
           {"holdout", options.holdout},
+          {"holdout_order", options.holdout_order},
           {"width", data.width},
           {"height", data.height},
           {"gaussians", avatar.gaussians.params.size()},
@@ -228,6 +229,8 @@ Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar
     if (options) {
       options->resolution = config.at("resolution").get<int>();
       options->holdout = config.value("holdout", options->holdout);
+      // Models trained before the order existed held out the last frames.
+      options->holdout_order = config.value("holdout_order", std::string("last"));
       options->mesh_riding = out.model->options().mesh_riding;
     }
   } catch (const std::exception& e) {

@@ -14,6 +14,7 @@ Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const s
   loading->resolution = resolution > 0 ? resolution : trained->resolution;
   loading->min_train_frames = 1;
   loading->holdout = trained->holdout;
+  loading->holdout_order = trained->holdout_order;
   HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, *model, *loading, data).WithContext("render"));
   if (trained->mesh_riding)
     avatar->neutral = ComputeTriangleFrames(data->identity_vertices, data->triangles).To(device);

@@ -394,8 +394,7 @@ Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, co
                      {"l1_masked", s.l1_masked}, {"sharpness", s.sharpness}, {"sharpness_truth", s.sharpness_truth},
                      {"sd", s.sd}});
   nlohmann::json eval = {
-      {"held_out_frames", "the last " + std::to_string(data.num_frames - data.first_test_frame) + " of " +
-                              std::to_string(data.num_frames)},
+      {"held_out_frames", data.HeldOutText()},
       {"background", kEvalBackground},
       {"latent_frame", 0},
       {"decoder", bool(avatar.decoder)},

@@ -96,6 +96,14 @@ torch::Tensor RenderUvMap(const FaceModel& model, const torch::Tensor& vertices,
 
 }  // namespace
 
+std::string AvatarDataset::HeldOutText() const {
+  int held = 0;
+  for (int f = 0; f < num_frames; ++f) held += HeldOut(f);
+  if (holdout_every == 0) return "the last " + std::to_string(held) + " of " + std::to_string(num_frames);
+  return "one frame in " + std::to_string(holdout_every) + " from frame " + std::to_string(holdout_every / 2) + " (" +
+         std::to_string(held) + " of " + std::to_string(num_frames) + ")";
+}
+
 Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, const DatasetOptions& options,
                          AvatarDataset* dataset) {
   IngestedCapture capture;
@@ -106,9 +114,22 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   if (options.resolution < 16) return Status::InvalidArgument("the training resolution must be at least 16 pixels");
   AvatarDataset out;
   out.num_frames = frames;
-  const int held = std::max(1, int(std::lround(options.holdout * frames)));
-  out.first_test_frame = frames - held;
-  if (out.first_test_frame < options.min_train_frames)
+  if (options.holdout_order != "auto" && options.holdout_order != "last" && options.holdout_order != "interleaved")
+    return Status::InvalidArgument("--holdout-order must be auto, last or interleaved, not '" + options.holdout_order +
+                                   "'");
+  const bool interleaved =
+      options.holdout_order == "interleaved" ||
+      (options.holdout_order == "auto" && capture.cameras.size() == 1 && cameras.WalksRoundTheHead());
+  int held = std::max(1, int(std::lround(options.holdout * frames)));
+  if (interleaved) {
+    out.holdout_every = std::max(2, int(std::lround(1 / options.holdout)));
+    out.first_test_frame = frames;
+    held = 0;
+    for (int f = 0; f < frames; ++f) held += out.HeldOut(f);
+  } else {
+    out.first_test_frame = frames - held;
+  }
+  if (frames - held < options.min_train_frames)
     return Status::DataError("the capture has " + std::to_string(frames) + " frames: the model needs at least " +
                              std::to_string(options.min_train_frames) + " to train on besides the " +
                              std::to_string(held) + " held out; ingest a longer video");
@@ -169,7 +190,7 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       view.condition = torch::cat({torch::from_blob(const_cast<float*>(expression.data()), {expression.size()}).clone(),
                                    PoseCondition(rotation, translation)});
       if (f.landmarks) RegionBoxes(*f.landmarks, *lens, scale, &view);
-      const bool training = f.index < out.first_test_frame && !held_camera;
+      const bool training = !out.HeldOut(f.index) && !held_camera;
       if (training && options.uv_map_side > 0) {
         const int64_t e = int64_t(out.expression_names.size());
         view.uv_map = RenderUvMap(model, out.Vertices(view.condition.slice(0, 0, e)), out.identity_vertices,

@@ -4,7 +4,8 @@
 // the canonical head frame (the head's tracked motion taken into the camera),
 // the frame's tracked expression and head pose as the condition, and boxes
 // round the eyes and the mouth from its landmarks. The last frames are held
-// out, and any cameras named to be.
+// out (or, for one camera circling the head, frames spread over the circle),
+// and any cameras named to be.
 #pragma once
 
 #include <torch/types.h>
@@ -43,7 +44,13 @@ struct AvatarView {
 
 struct DatasetOptions {
   int resolution = 256;       // the frames' longer side, pixels
-  double holdout = 0.2;       // the last fraction of the frames held out
+  double holdout = 0.2;       // the fraction of the frames held out
+  // Which: "last" (the last frames: the capture's future), "interleaved"
+  // (every round(1 / holdout)-th frame: views between training views) or
+  // "auto" (interleaved for one camera whose views spread 120 degrees or more
+  // round the head, where the last frames would be a side training never
+  // saw; else last).
+  std::string holdout_order = "auto";
   // Cameras held out whole: every frame of theirs is a test view (a 360
   // capture's views from sides training never saw).
   std::vector<std::string> holdout_cameras;
@@ -56,6 +63,7 @@ struct AvatarDataset {
   int width = 0, height = 0;
   int num_frames = 0;
   int first_test_frame = 0;            // frames from here on are held out
+  int holdout_every = 0;               // > 0: so is every frame f with f % holdout_every == holdout_every / 2
   std::vector<AvatarView> train, test;
   std::vector<std::string> expression_names;
   // The subject's mesh: identity shape [V, 3] (head frame, metres), the
@@ -64,6 +72,12 @@ struct AvatarDataset {
   // The model's named parts as inclusive triangle ranges (ICT's regions:
   // "face", "head_and_neck", ...; empty for a model without them).
   std::map<std::string, std::pair<int, int>> mesh_parts;
+
+  bool HeldOut(int frame) const {
+    return frame >= first_test_frame || (holdout_every > 0 && frame % holdout_every == holdout_every / 2);
+  }
+  // "the last 25 of 125" or "one frame in 5 from frame 2 (30 of 150)".
+  std::string HeldOutText() const;
 
   // The tracked mesh for `expression` [E]: [V, 3].
   torch::Tensor Vertices(const torch::Tensor& expression) const;

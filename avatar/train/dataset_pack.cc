@@ -48,6 +48,7 @@ Status WriteDatasetPack(const AvatarDataset& data, const nlohmann::json& options
                           {"height", data.height},
                           {"num_frames", data.num_frames},
                           {"first_test_frame", data.first_test_frame},
+                          {"holdout_every", data.holdout_every},
                           {"expression_names", data.expression_names},
                           {"mesh_parts", parts}}}};
   file.tensors.push_back(ToSafeTensor("identity_vertices", data.identity_vertices));
@@ -104,6 +105,7 @@ Status ReadDatasetPack(const fs::path& path, AvatarDataset* data, nlohmann::json
     out.height = d.at("height").get<int>();
     out.num_frames = d.at("num_frames").get<int>();
     out.first_test_frame = d.at("first_test_frame").get<int>();
+    out.holdout_every = d.value("holdout_every", 0);
     out.expression_names = d.at("expression_names").get<std::vector<std::string>>();
     for (const auto& [name, range] : d.at("mesh_parts").items())
       out.mesh_parts[name] = {range.at(0).get<int>(), range.at(1).get<int>()};

@@ -51,6 +51,7 @@ AvatarDataset RandomDataset() {
   d.height = 10;
   d.num_frames = 6;
   d.first_test_frame = 4;
+  d.holdout_every = 3;
   for (int f = 0; f < 4; ++f) d.train.push_back(RandomView(f, 12, 10, true, gen));
   for (int f = 4; f < 6; ++f) d.test.push_back(RandomView(f, 12, 10, false, gen));
   d.expression_names = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L"};
@@ -97,6 +98,7 @@ TEST(DatasetPack, ADatasetComesBackExactlyWithItsOptions) {
   EXPECT_EQ(back.height, 10);
   EXPECT_EQ(back.num_frames, 6);
   EXPECT_EQ(back.first_test_frame, 4);
+  EXPECT_EQ(back.holdout_every, 3);
   EXPECT_EQ(back.expression_names, data.expression_names);
   EXPECT_EQ(back.mesh_parts, data.mesh_parts);
   EXPECT_TRUE(torch::equal(back.identity_vertices, data.identity_vertices));

@@ -77,6 +77,8 @@ TEST(CameraSet, RoundTripsAndChecksItsVersion) {
 // front, +90 = toward +x), looking at the origin.
 CameraSet Ring(const std::vector<double>& azimuths) {
   CameraSet set;
+  set.cameras.emplace_back();
+  set.cameras.back().name = "cam";
   int frame = 0;
   for (double a : azimuths) {
     CameraView v;

@@ -17,7 +17,6 @@
 #include <sstream>
 
 #include "core/fs.h"
-#include "core/hash.h"
 #include "tests/run_headforge.h"
 #include "tests/shared_workspace.h"
 
@@ -68,31 +67,6 @@ void EditJson(const fs::path& path, const std::function<void(nlohmann::json*)>& 
   ASSERT_TRUE(ReadJson(path, &j).ok()) << path;
   edit(&j);
   WriteText(path, j.dump());
-}
-
-// Every file of a workspace with its contents' hash (the run's own record,
-// its lock and what a failure leaves in failed/ and .staging/ aside).
-std::map<std::string, std::string> Snapshot(const fs::path& ws) {
-  std::map<std::string, std::string> files;
-  for (const auto& entry : fs::recursive_directory_iterator(ws)) {
-    if (!entry.is_regular_file()) continue;
-    const std::string rel = fs::relative(entry.path(), ws).string();
-    if (rel == "workspace.json" || rel == ".lock" || rel.rfind("failed/", 0) == 0 || rel.rfind(".staging/", 0) == 0)
-      continue;
-    Hasher h;
-    EXPECT_TRUE(h.AddFileContents(entry.path()).ok());
-    files[rel] = h.Hex();
-  }
-  return files;
-}
-
-// The lines of stderr that are not progress or log lines.
-std::vector<std::string> ReasonLines(const std::string& err) {
-  std::vector<std::string> lines;
-  std::istringstream in(err);
-  for (std::string line; std::getline(in, line);)
-    if (line.rfind("headforge: ", 0) == 0) lines.push_back(line);
-  return lines;
 }
 
 std::vector<BadInput> Table() {

@@ -74,6 +74,16 @@ inline Result Headforge(const std::vector<std::string>& args, const char* binary
   return r;
 }
 
+// The lines of a run's stderr that give a reason ("headforge: ..."), not
+// progress or log lines.
+inline std::vector<std::string> ReasonLines(const std::string& err) {
+  std::vector<std::string> lines;
+  std::istringstream in(err);
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind("headforge: ", 0) == 0) lines.push_back(line);
+  return lines;
+}
+
 // headforge with `args` under a file-size limit of `kib` KiB (ulimit -f):
 // what a full disk does to the file being written.
 inline Result HeadforgeWithFileLimit(const std::vector<std::string>& args, int kib) {

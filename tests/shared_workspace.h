@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include <functional>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -118,6 +119,21 @@ inline std::string FileHash(const fs::path& path) {
   Hasher h;
   EXPECT_TRUE(h.AddFileContents(path).ok()) << path;
   return h.Hex();
+}
+
+// Every file of a workspace with its contents' hash (the run's own record,
+// its lock and what a failure leaves in failed/ and .staging/ aside): what
+// a failed run must leave as it was.
+inline std::map<std::string, std::string> Snapshot(const fs::path& ws) {
+  std::map<std::string, std::string> files;
+  for (const auto& entry : fs::recursive_directory_iterator(ws)) {
+    if (!entry.is_regular_file()) continue;
+    const std::string rel = fs::relative(entry.path(), ws).string();
+    if (rel == "workspace.json" || rel == ".lock" || rel.rfind("failed/", 0) == 0 || rel.rfind(".staging/", 0) == 0)
+      continue;
+    files[rel] = FileHash(entry.path());
+  }
+  return files;
 }
 
 // stats.jsonl's lines.

@@ -10,7 +10,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <map>
 #include <cmath>
 #include <thread>
 
@@ -69,29 +68,6 @@ class TrainStage : public ::testing::Test {
 };
 fs::path TrainStage::reference_;
 Result TrainStage::first_;
-
-// Every file of a workspace but its bookkeeping (workspace.json) and the
-// folders of unfinished or failed stages, by path, with its hash.
-std::map<std::string, std::string> Outputs(const fs::path& ws) {
-  std::map<std::string, std::string> hashes;
-  for (auto it = fs::recursive_directory_iterator(ws); it != fs::recursive_directory_iterator(); ++it) {
-    const std::string name = it->path().filename().string();
-    if (it->is_directory() && (name[0] == '.' || name == "failed")) {
-      it.disable_recursion_pending();
-      continue;
-    }
-    if (it->is_regular_file() && name != "workspace.json") hashes[fs::relative(it->path(), ws).string()] = FileHash(it->path());
-  }
-  return hashes;
-}
-
-// The lines of a run's stderr that report an error ("headforge: ...").
-int ErrorLines(const std::string& err) {
-  int n = 0;
-  std::istringstream in(err);
-  for (std::string line; std::getline(in, line);) n += line.rfind("headforge: ", 0) == 0;
-  return n;
-}
 
 TEST_F(TrainStage, TheLossFallsAndTheHeldOutFramesAreScored) {
   ASSERT_EQ(first_.code, 0) << first_.err;
@@ -154,15 +130,15 @@ TEST_F(TrainStage, KilledMidTrainingResumesToTheSameModel) {
   // Resumed on a disk that fills at the next checkpoint (a file-size limit
   // stands in for it): one clear error, the workspace's outputs untouched,
   // and the checkpoint it resumed from kept for the next run.
-  const auto before = Outputs(ws);
+  const auto before = Snapshot(ws);
   const Result full = HeadforgeWithFileLimit(TrainArgs(ws), 64);
   EXPECT_EQ(full.code, 1) << full.err;
   EXPECT_NE(full.err.find("resuming from the checkpoint at step"), std::string::npos) << full.err;
   EXPECT_NE(full.err.find("checkpoint.pt"), std::string::npos) << full.err;
   EXPECT_NE(full.err.find("ulimit -f, or a full disk"), std::string::npos) << full.err;
   EXPECT_NE(full.err.find("goes on from the stage's last checkpoint"), std::string::npos) << full.err;
-  EXPECT_EQ(ErrorLines(full.err), 1) << full.err;
-  EXPECT_EQ(Outputs(ws), before);
+  EXPECT_EQ(ReasonLines(full.err).size(), 1u) << full.err;
+  EXPECT_EQ(Snapshot(ws), before);
   EXPECT_TRUE(fs::exists(staging / "checkpoint.pt"));
 
   const Result resumed = Headforge(TrainArgs(ws));
@@ -333,13 +309,13 @@ TEST_F(ExportStage, AFullDiskDuringAnExportSaysSoAndKeepsTheEarlierExport) {
   const fs::path ws = CopyOf(reference_, Scratch("export_full_disk"));
   const std::vector<std::string> args = {"export", "--workspace", ws.string(), "--texture-size", "64",
                                          "--bake-views", "4", "--formats", "mesh", "weights"};
-  const auto before = Outputs(ws);
+  const auto before = Snapshot(ws);
   ASSERT_TRUE(before.count("export/avatar_mesh.glb"));
   const Result full = HeadforgeWithFileLimit(args, 64);
   EXPECT_EQ(full.code, 1) << full.err;
   EXPECT_NE(full.err.find("ulimit -f, or a full disk"), std::string::npos) << full.err;
-  EXPECT_EQ(ErrorLines(full.err), 1) << full.err;
-  EXPECT_EQ(Outputs(ws), before);
+  EXPECT_EQ(ReasonLines(full.err).size(), 1u) << full.err;
+  EXPECT_EQ(Snapshot(ws), before);
   const Result again = Headforge(args);
   ASSERT_EQ(again.code, 0) << again.err;
   EXPECT_TRUE(fs::exists(ws / "export" / "weights" / "weights.safetensors"));

@@ -104,7 +104,7 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     return Status::InvalidArgument("render: --side-by-side and --held-out show the avatar's own frames; leave out --drive");
   if (options.orbit_deg < 0 || options.orbit_deg > 180 || options.orbit_steps < 2)
     return Status::InvalidArgument("render: --orbit takes a yaw in (0, 180] degrees and at least 2 steps");
-  fs::path model_dir = options.model.empty() ? fs::path() : fs::path(options.model);
+  const fs::path model_dir = options.model;  // empty: the model trained last
   DrawableAvatar avatar;
   HF_RETURN_IF_ERROR(LoadDrawableAvatar(workspace, model_dir, face_model, device, options.resolution,
                                         options.side_by_side, options.background, &avatar));

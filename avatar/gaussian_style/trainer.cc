@@ -148,7 +148,9 @@ Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
                  << " training views left out (tracking interpolated or low-confidence)";
   if (usable_.empty())
     return Status::DataError("train: the tracker flagged every training frame as interpolated or low-confidence; "
-                             "check overlay_<camera>.mp4 and run headforge track again");
+                             "check overlay_<camera>.mp4 and run headforge track again (a capture that goes round "
+                             "the head, whose sides the landmark detector cannot read: --model gan-avatar, which "
+                             "trains without tracked expressions)");
   std::error_code ec;
   if (fs::exists(checkpoint, ec)) HF_RETURN_IF_ERROR(LoadCheckpoint(checkpoint, stats));
   return Status::Ok();

@@ -119,7 +119,7 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
                                    "'");
   const bool interleaved =
       options.holdout_order == "interleaved" ||
-      (options.holdout_order == "auto" && capture.cameras.size() == 1 && cameras.WalksRoundTheHead());
+      (options.holdout_order == "auto" && cameras.WalksRoundTheHead());
   int held = std::max(1, int(std::lround(options.holdout * frames)));
   if (interleaved) {
     out.holdout_every = std::max(2, int(std::lround(1 / options.holdout)));

@@ -2,12 +2,16 @@
 
 #include <torch/torch.h>
 
+#include <thread>
+
+#include "avatar/gan_avatar/render_expressions.h"
 #include "avatar/gan_avatar/trainer.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/train/dataset_pack.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/loop.h"
 #include "core/camera_set.h"
+#include "core/json_io.h"
 #include "core/log.h"
 #include "core/paths.h"
 
@@ -166,6 +170,11 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
          "gan-avatar: dlib's 68-point landmark model, which reads the renders' landmarks (default: Debian's "
          "libdlib-data).",
          "landmark-model", OptionSet::Effect::kRuntime);
+  o->Add("train.generator_from", &t->generator_from,
+         "gan-avatar: the folder of a GAN trained already (headforge-train's --out for this workspace's pack, e.g. on "
+         "a GPU machine): its generator is taken, only the expression mapping trains here, and the options that "
+         "shape the model and its views are the ones recorded there.",
+         "generator-from");
   o->Add("train.decoder_steps", &t->decoder_steps,
          "gaussian-style: steps of stage 3, the StyleGAN decoder that turns the splatted 32-channel features into "
          "the image (0: none; the image is the splatted RGB).",
@@ -300,21 +309,68 @@ Status LoadTrainingData(const TrainOptions& options, const fs::path& workspace, 
 
 }  // namespace
 
+namespace {
+
+// --generator-from DIR: the options DIR's training recorded, with this
+// command's for what only the mapping and this machine use.
+Status AdoptRecordedOptions(const TrainOptions& options, TrainOptions* resolved) {
+  const fs::path dir = options.generator_from;
+  nlohmann::json config;
+  HF_RETURN_IF_ERROR(ReadJson(dir / "config.json", &config)
+                         .WithContext("train: --generator-from takes the folder headforge-train (or train) wrote"));
+  if (config.value("model", "") != "gan-avatar" || !config.contains("options"))
+    return Status::InvalidArgument("train: --generator-from " + dir.string() +
+                                   " holds no gan-avatar training of this version (its config.json records no "
+                                   "options); train it again with this version's headforge-train");
+  try {
+    *resolved = TrainOptionsFromJson(config.at("options"));
+  } catch (const nlohmann::json::exception& e) {
+    return Status::DataError(dir.string() + "/config.json: its options do not read (" + e.what() + ")");
+  }
+  resolved->device = options.device;
+  resolved->mapping_samples = options.mapping_samples;
+  resolved->mapping_steps = options.mapping_steps;
+  resolved->mapping_loss = options.mapping_loss;
+  resolved->landmark_model = options.landmark_model;
+  resolved->log_every = options.log_every;
+  resolved->checkpoint_every = options.checkpoint_every;
+  resolved->generator_from = options.generator_from;
+  HF_LOG(Info) << "train: the GAN of " << dir.string() << " (resolution " << resolved->resolution << ", render "
+               << resolved->render_resolution << ", preset " << resolved->preset
+               << "): its recorded options shape the model and the views";
+  return resolved->Check();
+}
+
+}  // namespace
+
 Status RunTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
                 const fs::path& out_dir, Progress* progress, TrainSummary* summary) {
   UseTensorThreads();
   HF_RETURN_IF_ERROR(options.Check());
   FaceModel model;
   HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
-  AvatarDataset data;
-  HF_RETURN_IF_ERROR(LoadTrainingData(options, workspace, model, &data));
-  if (options.model != "gan-avatar") return TrainGaussianStyleRun(options, data, out_dir, progress, summary);
   TrainOptions resolved = options;
+  if (!options.generator_from.empty()) HF_RETURN_IF_ERROR(AdoptRecordedOptions(options, &resolved));
+  AvatarDataset data;
+  HF_RETURN_IF_ERROR(LoadTrainingData(resolved, workspace, model, &data));
+  if (resolved.model != "gan-avatar") return TrainGaussianStyleRun(resolved, data, out_dir, progress, summary);
   if (resolved.landmark_model.empty()) resolved.landmark_model = DefaultLandmarkModel();
+  TrackingFile tracking;
+  HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", &tracking));
+  const RenderTracker track_renders = [&](GanGenerator& generator, const SplatCamera& camera, int width, int height,
+                                          double background, at::Generator& random, Progress* p,
+                                          RenderExpressions* out) {
+    RenderExpressionOptions sampling;
+    sampling.samples = resolved.mapping_samples;
+    sampling.landmark_model = resolved.landmark_model;
+    sampling.background = background;
+    sampling.threads = std::max(1, int(std::thread::hardware_concurrency()));
+    return EstimateRenderExpressions(generator, camera, width, height, model, tracking, sampling, random, p, out);
+  };
   StatsLog stats;
   HF_RETURN_IF_ERROR(OpenTrainStats(out_dir, &stats));
   *summary = TrainSummary();
-  HF_RETURN_IF_ERROR(TrainGanAvatar(resolved, workspace, data, model, out_dir, &stats, progress, summary));
+  HF_RETURN_IF_ERROR(TrainGanAvatar(resolved, data, track_renders, out_dir, &stats, progress, summary));
   summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json", "held_out"};
   std::error_code ec;
   if (fs::exists(out_dir / "previews", ec)) summary->outputs.push_back("previews");
@@ -328,9 +384,9 @@ Status WriteTrainPack(const TrainOptions& options, const fs::path& workspace, co
   TrainOptions here = options;
   here.device = "cpu";
   HF_RETURN_IF_ERROR(here.Check());
-  if (options.model != "gaussian-style")
-    return Status::InvalidArgument("pack: only the gaussian-style model trains from a pack (the gan-avatar "
-                                   "model's expression mapping tracks its renders, which needs the full build)");
+  if (!options.generator_from.empty())
+    return Status::InvalidArgument("pack: --generator-from is for headforge train, which adds the expression mapping "
+                                   "to a GAN trained from a pack");
   FaceModel model;
   HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
   AvatarDataset data;

@@ -77,6 +77,11 @@ struct TrainOptions {
   int mapping_steps = 300;
   std::string mapping_loss = "image";
   std::string landmark_model;
+  // gan-avatar: a folder where the GAN was trained already (headforge-train's
+  // output for this workspace's pack, on a GPU machine): its generator is
+  // taken and only the expression mapping trains; the options that shape the
+  // model and its views come from that folder's config.json.
+  std::string generator_from;
   // gaussian-style's stage 3, the StyleGAN decoder: its steps (0: no stage
   // 3), the personal prior's steps (the generator trained on the frames),
   // PTI's steps (each half) and frames, the decoder's side (0: --resolution),
@@ -111,7 +116,7 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* train);
 
 // The model `--model auto` (the train stage's default) trains on an aligned
 // workspace: gan-avatar when its cameras are several, or its views spread
-// kAutoGanSpreadDeg or more round the head (a 360-degree or multi-view
+// kWalkAroundSpreadDeg or more round the head (a 360-degree or multi-view
 // capture), else gaussian-style (one fixed camera, or one that moves a
 // little); `why` says which in a few words.
 Status ChooseModel(const fs::path& workspace, std::string* model, std::string* why);
@@ -142,8 +147,10 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
 // TrainFromPack, which needs LibTorch alone (the headforge-train program),
 // trains on it into `out_dir` with the same result as RunTrain. `settings`
 // ("field=value", TrainOptions' field names: device=cuda, max_minutes=9)
-// replace the pack's options. gaussian-style only (the gan-avatar model's
-// mapping tracks its renders).
+// replace the pack's options. For the gan-avatar model the pack trains the
+// GAN alone (the expression mapping tracks the GAN's renders, which needs
+// the full build): `headforge train --generator-from DIR` adds the mapping
+// on the workspace's machine.
 Status WriteTrainPack(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
                       const fs::path& pack);
 Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& settings, const fs::path& out_dir,

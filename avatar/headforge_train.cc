@@ -1,7 +1,9 @@
-// headforge-train: trains the gaussian-style avatar from a training pack
-// (`headforge pack`), needing LibTorch alone, for a GPU machine that has
-// PyTorch but not the rest of HeadForge's stack. The output folder is what
-// `headforge train` writes into WORKSPACE/models/gaussian_style.
+// headforge-train: trains an avatar from a training pack (`headforge pack`),
+// needing LibTorch alone, for a GPU machine that has PyTorch but not the rest
+// of HeadForge's stack. The output folder is what `headforge train` writes
+// into WORKSPACE/models/gaussian_style; for the gan-avatar model it holds the
+// GAN, to which `headforge train --generator-from` adds the expression
+// mapping.
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -23,13 +25,17 @@ void PrintHelp() {
   std::printf(
       "Usage: headforge-train PACK --out DIR [--device cpu|cuda|cuda:N] [--max-minutes M]\n"
       "                       [--set FIELD=VALUE ...]\n\n"
-      "Trains the gaussian-style avatar on a training pack written by\n"
+      "Trains an avatar on a training pack written by\n"
       "  headforge pack --workspace WS --out PACK [train options, --preset ...]\n"
       "with the options recorded in it, as headforge train would on the workspace.\n"
       "DIR receives model.pt, config.json, stats.jsonl, eval.json and the previews\n"
-      "(images only where the build has an image library); copy it into\n"
-      "WS/models/gaussian_style to render and export the avatar there. An interrupted\n"
-      "run (Ctrl-C, a kill) resumes from DIR's checkpoint when run again.\n\n"
+      "(images only where the build has an image library). gaussian-style: copy DIR\n"
+      "into WS/models/gaussian_style to render and export the avatar there.\n"
+      "gan-avatar: DIR holds the GAN without its expression mapping (the mean latent\n"
+      "draws every frame); copy it to the workspace's machine and run\n"
+      "  headforge train --workspace WS --model gan-avatar --generator-from DIR\n"
+      "to add the mapping there. An interrupted run (Ctrl-C, a kill) resumes from\n"
+      "DIR's checkpoint when run again.\n\n"
       "  --device D        replaces the pack's device (cpu, cuda, cuda:N)\n"
       "  --max-minutes M   replaces the pack's training time limit (0: none)\n"
       "  --set F=V         replaces any recorded option, by its field name (the\n"

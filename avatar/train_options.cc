@@ -22,7 +22,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(TrainOptions, model, preset, dev
     lr_network, lr_means, lr_quats, lr_scales, lr_opacity, lr_features, feature_channels, triplane_resolution,
     latent_dim, render_resolution, batch, reconstruction_steps, recon_weight, adversarial_ramp, lr_discriminator,
     r1_gamma, r1_every, ada_target, collapse_steps, coarse_samples, fine_samples, mapping_samples, mapping_steps, mapping_loss,
-    landmark_model, decoder_steps, prior_steps, pti_steps, pti_frames, decoder_resolution, projected_blocks,
+    landmark_model, generator_from, decoder_steps, prior_steps, pti_steps, pti_frames, decoder_resolution, projected_blocks,
     adversarial_weight, perceptual_weight, decoder_ada, full_tune, decoder_init, log_every, eval_every,
     preview_every, checkpoint_every, seed)
 
@@ -75,6 +75,8 @@ Status TrainOptions::Check() const {
       return Status::InvalidArgument("train: --mapping-samples must be at least 1 and --mapping-steps at least 0");
     if (coarse_samples < 1 || fine_samples < 0)
       return Status::InvalidArgument("train: --samples must be at least 1 and --fine-samples at least 0");
+  } else if (!generator_from.empty()) {
+    return Status::InvalidArgument("train: --generator-from is for the gan-avatar model (--model gan-avatar)");
   }
   if (model == "gaussian-style" && decoder_steps > 0) {
     const int side = decoder_resolution > 0 ? decoder_resolution : resolution;

@@ -4,10 +4,12 @@
 #include <nlohmann/json.hpp>
 
 #include "avatar/avatar_train.h"
+#include "avatar/gan_avatar/trainer.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/dataset_pack.h"
 #include "avatar/train/image_file.h"
+#include "avatar/train/loop.h"
 #include "core/log.h"
 
 namespace headforge {
@@ -61,9 +63,6 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
                                      " is not on this machine; put it at the same path");
   }
   HF_RETURN_IF_ERROR(options.Check().WithContext(pack.string()));
-  if (options.model != "gaussian-style")
-    return Status::InvalidArgument(pack.string() + " is for the " + options.model +
-                                   " model; only gaussian-style trains from a pack");
   if (options.decoder_steps > 0 && options.adversarial_weight > 0 && !data.train.empty() &&
       !data.train.front().uv_map.defined())
     return Status::InvalidArgument(pack.string() + " has no UV maps for stage 3's discriminator: write it with "
@@ -74,7 +73,20 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
   if (!ImageFilesWritten())
     HF_LOG(Info) << "train: this build writes no images (previews, held_out/): headforge render --held-out "
                     "--side-by-side draws them once the model is in its workspace";
-  return TrainGaussianStyleRun(options, data, out_dir, progress, summary);
+  if (options.model == "gaussian-style") return TrainGaussianStyleRun(options, data, out_dir, progress, summary);
+  if (!options.generator_from.empty())
+    return Status::InvalidArgument("--set generator_from: a pack trains the GAN itself; --generator-from is headforge "
+                                   "train's, on the workspace");
+  StatsLog stats;
+  HF_RETURN_IF_ERROR(OpenTrainStats(out_dir, &stats));
+  *summary = TrainSummary();
+  HF_RETURN_IF_ERROR(TrainGanAvatar(options, data, /*track_renders=*/{}, out_dir, &stats, progress, summary));
+  summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json"};
+  if (options.mapping_steps > 0)
+    HF_LOG(Info) << "train: the GAN is trained; on the workspace's machine, headforge train --workspace WS --model "
+                    "gan-avatar --generator-from " << out_dir.string()
+                 << " (this folder copied there) adds the expression mapping";
+  return Status::Ok();
 }
 
 }  // namespace headforge

@@ -25,8 +25,11 @@ int PackCommand(const std::vector<std::string>& args) {
       "options with the preset applied) into one file. On a machine with PyTorch and a GPU,\n"
       "scripts/train_cuda.sh builds headforge-train, which trains on it with LibTorch alone:\n"
       "  headforge-train FILE --out DIR [--device cuda]\n"
-      "and DIR is the model folder (copy it into WORKSPACE/models/gaussian_style to render\n"
-      "and export there). gaussian-style only.");
+      "and DIR is the model folder: for gaussian-style, copy it into\n"
+      "WORKSPACE/models/gaussian_style to render and export there; for gan-avatar it holds\n"
+      "the GAN alone, and on this machine\n"
+      "  headforge train --workspace WORKSPACE --model gan-avatar --generator-from DIR\n"
+      "adds the expression mapping (its tracker needs this build) and makes the model.");
   if (parsed >= 0) return parsed;
   if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
   if (out.empty()) return ReportFailure(Status::InvalidArgument("pack: give the file to write with --out FILE"));
@@ -38,7 +41,9 @@ int PackCommand(const std::vector<std::string>& args) {
   const double mib = double(fs::file_size(out, ec)) / (1 << 20);
   HF_LOG(Info) << "pack: " << out << " (" << static_cast<int>(mib + 0.5) << " MiB) for " << train.model << " ("
                << train.preset << ", " << train.resolution << " px, on " << train.device
-               << "); train it with headforge-train " << out << " --out DIR";
+               << "); train it with headforge-train " << out << " --out DIR"
+               << (train.model == "gan-avatar" ? ", then headforge train --model gan-avatar --generator-from DIR here"
+                                                : "");
   return kExitOk;
 }
 

@@ -149,6 +149,61 @@ TEST_F(GanAvatarTrain, KilledMidTrainingResumesToTheSameModel) {
   }
 }
 
+// The GPU machine's route: a training pack of the gan-avatar model trained
+// by headforge-train (the LibTorch-only program) gives the train stage's GAN
+// without an expression mapping (the mean latent draws every frame); then
+// `headforge train --generator-from` on the workspace adds the mapping,
+// trains no GAN, and makes the train stage's model.
+TEST_F(GanAvatarTrain, APackTrainsTheGanAndTheWorkspaceAddsTheMapping) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("pack"));
+  std::vector<std::string> args = TrainArgs(ws);
+  args[0] = "pack";
+  args.insert(args.end(), {"--out", (ws / "gan.pack").string()});
+  const Result packed = Headforge(args);
+  ASSERT_EQ(packed.code, 0) << packed.err;
+  const fs::path out = ws / "trained_elsewhere";
+  const Result trained =
+      Headforge({(ws / "gan.pack").string(), "--out", out.string(), "--threads", "2"}, HEADFORGE_TRAIN_BINARY);
+  ASSERT_EQ(trained.code, 0) << trained.err;
+  EXPECT_NE(trained.err.find("--generator-from"), std::string::npos) << trained.err;
+  nlohmann::json config, eval, expected_eval;
+  ASSERT_TRUE(ReadJson(out / "config.json", &config).ok());
+  EXPECT_FALSE(config["expression_mapping"]["trained"].get<bool>());
+  EXPECT_EQ(config["options"]["resolution"], 32);
+  ASSERT_TRUE(ReadJson(out / "eval.json", &eval).ok());
+  ASSERT_TRUE(ReadJson(reference_ / kModelDir / "eval.json", &expected_eval).ok());
+  EXPECT_NE(eval["latent"].get<std::string>().find("running mean"), std::string::npos) << eval["latent"];
+  // The GAN is the train stage's: the same losses at every logged step, and
+  // the same held-out scores for the mean latent.
+  std::vector<nlohmann::json> gan = StatsLines(out / "stats.jsonl");
+  const std::vector<nlohmann::json> expected = StatsLines(reference_ / kModelDir / "stats.jsonl");
+  ASSERT_EQ(gan.size(), 12u);
+  for (size_t i = 0; i < gan.size(); ++i) EXPECT_EQ(gan[i]["loss_g"], expected[i]["loss_g"]) << i;
+  EXPECT_EQ(eval["mean"]["psnr_masked"], expected_eval["mean_latent"]["psnr_masked"]);
+
+  // On the workspace: the mapping alone, to the train stage's model.
+  args = TrainArgs(ws);
+  args.insert(args.end(), {"--generator-from", out.string()});
+  const Result mapped = Headforge(args);
+  ASSERT_EQ(mapped.code, 0) << mapped.err;
+  EXPECT_NE(mapped.err.find("training the expression mapping only"), std::string::npos) << mapped.err;
+  EXPECT_EQ(mapped.err.find("adversarial training from step"), std::string::npos) << "the GAN trained again";
+  EXPECT_EQ(FileHash(ws / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
+  ASSERT_TRUE(ReadJson(ws / kModelDir / "eval.json", &eval).ok());
+  EXPECT_EQ(eval["mean"], expected_eval["mean"]);
+  const std::vector<nlohmann::json> whole = StatsLines(ws / kModelDir / "stats.jsonl");
+  ASSERT_EQ(whole.size(), expected.size());  // the GAN's lines, then the mapping's
+  EXPECT_EQ(whole.back()["mapping_loss"], expected.back()["mapping_loss"]);
+
+  // A folder that holds no gan-avatar training is refused before anything loads.
+  args = TrainArgs(ws);
+  args.insert(args.end(), {"--generator-from", (ws / "nothing").string()});
+  const Result refused = Headforge(args);
+  EXPECT_EQ(refused.code, 1);
+  EXPECT_NE(refused.err.find("--generator-from"), std::string::npos) << refused.err;
+}
+
 TEST_F(GanAvatarTrain, TheLatentLossAblationMapsToo) {
   ASSERT_EQ(first_.code, 0) << first_.err;
   const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("latent"));

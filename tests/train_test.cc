@@ -885,11 +885,15 @@ TEST(PackBadInput, WhatCannotBePackedOrTrainedSaysWhy) {
   Result r = Headforge({"pack", "--workspace", ws.string()});
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("--out"), std::string::npos) << r.err;
-  // The gan-avatar model does not train from a pack.
-  r = Headforge({"pack", "--workspace", ws.string(), "--model", "gan-avatar", "--out", (ws / "g.pack").string()});
+  // --generator-from is the gan-avatar model's, and headforge train's.
+  r = Headforge({"pack", "--workspace", ws.string(), "--model", "gan-avatar", "--generator-from", ws.string(), "--out",
+                 (ws / "g.pack").string()});
   EXPECT_EQ(r.code, 2);
-  EXPECT_NE(r.err.find("gaussian-style"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("headforge train"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(ws / "g.pack"));
+  r = Headforge({"train", "--workspace", ws.string(), "--model", "gaussian-style", "--generator-from", ws.string()});
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("gan-avatar"), std::string::npos) << r.err;
   // A workspace not yet tracked.
   fs::remove(ws / "tracking.json");
   r = Headforge({"pack", "--workspace", ws.string(), "--out", (ws / "t.pack").string()});

@@ -2,7 +2,7 @@
 // tracked expression to the generator's w, trained on the generator's own
 // renders. Latents are sampled, rendered from a frontal training camera, and
 // HeadForge's landmark model and tracker estimate each render's expression
-// (the paper runs Deep3DFace there); the MLP then learns, with the generator
+// (render_expressions.h; the paper runs Deep3DFace there); the MLP then learns, with the generator
 // frozen, to reproduce each render from its estimated expression (the
 // photometric loss), or to reproduce its w (the latent loss, the ablation).
 #pragma once
@@ -10,15 +10,8 @@
 #include <torch/nn/module.h>
 #include <torch/nn/pimpl.h>
 
-#include <string>
-
 #include "avatar/gan_avatar/model.h"
 #include "avatar/nn/mlp.h"
-#include "core/face_model.h"
-#include "core/fs.h"
-#include "core/progress.h"
-#include "core/status.h"
-#include "reconstruction/tracking_io.h"
 
 namespace headforge {
 
@@ -40,23 +33,5 @@ struct RenderExpressions {
   int flagged = 0;            // of those kept, how many the tracker flagged low-confidence
   double median_residual_px = 0;  // the tracker's, at the landmark image's scale
 };
-
-struct RenderExpressionOptions {
-  int samples = 256;           // latents rendered
-  int landmark_size = 256;     // renders are enlarged to this longer side for the landmark model
-  std::string landmark_model;  // dlib's 68-point model file
-  double background = 0.5;
-  int threads = 1;
-};
-
-// Samples latents z ~ N(0, I) from `generator` (z drawn from `random`),
-// renders each from `camera` (the volume render's size) at out_width x
-// out_height, finds the 68 landmarks in a box placed where the subject's
-// tracked face projects, and tracks every render as one frame of one
-// sequence with the camera fixed, the identity shared and no smoothing.
-Status EstimateRenderExpressions(GanGenerator& generator, const SplatCamera& camera, int out_width, int out_height,
-                                 const FaceModel& model, const TrackingFile& tracking,
-                                 const RenderExpressionOptions& options, at::Generator& random, Progress* progress,
-                                 RenderExpressions* out);
 
 }  // namespace headforge

@@ -12,10 +12,10 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <sstream>
 #include <thread>
 
 #include "avatar/gan_avatar/avatar_io.h"
-#include "avatar/gan_avatar/expression_mapping.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/nn/augment.h"
 #include "avatar/nn/discriminator.h"
@@ -26,6 +26,7 @@
 #include "avatar/train/gan_watch.h"
 #include "avatar/train/image_file.h"
 #include "avatar/train/loop.h"
+#include "core/interrupt.h"
 #include "core/json_io.h"
 #include "core/log.h"
 
@@ -53,13 +54,16 @@ struct GanState {
 
 class GanTrainer {
  public:
-  GanTrainer(const TrainOptions& options, const AvatarDataset& data, const FaceModel& model, torch::Device device)
-      : options_(options), data_(data), model_(model), device_(device), gen_(at::detail::createCPUGenerator(options.seed)),
+  GanTrainer(const TrainOptions& options, const AvatarDataset& data, torch::Device device)
+      : options_(options), data_(data), device_(device), gen_(at::detail::createCPUGenerator(options.seed)),
         adam_g_(0.0, 0.99), adam_d_(0.0, 0.99), ada_(options.ada_target), watch_(options.collapse_steps) {}
 
   Status Start(const fs::path& checkpoint, StatsLog* stats);
+  // The generator of a finished training (options.generator_from) in place
+  // of this one's; Train then trains no GAN.
+  Status ImportGenerator(const fs::path& dir);
   Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
-  Status TrainMapping(const fs::path& workspace, StatsLog* stats, Progress* progress);
+  Status TrainMapping(const RenderTracker& track_renders, StatsLog* stats, Progress* progress);
   Status Finish(const fs::path& out_dir, TrainSummary* summary);
   int step() const { return state_.step; }
 
@@ -89,7 +93,6 @@ class GanTrainer {
 
   TrainOptions options_;
   const AvatarDataset& data_;
-  const FaceModel& model_;
   torch::Device device_;
   at::Generator gen_;
   GanAvatarOptions arch_;
@@ -361,8 +364,31 @@ Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   return stats->Truncate(size_t(lines));
 }
 
+Status GanTrainer::ImportGenerator(const fs::path& dir) {
+  GanAvatar trained;
+  HF_RETURN_IF_ERROR(LoadGanAvatar(dir, device_, &trained).WithContext("train: --generator-from"));
+  nlohmann::json config;
+  HF_RETURN_IF_ERROR(ReadJson(dir / "config.json", &config));
+  if (nlohmann::json(arch_) != config.at("architecture") || trained.out_width != data_.width ||
+      trained.out_height != data_.height)
+    return Status::InvalidArgument("train: --generator-from " + dir.string() + ": its generator (" +
+                                   config.at("architecture").dump() + " at " + std::to_string(trained.out_width) + "x" +
+                                   std::to_string(trained.out_height) + ") is not the one these options make (" +
+                                   nlohmann::json(arch_).dump() + " at " + std::to_string(data_.width) + "x" +
+                                   std::to_string(data_.height) + "): was it trained on this workspace's pack?");
+  avatar_.generator = trained.generator;
+  avatar_.w_average = trained.w_average;
+  g_params_ = avatar_.generator->parameters();
+  state_.step = config.at("training").value("steps", 0);
+  state_.seconds = config.at("training").value("seconds", 0.0);
+  HF_LOG(Info) << "train: gan-avatar: the generator of " << dir.string() << " (" << state_.step
+               << " GAN steps); training the expression mapping only";
+  return Status::Ok();
+}
+
 Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
   auto elapsed = [&] { return state_.seconds + SecondsSince(start_); };
+  if (!options_.generator_from.empty()) return Status::Ok();  // the GAN was trained elsewhere
   progress->Start("train: gan-avatar", options_.steps);
   progress->Advance(state_.step);
   for (int step = state_.step + 1; step <= options_.steps; ++step) {
@@ -428,20 +454,21 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
   return Status::Ok();
 }
 
-Status GanTrainer::TrainMapping(const fs::path& workspace, StatsLog* stats, Progress* progress) {
+Status GanTrainer::TrainMapping(const RenderTracker& track_renders, StatsLog* stats, Progress* progress) {
   if (options_.mapping_steps == 0) return Status::Ok();
+  if (!track_renders) {
+    HF_LOG(Info) << "train: gan-avatar: no expression mapping in this build (its tracker needs the full one); the "
+                    "model draws every frame with the mean latent until headforge train --generator-from adds it";
+    return Status::Ok();
+  }
   const auto start = std::chrono::steady_clock::now();
-  TrackingFile tracking;
-  HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", &tracking));
   for (torch::Tensor& p : g_params_) p.requires_grad_(false);  // the generator is frozen
   const SplatCamera camera = RenderCamera(FrontalView());
-  RenderExpressionOptions sampling;
-  sampling.samples = options_.mapping_samples;
-  sampling.landmark_model = options_.landmark_model;
-  sampling.background = kBackground;
-  sampling.threads = std::max(1, int(std::thread::hardware_concurrency()));
-  HF_RETURN_IF_ERROR(EstimateRenderExpressions(avatar_.generator, camera, data_.width, data_.height, model_, tracking, sampling,
-                                               gen_, progress, &samples_));
+  // Its own random stream: the same renders whether the GAN was trained here
+  // or imported (--generator-from).
+  at::Generator random = at::detail::createCPUGenerator(uint64_t(options_.seed) + 13);
+  HF_RETURN_IF_ERROR(track_renders(avatar_.generator, camera, data_.width, data_.height, kBackground, random, progress,
+                                   &samples_));
   const int64_t expressions = samples_.expressions.size(1);
   torch::manual_seed(uint64_t(options_.seed) + 11);
   avatar_.mapping = ExpressionMapping(expressions, arch_.w_dim);
@@ -456,7 +483,7 @@ Status GanTrainer::TrainMapping(const fs::path& workspace, StatsLog* stats, Prog
   double sum = 0;
   int summed = 0;
   for (int step = 1; step <= options_.mapping_steps; ++step) {
-    const torch::Tensor index = torch::randint(count, {batch}, gen_, torch::kLong).to(device_);
+    const torch::Tensor index = torch::randint(count, {batch}, random, torch::kLong).to(device_);
     const torch::Tensor w = avatar_.mapping->forward(e_all.index_select(0, index));
     torch::Tensor loss;
     if (options_.mapping_loss == "latent") {
@@ -487,6 +514,12 @@ Status GanTrainer::TrainMapping(const fs::path& workspace, StatsLog* stats, Prog
       summed = 0;
     }
     progress->Advance();
+    if (InterruptRequested()) {
+      progress->Finish("interrupted");
+      return Status::Interrupted("train: the expression mapping stopped at its step " + std::to_string(step) + " of " +
+                                 std::to_string(options_.mapping_steps) +
+                                 "; the GAN is kept: run the same command again to train the mapping from it");
+    }
   }
   progress->Finish(std::to_string(options_.mapping_steps) + " steps");
   state_.seconds += SecondsSince(start);
@@ -546,7 +579,9 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
       {"background", kBackground},
       {"training", {{"steps", state_.step}, {"batch", options_.batch}, {"seconds", state_.seconds},
                     {"seed", options_.seed}, {"preset", options_.preset}, {"holdout", options_.holdout},
-                    {"holdout_order", options_.holdout_order}, {"holdout_cameras", options_.holdout_cameras}}}};
+                    {"holdout_order", options_.holdout_order}, {"holdout_cameras", options_.holdout_cameras},
+                    {"generator_from", options_.generator_from}}},
+      {"options", ToJson(options_)}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "config.json", config, 1));
   summary->steps = state_.step;
   summary->seconds = state_.seconds;
@@ -580,20 +615,29 @@ GanAvatarOptions GanArchitecture(const TrainOptions& options, const AvatarDatase
   return arch;
 }
 
-Status TrainGanAvatar(const TrainOptions& options, const fs::path& workspace, const AvatarDataset& data,
-                      const FaceModel& model, const fs::path& out_dir, StatsLog* stats, Progress* progress,
-                      TrainSummary* summary) {
+Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const RenderTracker& track_renders,
+                      const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary) {
   torch::Device device = torch::kCPU;
   HF_RETURN_IF_ERROR(ParseDevice("train", options.device, &device));
   const fs::path checkpoint = out_dir / "checkpoint.pt";
-  GanTrainer trainer(options, data, model, device);
+  GanTrainer trainer(options, data, device);
   HF_RETURN_IF_ERROR(trainer.Start(checkpoint, stats));
+  std::error_code ec;
+  if (!options.generator_from.empty() && !fs::exists(checkpoint, ec)) {
+    HF_RETURN_IF_ERROR(trainer.ImportGenerator(options.generator_from));
+    // Its GAN's lines first, so that stats.jsonl tells the whole training.
+    std::string text;
+    if (stats->size() == 0 && ReadFileToString(fs::path(options.generator_from) / "stats.jsonl", &text).ok()) {
+      std::istringstream lines(text);
+      for (std::string line; std::getline(lines, line);)
+        if (!line.empty() && line.find("\"mapping_step\"") == std::string::npos) stats->Append(line);
+    }
+  }
   const int resumed_from = trainer.step();
   HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
-  HF_RETURN_IF_ERROR(trainer.TrainMapping(workspace, stats, progress));
+  HF_RETURN_IF_ERROR(trainer.TrainMapping(track_renders, stats, progress));
   HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
   summary->resumed_from = resumed_from;
-  std::error_code ec;
   fs::remove(checkpoint, ec);
   return Status::Ok();
 }

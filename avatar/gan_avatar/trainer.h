@@ -6,9 +6,13 @@
 // the expression mapping (expression_mapping.h).
 #pragma once
 
+#include <ATen/core/Generator.h>
 #include <torch/types.h>
 
+#include <functional>
+
 #include "avatar/avatar_train.h"
+#include "avatar/gan_avatar/expression_mapping.h"
 #include "avatar/gan_avatar/model.h"
 #include "avatar/train/dataset.h"
 #include "core/stats_log.h"
@@ -22,13 +26,24 @@ GanAvatarOptions GanArchitecture(const TrainOptions& options, const AvatarDatase
 // The volume render's size for `data`'s frames at `options`' render resolution.
 void GanRenderSize(const TrainOptions& options, const AvatarDataset& data, int* width, int* height);
 
+// What the expression mapping learns from: renders of `generator` from
+// `camera` at width x height over `background`, latents drawn from `random`,
+// each render's expression estimated (render_expressions.h, the full
+// build's tracker).
+using RenderTracker =
+    std::function<Status(GanGenerator& generator, const SplatCamera& camera, int width, int height,
+                         double background, at::Generator& random, Progress* progress, RenderExpressions* out)>;
+
 // Trains into `out_dir` (checkpoint.pt between attempts; a run that finds
-// one continues from it); writes model.pt, config.json, eval.json,
-// held_out/ and previews/.
-// Then samples renders, tracks them and trains the expression mapping, and
-// scores the held-out frames driven by their tracked expressions.
-Status TrainGanAvatar(const TrainOptions& options, const fs::path& workspace, const AvatarDataset& data,
-                      const FaceModel& model, const fs::path& out_dir, StatsLog* stats, Progress* progress,
-                      TrainSummary* summary);
+// one continues from it); writes model.pt, config.json (with every option,
+// for --generator-from), eval.json, held_out/ and previews/. Then, with
+// `track_renders`, trains the expression mapping, and scores the held-out
+// frames driven by their tracked expressions; without it (headforge-train,
+// the LibTorch-only program) the model has no mapping and draws every frame
+// with the mean latent. With options.generator_from (a folder this function
+// wrote for the same views and architecture) the GAN is that folder's and
+// only the mapping trains.
+Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const RenderTracker& track_renders,
+                      const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary);
 
 }  // namespace headforge

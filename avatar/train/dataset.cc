@@ -96,14 +96,6 @@ torch::Tensor RenderUvMap(const FaceModel& model, const torch::Tensor& vertices,
 
 }  // namespace
 
-std::string AvatarDataset::HeldOutText() const {
-  int held = 0;
-  for (int f = 0; f < num_frames; ++f) held += HeldOut(f);
-  if (holdout_every == 0) return "the last " + std::to_string(held) + " of " + std::to_string(num_frames);
-  return "one frame in " + std::to_string(holdout_every) + " from frame " + std::to_string(holdout_every / 2) + " (" +
-         std::to_string(held) + " of " + std::to_string(num_frames) + ")";
-}
-
 Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, const DatasetOptions& options,
                          AvatarDataset* dataset) {
   IngestedCapture capture;

@@ -15,6 +15,14 @@ torch::Tensor AvatarDataset::Vertices(const torch::Tensor& expression) const {
   return identity_vertices + torch::matmul(expression_basis, expression.to(expression_basis.dtype())).view({-1, 3});
 }
 
+std::string AvatarDataset::HeldOutText() const {
+  int held = 0;
+  for (int f = 0; f < num_frames; ++f) held += HeldOut(f);
+  if (holdout_every == 0) return "the last " + std::to_string(held) + " of " + std::to_string(num_frames);
+  return "one frame in " + std::to_string(holdout_every) + " from frame " + std::to_string(holdout_every / 2) + " (" +
+         std::to_string(held) + " of " + std::to_string(num_frames) + ")";
+}
+
 torch::Tensor ImageFromBytes(const torch::Tensor& bytes) { return bytes.to(torch::kFloat32).div(255.0).contiguous(); }
 
 torch::Tensor PoseCondition(const double rotation[9], const double translation[3]) {

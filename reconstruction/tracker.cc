@@ -89,8 +89,33 @@ double YawFromCamera(const TrackingCamera& camera, const Eigen::Isometry3d& head
   return std::atan2(facing.x(), -facing.z()) * 180.0 / M_PI;
 }
 
-Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>& views, int num_frames,
-                     const TrackOptions& options, TrackResult* result) {
+namespace {
+
+// One sequence's fit: the problem, its parameter blocks and what each view
+// put into it, built and read by the steps below in TrackSequence's order.
+struct SequenceFit {
+  SequenceFit(const std::vector<TrackingView>& v, int n, const TrackOptions& o) : views(v), num_frames(n), options(o) {}
+
+  const std::vector<TrackingView>& views;
+  const int num_frames;
+  const TrackOptions& options;
+  LandmarkBasis fit_basis;  // the sequence's basis cut to the fitted identity modes
+  std::vector<std::shared_ptr<const LandmarkBasis>> own_basis;  // a view's own, where it has one
+  std::vector<double> identity;
+  double focal_scale = 1.0;
+  std::vector<FrameBlocks> frames;
+  std::vector<bool> used;  // the view's landmarks are in the fit
+  std::vector<std::vector<ceres::ResidualBlockId>> view_blocks;
+  ceres::Problem problem;
+  ceres::Solver::Options solver;
+  ceres::Solver::Summary summary;
+  int dropped_views = 0;
+
+  const LandmarkBasis& BasisOf(size_t v) const { return own_basis[v] ? *own_basis[v] : fit_basis; }
+  Eigen::VectorXd Alpha() const { return Eigen::Map<const Eigen::VectorXd>(identity.data(), Eigen::Index(identity.size())); }
+};
+
+Status CheckSequence(const LandmarkBasis& basis, int num_frames, const TrackOptions& options) {
   std::string why;
   if (!options.Check(&why)) return Status::InvalidArgument("track: " + why);
   if (basis.size() != 68) return Status::InvalidArgument("track: the landmark basis must hold 68 landmarks");
@@ -100,58 +125,62 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
                                    " identity modes, fewer than the " + std::to_string(options.identity_modes) +
                                    " asked for");
   }
-  const auto start = std::chrono::steady_clock::now();
-  const int k = options.identity_modes, e = basis.num_expressions;
-  // The bases cut to the fitted identity modes: the sequence's, and each
-  // view's own where it has one (shared as it is when it has no more modes).
+  return Status::Ok();
+}
+
+// The bases cut to the fitted identity modes: the sequence's, and each
+// view's own where it has one (shared as it is when it has no more modes);
+// the parameter blocks at their starting values.
+Status PrepareBlocks(const LandmarkBasis& basis, SequenceFit* fit) {
+  const int k = fit->options.identity_modes;
   auto truncated = [k](const LandmarkBasis& b) {
     LandmarkBasis t = b;
     t.num_identity = k;
     for (auto& m : t.identity) m = m.leftCols(k).eval();
     return t;
   };
-  const LandmarkBasis fit_basis = truncated(basis);
-  std::vector<std::shared_ptr<const LandmarkBasis>> own_basis(views.size());
-  for (size_t v = 0; v < views.size(); ++v) {
-    const auto& b = views[v].basis;
+  fit->fit_basis = truncated(basis);
+  fit->own_basis.resize(fit->views.size());
+  for (size_t v = 0; v < fit->views.size(); ++v) {
+    const auto& b = fit->views[v].basis;
     if (!b) continue;
     if (b->size() != 68 || b->num_identity < k || b->num_expressions != basis.num_expressions)
       return Status::InvalidArgument("track: a view's landmark basis does not match the sequence's");
-    own_basis[v] = b->num_identity == k ? b : std::make_shared<const LandmarkBasis>(truncated(*b));
+    fit->own_basis[v] = b->num_identity == k ? b : std::make_shared<const LandmarkBasis>(truncated(*b));
   }
-  auto basis_of = [&](size_t v) -> const LandmarkBasis& { return own_basis[v] ? *own_basis[v] : fit_basis; };
+  fit->identity.assign(size_t(k), 0.0);
+  fit->frames.resize(size_t(fit->num_frames));
+  for (auto& f : fit->frames) f.expression.assign(size_t(basis.num_expressions), 0.0);
+  fit->used.assign(fit->views.size(), false);
+  fit->view_blocks.resize(fit->views.size());
+  return Status::Ok();
+}
 
-  std::vector<double> identity(k, 0.0);
-  double focal_scale = 1.0;
-  std::vector<FrameBlocks> frames(num_frames);
-  for (auto& f : frames) f.expression.assign(e, 0.0);
-
-  // Frames seen nearly frontally by some camera ignore their near-profile
-  // views, where the detector's landmarks are least reliable.
-  std::vector<bool> has_frontal(num_frames, false);
-  for (const TrackingView& view : views) {
-    if (view.frame >= 0 && view.frame < num_frames && view.landmarks &&
+// A robust reprojection residual per usable landmark of each view. Frames
+// seen nearly frontally by some camera ignore their near-profile views,
+// where the detector's landmarks are least reliable; the jaw contour fades
+// out towards profile.
+Status AddLandmarkResiduals(SequenceFit* fit) {
+  const TrackOptions& options = fit->options;
+  std::vector<bool> has_frontal(size_t(fit->num_frames), false);
+  for (const TrackingView& view : fit->views) {
+    if (view.frame >= 0 && view.frame < fit->num_frames && view.landmarks &&
         std::abs(YawFromCamera(view.camera, Eigen::Isometry3d::Identity())) <= options.max_fit_yaw_deg) {
-      has_frontal[view.frame] = true;
+      has_frontal[size_t(view.frame)] = true;
     }
   }
-  std::vector<bool> used(views.size(), false);
-  int out_dropped_views = 0;
-  std::vector<std::vector<ceres::ResidualBlockId>> view_blocks(views.size());
-
-  ceres::Problem problem;
   int observations = 0;
-  for (size_t v = 0; v < views.size(); ++v) {
-    const TrackingView& view = views[v];
-    if (view.frame < 0 || view.frame >= num_frames) {
+  for (size_t v = 0; v < fit->views.size(); ++v) {
+    const TrackingView& view = fit->views[v];
+    if (view.frame < 0 || view.frame >= fit->num_frames) {
       return Status::InvalidArgument("track: a view refers to frame " + std::to_string(view.frame) + " of " +
-                                     std::to_string(num_frames));
+                                     std::to_string(fit->num_frames));
     }
     if (!view.landmarks) continue;
     const double view_yaw = std::abs(YawFromCamera(view.camera, Eigen::Isometry3d::Identity()));
-    if (has_frontal[view.frame] && view_yaw > options.max_fit_yaw_deg) continue;
-    used[v] = true;
-    FrameBlocks& f = frames[view.frame];
+    if (has_frontal[size_t(view.frame)] && view_yaw > options.max_fit_yaw_deg) continue;
+    fit->used[v] = true;
+    FrameBlocks& f = fit->frames[size_t(view.frame)];
     constexpr double kContourFadeDeg = 10.0;
     const double contour =
         options.contour_weight * std::clamp((options.contour_max_yaw_deg - view_yaw) / kContourFadeDeg, 0.0, 1.0);
@@ -161,10 +190,10 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
       const double confidence = view.confidence.empty() ? 1.0 : view.confidence[i];
       const double weight = confidence * (i < 17 ? contour : 1.0);
       if (!(weight > 0)) continue;
-      view_blocks[v].push_back(problem.AddResidualBlock(
-          LandmarkReprojectionCost::Create(basis_of(v), i, view.camera, pixel, weight),
-          new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, identity.data(),
-          f.expression.data(), &focal_scale));
+      fit->view_blocks[v].push_back(fit->problem.AddResidualBlock(
+          LandmarkReprojectionCost::Create(fit->BasisOf(v), i, view.camera, pixel, weight),
+          new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, fit->identity.data(),
+          f.expression.data(), &fit->focal_scale));
       f.observed = true;
       ++observations;
     }
@@ -172,23 +201,33 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
   if (observations == 0) {
     return Status::DataError("track: no frame has landmarks; check that ingest found the face (landmarks.json)");
   }
+  return Status::Ok();
+}
 
-  if (options.fit_focal) {
-    problem.SetParameterLowerBound(&focal_scale, 0, 1.0 / options.max_focal_change);
-    problem.SetParameterUpperBound(&focal_scale, 0, options.max_focal_change);
-    if (options.focal_prior_scale > 0 && options.focal_prior_sigma > 0)
-      problem.AddResidualBlock(LogPriorCost::Create(options.focal_prior_scale,
-                                                    options.robust_scale_px / options.focal_prior_sigma),
-                               nullptr, &focal_scale);
-  } else {
-    problem.SetParameterBlockConstant(&focal_scale);
+// The focal length's scale: bounded, with its prior, or constant.
+void AddFocalLength(SequenceFit* fit) {
+  const TrackOptions& options = fit->options;
+  if (!options.fit_focal) {
+    fit->problem.SetParameterBlockConstant(&fit->focal_scale);
+    return;
   }
+  fit->problem.SetParameterLowerBound(&fit->focal_scale, 0, 1.0 / options.max_focal_change);
+  fit->problem.SetParameterUpperBound(&fit->focal_scale, 0, options.max_focal_change);
+  if (options.focal_prior_scale > 0 && options.focal_prior_sigma > 0)
+    fit->problem.AddResidualBlock(
+        LogPriorCost::Create(options.focal_prior_scale, options.robust_scale_px / options.focal_prior_sigma), nullptr,
+        &fit->focal_scale);
+}
 
-  // Priors, bounds, smoothness between consecutive observed frames.
-  problem.AddResidualBlock(CoefficientPriorCost::Create(k, options.identity_prior), nullptr, identity.data());
+// Priors, bounds, smoothness between consecutive observed frames.
+void AddPriorsAndSmoothness(SequenceFit* fit) {
+  const TrackOptions& options = fit->options;
+  ceres::Problem& problem = fit->problem;
+  const int k = options.identity_modes, e = int(fit->fit_basis.num_expressions);
+  problem.AddResidualBlock(CoefficientPriorCost::Create(k, options.identity_prior), nullptr, fit->identity.data());
   int previous = -1;
-  for (int i = 0; i < num_frames; ++i) {
-    FrameBlocks& f = frames[i];
+  for (int i = 0; i < fit->num_frames; ++i) {
+    FrameBlocks& f = fit->frames[size_t(i)];
     if (!f.observed) continue;
     if (options.expression_sparsity > 0) {
       // soft-L1 of scale a costs about 2 a |w| for |w| >> a; scaled so a weight
@@ -208,7 +247,7 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
       problem.SetParameterBlockConstant(f.translation);
     }
     if (previous >= 0) {
-      FrameBlocks& p = frames[previous];
+      FrameBlocks& p = fit->frames[size_t(previous)];
       // Gaps in the observed frames weaken the link in proportion.
       const double gap = i - previous;
       if (!options.fixed_head && (options.rotation_smoothness > 0 || options.translation_smoothness > 0)) {
@@ -223,94 +262,94 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
     }
     previous = i;
   }
+}
 
-  ceres::Solver::Options solver;
-  solver.linear_solver_type = PickLinearSolver();
-  solver.max_num_iterations = options.max_iterations;
-  solver.num_threads = options.threads;
-  solver.function_tolerance = 1e-8;
-  ceres::Solver::Summary summary;
-  ceres::Solve(solver, &problem, &summary);
-
-  // A view whose landmarks disagree with the others of its frame (a detector
-  // failure, typically on a turned face) is dropped, and the fit repeated.
-  if (summary.termination_type != ceres::FAILURE) {
+// Solves; a view whose landmarks disagree with the others of its frame (a
+// detector failure, typically on a turned face) is then dropped, and the fit
+// repeated.
+Status SolveDroppingOutlierViews(SequenceFit* fit) {
+  fit->solver.linear_solver_type = PickLinearSolver();
+  fit->solver.max_num_iterations = fit->options.max_iterations;
+  fit->solver.num_threads = fit->options.threads;
+  fit->solver.function_tolerance = 1e-8;
+  ceres::Solve(fit->solver, &fit->problem, &fit->summary);
+  if (fit->summary.termination_type != ceres::FAILURE) {
+    const std::vector<TrackingView>& views = fit->views;
     std::vector<double> view_median(views.size(), 0.0), all_used;
-    const Eigen::VectorXd alpha = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
+    const Eigen::VectorXd alpha = fit->Alpha();
     for (size_t v = 0; v < views.size(); ++v) {
-      if (!used[v]) continue;
-      view_median[v] = Median(ViewResiduals(views[v], basis_of(v), alpha, frames[views[v].frame], focal_scale));
+      if (!fit->used[v]) continue;
+      view_median[v] =
+          Median(ViewResiduals(views[v], fit->BasisOf(v), alpha, fit->frames[size_t(views[v].frame)], fit->focal_scale));
       all_used.push_back(view_median[v]);
     }
-    const double limit = std::max(options.flag_residual_px, 3.0 * Median(all_used));
-    std::vector<int> inliers(num_frames, 0);
-    for (size_t v = 0; v < views.size(); ++v) inliers[views[v].frame] += used[v] && view_median[v] <= limit;
+    const double limit = std::max(fit->options.flag_residual_px, 3.0 * Median(all_used));
+    std::vector<int> inliers(size_t(fit->num_frames), 0);
+    for (size_t v = 0; v < views.size(); ++v) inliers[size_t(views[v].frame)] += fit->used[v] && view_median[v] <= limit;
     int dropped = 0;
     for (size_t v = 0; v < views.size(); ++v) {
-      if (!used[v] || view_median[v] <= limit || inliers[views[v].frame] == 0) continue;
-      for (ceres::ResidualBlockId id : view_blocks[v]) problem.RemoveResidualBlock(id);
-      used[v] = false;
+      if (!fit->used[v] || view_median[v] <= limit || inliers[size_t(views[v].frame)] == 0) continue;
+      for (ceres::ResidualBlockId id : fit->view_blocks[v]) fit->problem.RemoveResidualBlock(id);
+      fit->used[v] = false;
       ++dropped;
     }
     if (dropped > 0) {
-      ceres::Solve(solver, &problem, &summary);
-      out_dropped_views = dropped;
+      ceres::Solve(fit->solver, &fit->problem, &fit->summary);
+      fit->dropped_views = dropped;
     }
   }
-  if (summary.termination_type == ceres::FAILURE || !std::isfinite(summary.final_cost)) {
-    return Status::Internal("track: the solver failed: " + summary.message);
+  if (fit->summary.termination_type == ceres::FAILURE || !std::isfinite(fit->summary.final_cost)) {
+    return Status::Internal("track: the solver failed: " + fit->summary.message);
   }
-  for (double a : identity) {
+  for (double a : fit->identity) {
     if (!std::isfinite(a)) return Status::Internal("track: the identity became non-finite");
   }
+  if (!std::isfinite(fit->focal_scale)) return Status::Internal("track: the focal length became non-finite");
+  return Status::Ok();
+}
 
-  TrackResult out;
-  out.dropped_views = out_dropped_views;
-  if (!std::isfinite(focal_scale)) return Status::Internal("track: the focal length became non-finite");
-  out.focal_scale = focal_scale;
-  if (options.fit_focal && options.focal_uncertainty)
-    out.focal_log_sigma = LogStandardDeviation(&problem, &focal_scale, summary.final_cost);
-  out.identity = Eigen::Map<const Eigen::VectorXd>(identity.data(), k);
-  out.iterations = static_cast<int>(summary.iterations.size());
-  out.solver_report = summary.BriefReport();
-  // Residuals and flags per observed frame.
-  std::vector<std::vector<double>> residuals(num_frames);
-  std::vector<int> seen(num_frames, 0);
-  std::vector<std::string> reasons(num_frames);
-  const Eigen::VectorXd alpha = out.identity;
-  for (size_t v = 0; v < views.size(); ++v) {
-    const TrackingView& view = views[v];
-    if (!used[v]) continue;
+// Every frame's motion and expression; for observed frames the median
+// residual and the reasons a frame is flagged low-confidence.
+void CollectFrames(const SequenceFit& fit, TrackResult* out) {
+  const TrackOptions& options = fit.options;
+  const int n = fit.num_frames;
+  std::vector<std::vector<double>> residuals(static_cast<size_t>(n));
+  std::vector<int> seen(static_cast<size_t>(n), 0);
+  std::vector<std::string> reasons(static_cast<size_t>(n));
+  const Eigen::VectorXd alpha = fit.Alpha();
+  for (size_t v = 0; v < fit.views.size(); ++v) {
+    const TrackingView& view = fit.views[v];
+    if (!fit.used[v]) continue;
+    const size_t f = size_t(view.frame);
     std::vector<int> indices;
-    const std::vector<double> r = ViewResiduals(view, basis_of(v), alpha, frames[view.frame], focal_scale, &indices);
-    residuals[view.frame].insert(residuals[view.frame].end(), r.begin(), r.end());
-    seen[view.frame] += int(indices.size());
+    const std::vector<double> r = ViewResiduals(view, fit.BasisOf(v), alpha, fit.frames[f], fit.focal_scale, &indices);
+    residuals[f].insert(residuals[f].end(), r.begin(), r.end());
+    seen[f] += int(indices.size());
     Eigen::MatrixXd seen_points(2, indices.size());
     for (size_t j = 0; j < indices.size(); ++j) seen_points.col(Eigen::Index(j)) = (*view.landmarks)[indices[j]];
-    const Eigen::Isometry3d motion = MotionOf(frames[view.frame]);
-    if (std::abs(YawFromCamera(view.camera, motion)) > options.max_yaw_deg) {
-      reasons[view.frame] += "profile view; ";
+    if (std::abs(YawFromCamera(view.camera, MotionOf(fit.frames[f]))) > options.max_yaw_deg) {
+      reasons[f] += "profile view; ";
     }
     if (seen_points.cols() >= 3) {
       const Eigen::MatrixXd centred = seen_points.colwise() - seen_points.rowwise().mean();
       const Eigen::JacobiSVD<Eigen::MatrixXd> svd(centred);
       const Eigen::Vector2d s = svd.singularValues();
-      if (s[1] < 0.1 * s[0]) reasons[view.frame] += "landmarks nearly collinear; ";
+      if (s[1] < 0.1 * s[0]) reasons[f] += "landmarks nearly collinear; ";
     }
   }
   std::vector<double> all;
-  std::vector<int> observed;
-  for (int i = 0; i < num_frames; ++i) {
+  const int e = int(fit.fit_basis.num_expressions);
+  for (int i = 0; i < n; ++i) {
+    const FrameBlocks& blocks = fit.frames[size_t(i)];
     TrackedFrame t;
     t.frame = i;
-    t.head_motion = MotionOf(frames[i]);
-    t.expression = Eigen::Map<const Eigen::VectorXd>(frames[i].expression.data(), e);
-    t.landmarks = seen[i];
-    if (frames[i].observed) {
-      observed.push_back(i);
-      t.residual_px = Median(residuals[i]);
-      all.insert(all.end(), residuals[i].begin(), residuals[i].end());
-      std::string r = reasons[i];
+    t.head_motion = MotionOf(blocks);
+    t.expression = Eigen::Map<const Eigen::VectorXd>(blocks.expression.data(), e);
+    t.landmarks = seen[size_t(i)];
+    if (blocks.observed) {
+      t.residual_px = Median(residuals[size_t(i)]);
+      all.insert(all.end(), residuals[size_t(i)].begin(), residuals[size_t(i)].end());
+      std::string r = reasons[size_t(i)];
       if (t.landmarks < options.min_landmarks) r += "few landmarks; ";
       if (t.residual_px > options.flag_residual_px) r += "high residual; ";
       if (!r.empty()) {
@@ -318,33 +357,65 @@ Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>
         t.why = r.substr(0, r.size() - 2);
       }
     }
-    out.frames.push_back(t);
+    out->frames.push_back(t);
   }
-  // Frames without landmarks: linear interpolation between the nearest
-  // observed frames (constant beyond the ends).
-  for (int i = 0; i < num_frames; ++i) {
-    if (frames[i].observed) continue;
+  out->median_residual_px = Median(all);
+}
+
+// Frames without landmarks: linear interpolation between the nearest
+// observed frames (constant beyond the ends).
+void InterpolateUnobservedFrames(const SequenceFit& fit, TrackResult* out) {
+  std::vector<int> observed;
+  for (int i = 0; i < fit.num_frames; ++i)
+    if (fit.frames[size_t(i)].observed) observed.push_back(i);
+  const int e = int(fit.fit_basis.num_expressions);
+  for (int i = 0; i < fit.num_frames; ++i) {
+    if (fit.frames[size_t(i)].observed) continue;
     const auto next = std::lower_bound(observed.begin(), observed.end(), i);
     const int after = next == observed.end() ? -1 : *next;
     const int before = next == observed.begin() ? -1 : *(next - 1);
     const int a = before >= 0 ? before : after, b = after >= 0 ? after : before;
     const double w = (a == b) ? 0.0 : double(i - a) / double(b - a);
-    const FrameBlocks& fa = frames[a];
-    const FrameBlocks& fb = frames[b];
+    const FrameBlocks& fa = fit.frames[size_t(a)];
+    const FrameBlocks& fb = fit.frames[size_t(b)];
     FrameBlocks mix;
     for (int d = 0; d < 3; ++d) {
       mix.rotation[d] = (1 - w) * fa.rotation[d] + w * fb.rotation[d];
       mix.translation[d] = (1 - w) * fa.translation[d] + w * fb.translation[d];
     }
-    TrackedFrame& t = out.frames[i];
+    TrackedFrame& t = out->frames[size_t(i)];
     t.head_motion = MotionOf(mix);
     t.expression.resize(e);
-    for (int j = 0; j < e; ++j) t.expression[j] = (1 - w) * fa.expression[j] + w * fb.expression[j];
+    for (int j = 0; j < e; ++j) t.expression[j] = (1 - w) * fa.expression[size_t(j)] + w * fb.expression[size_t(j)];
     t.interpolated = true;
     t.low_confidence = true;
     t.why = "no landmarks: interpolated";
   }
-  out.median_residual_px = Median(all);
+}
+
+}  // namespace
+
+Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>& views, int num_frames,
+                     const TrackOptions& options, TrackResult* result) {
+  HF_RETURN_IF_ERROR(CheckSequence(basis, num_frames, options));
+  const auto start = std::chrono::steady_clock::now();
+  SequenceFit fit(views, num_frames, options);
+  HF_RETURN_IF_ERROR(PrepareBlocks(basis, &fit));
+  HF_RETURN_IF_ERROR(AddLandmarkResiduals(&fit));
+  AddFocalLength(&fit);
+  AddPriorsAndSmoothness(&fit);
+  HF_RETURN_IF_ERROR(SolveDroppingOutlierViews(&fit));
+
+  TrackResult out;
+  out.dropped_views = fit.dropped_views;
+  out.focal_scale = fit.focal_scale;
+  if (options.fit_focal && options.focal_uncertainty)
+    out.focal_log_sigma = LogStandardDeviation(&fit.problem, &fit.focal_scale, fit.summary.final_cost);
+  out.identity = fit.Alpha();
+  out.iterations = static_cast<int>(fit.summary.iterations.size());
+  out.solver_report = fit.summary.BriefReport();
+  CollectFrames(fit, &out);
+  InterpolateUnobservedFrames(fit, &out);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   *result = std::move(out);
   return Status::Ok();

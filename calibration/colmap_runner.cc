@@ -288,82 +288,126 @@ Status CheckFixedCameraInstants(const CameraSet& cameras, double max_rotation_de
   return Status::DataError(text);
 }
 
-Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, const fs::path& work_dir,
-                 CameraSet* cameras, ColmapReport* report) {
-  HF_RETURN_IF_ERROR(options.Check());
-  const auto start = std::chrono::steady_clock::now();
-  HF_RETURN_IF_ERROR(EnsureDirectory(work_dir));
-  const fs::path log = work_dir / "colmap.log";
-  const fs::path database = work_dir / "database.db";
-  RemoveAll(database);
-  const int threads = options.threads > 0 ? options.threads : HardwareThreads();
-  const bool several = capture.cameras.size() > 1;
-  report->matcher = options.matcher == "auto" ? (several ? "exhaustive" : "sequential") : options.matcher;
-  report->mask = options.mask == "auto" ? (several && !options.static_cameras ? "background" : "none") : options.mask;
+namespace {
 
-  // The frames COLMAP sees, named "<camera>/<index>.png": every frame_step-th
-  // frame, or for fixed cameras a few synchronised instants.
-  std::vector<std::vector<size_t>> chosen(capture.cameras.size());
-  for (size_t c = 0; c < capture.cameras.size(); ++c) {
-    const size_t n = capture.cameras[c].frames.size();
-    if (options.static_cameras) {
-      const size_t k = std::min<size_t>(n, options.rig_instants);
+// One COLMAP reconstruction of a capture in `work_dir`: the steps RunColmap
+// takes, in its order, sharing the database, the log and the report.
+class ColmapJob {
+ public:
+  ColmapJob(const ColmapOptions& options, const IngestedCapture& capture, const fs::path& work_dir,
+            ColmapReport* report)
+      : options_(options), capture_(capture), work_dir_(work_dir), log_(work_dir / "colmap.log"),
+        database_(work_dir / "database.db"), image_path_((capture.workspace / "frames").string()),
+        exe_(options.executable), threads_(std::to_string(options.threads > 0 ? options.threads : HardwareThreads())),
+        report_(report) {}
+
+  // The frames COLMAP sees, named "<camera>/<index>.png", listed in
+  // images.txt: every frame_step-th frame, or for fixed cameras a few
+  // synchronised instants; their masks where the mask mode asks for them.
+  Status ChooseImages();
+  Status ExtractFeatures();
+  Status Match(const std::string& matcher);
+  // The mapper into sparse/, sparse_1/, ... (numbered on across calls), again
+  // with relaxed initialisation while too few images register; keeps the
+  // largest model. Fails only when the last attempt fails and nothing was
+  // mapped yet.
+  Status Map();
+  // Sequential matching that registers too few images: every pair matched,
+  // and mapped again.
+  Status MapWithFallback();
+  // Loop closure: the views the first model shows the camera coming back to
+  // are matched, and the model refined with them.
+  Status CloseLoops();
+  // The best model as text, read into `cameras`.
+  Status ReadModel(CameraSet* cameras);
+  // Fixed cameras: each one's pose (from its first registered instant) holds
+  // for all of its frames, after a check that the instants agree.
+  Status HoldFixedCameraPoses(CameraSet* cameras) const;
+
+ private:
+  Status Refine(fs::path* refined);
+  bool Enough() const { return best_registered_ >= options_.retry_below * total_; }
+
+  const ColmapOptions& options_;
+  const IngestedCapture& capture_;
+  const fs::path work_dir_, log_, database_;
+  const std::string image_path_, exe_, threads_;
+  ColmapReport* report_;
+  std::vector<std::string> image_names_;
+  int total_ = 0;
+  fs::path best_;
+  int best_registered_ = 0, runs_ = 0;
+};
+
+Status ColmapJob::ChooseImages() {
+  RemoveAll(database_);
+  const bool several = capture_.cameras.size() > 1;
+  report_->matcher = options_.matcher == "auto" ? (several ? "exhaustive" : "sequential") : options_.matcher;
+  report_->mask =
+      options_.mask == "auto" ? (several && !options_.static_cameras ? "background" : "none") : options_.mask;
+  std::vector<std::vector<size_t>> chosen(capture_.cameras.size());
+  for (size_t c = 0; c < capture_.cameras.size(); ++c) {
+    const size_t n = capture_.cameras[c].frames.size();
+    if (options_.static_cameras) {
+      const size_t k = std::min<size_t>(n, options_.rig_instants);
       for (size_t i = 0; i < k; ++i) chosen[c].push_back(k > 1 ? i * (n - 1) / (k - 1) : 0);
     } else {
-      for (size_t i = 0; i < n; i += options.frame_step) chosen[c].push_back(i);
+      for (size_t i = 0; i < n; i += options_.frame_step) chosen[c].push_back(i);
     }
   }
-  const fs::path list = work_dir / "images.txt";
-  std::vector<std::string> image_names;
-  std::ofstream names(list);
-  for (size_t c = 0; c < capture.cameras.size(); ++c)
+  std::string names;
+  for (size_t c = 0; c < capture_.cameras.size(); ++c)
     for (size_t i : chosen[c]) {
-      image_names.push_back(capture.cameras[c].name + "/" + FrameFileName(capture.cameras[c].frames[i].index));
-      names << image_names.back() << "\n";
+      image_names_.push_back(capture_.cameras[c].name + "/" + FrameFileName(capture_.cameras[c].frames[i].index));
+      names += image_names_.back() + "\n";
     }
-  names.close();
-  const int total = static_cast<int>(image_names.size());
-  report->total = total;
-  // Masks: COLMAP reads <mask_path>/<image name>.png and ignores pixels that are 0.
-  const fs::path mask_dir = work_dir / "masks";
-  if (report->mask != "none") {
-    for (size_t c = 0; c < capture.cameras.size(); ++c)
-      for (size_t i : chosen[c]) {
-        const IngestedCamera& cam = capture.cameras[c];
-        cv::Mat head = cv::imread(capture.MaskPath(cam.name, cam.frames[i].index).string(), cv::IMREAD_GRAYSCALE);
-        if (head.empty()) return Status::DataError("missing mask for " + cam.name + " frame " + std::to_string(i));
-        const cv::Mat keep = report->mask == "head" ? head : 255 - head;
-        HF_RETURN_IF_ERROR(WriteImageAtomic(mask_dir / cam.name / (FrameFileName(cam.frames[i].index) + ".png"), keep));
-      }
-  }
-  const std::string exe = options.executable;
-  const std::string image_path = (capture.workspace / "frames").string();
-  std::vector<std::string> extract = {exe, "feature_extractor", "--database_path", database.string(),
-                                      "--image_path", image_path, "--image_list_path", list.string(),
-                                      "--ImageReader.camera_model", options.camera_model,
+  HF_RETURN_IF_ERROR(WriteFileAtomic(work_dir_ / "images.txt", names));
+  total_ = static_cast<int>(image_names_.size());
+  report_->total = total_;
+  if (report_->mask == "none") return Status::Ok();
+  // COLMAP reads <mask_path>/<image name>.png and ignores pixels that are 0.
+  for (size_t c = 0; c < capture_.cameras.size(); ++c)
+    for (size_t i : chosen[c]) {
+      const IngestedCamera& cam = capture_.cameras[c];
+      cv::Mat head = cv::imread(capture_.MaskPath(cam.name, cam.frames[i].index).string(), cv::IMREAD_GRAYSCALE);
+      if (head.empty()) return Status::DataError("missing mask for " + cam.name + " frame " + std::to_string(i));
+      const cv::Mat keep = report_->mask == "head" ? head : 255 - head;
+      HF_RETURN_IF_ERROR(
+          WriteImageAtomic(work_dir_ / "masks" / cam.name / (FrameFileName(cam.frames[i].index) + ".png"), keep));
+    }
+  return Status::Ok();
+}
+
+Status ColmapJob::ExtractFeatures() {
+  std::vector<std::string> extract = {exe_, "feature_extractor", "--database_path", database_.string(),
+                                      "--image_path", image_path_, "--image_list_path", (work_dir_ / "images.txt").string(),
+                                      "--ImageReader.camera_model", options_.camera_model,
                                       "--ImageReader.single_camera_per_folder", "1",
                                       "--SiftExtraction.use_gpu", "0",
-                                      "--SiftExtraction.num_threads", std::to_string(threads),
-                                      "--SiftExtraction.max_num_features", std::to_string(options.max_features)};
-  if (report->mask != "none") {
+                                      "--SiftExtraction.num_threads", threads_,
+                                      "--SiftExtraction.max_num_features", std::to_string(options_.max_features)};
+  if (report_->mask != "none") {
     extract.push_back("--ImageReader.mask_path");
-    extract.push_back(mask_dir.string());
+    extract.push_back((work_dir_ / "masks").string());
   }
-  HF_LOG(Info) << "calibrate: COLMAP feature extraction on " << total << " images (" << options.max_features
-               << " SIFT features max, mask: " << report->mask << ")";
-  HF_RETURN_IF_ERROR(RunTool(extract, log));
-  HF_LOG(Info) << "calibrate: COLMAP " << report->matcher << " matching";
-  auto match = [&](const std::string& matcher) {
-    if (matcher == "sequential")
-      return RunTool({exe, "sequential_matcher", "--database_path", database.string(), "--SiftMatching.use_gpu", "0",
-                      "--SiftMatching.num_threads", std::to_string(threads), "--SequentialMatching.overlap",
-                      std::to_string(options.overlap), "--SequentialMatching.quadratic_overlap", "1"},
-                     log);
-    return RunTool({exe, "exhaustive_matcher", "--database_path", database.string(), "--SiftMatching.use_gpu", "0",
-                    "--SiftMatching.num_threads", std::to_string(threads)},
-                   log);
-  };
-  HF_RETURN_IF_ERROR(match(report->matcher));
+  HF_LOG(Info) << "calibrate: COLMAP feature extraction on " << total_ << " images (" << options_.max_features
+               << " SIFT features max, mask: " << report_->mask << ")";
+  return RunTool(extract, log_);
+}
+
+Status ColmapJob::Match(const std::string& matcher) {
+  HF_LOG(Info) << "calibrate: COLMAP " << matcher << " matching";
+  if (matcher == "sequential")
+    return RunTool({exe_, "sequential_matcher", "--database_path", database_.string(), "--SiftMatching.use_gpu", "0",
+                    "--SiftMatching.num_threads", threads_, "--SequentialMatching.overlap",
+                    std::to_string(options_.overlap), "--SequentialMatching.quadratic_overlap", "1"},
+                   log_);
+  return RunTool({exe_, "exhaustive_matcher", "--database_path", database_.string(), "--SiftMatching.use_gpu", "0",
+                  "--SiftMatching.num_threads", threads_},
+                 log_);
+}
+
+Status ColmapJob::Map() {
   // The incremental mapper depends on its initial pair and on thread timing: a
   // run that registers too few images is repeated with relaxed initialisation
   // (the attempts' models are kept side by side), and the largest model wins.
@@ -371,141 +415,163 @@ Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, c
       {},
       {"--Mapper.init_min_tri_angle", "8", "--Mapper.init_min_num_inliers", "50", "--Mapper.abs_pose_min_num_inliers",
        "15", "--Mapper.min_num_matches", "10"}};
-  const size_t num_attempts = std::min(attempts.size(), static_cast<size_t>(options.mapper_attempts));
-  fs::path best;
-  int best_registered = 0, run = 0;
-  // Runs the mapper attempts into sparse/, sparse_1/, ... (numbered on across
-  // rounds); fails only when the last attempt fails and nothing was mapped yet.
-  auto map = [&]() -> Status {
-    for (size_t a = 0; a < num_attempts; ++a) {
-      const int this_run = run++;
-      const fs::path sparse = work_dir / ("sparse" + (this_run == 0 ? std::string() : "_" + std::to_string(this_run)));
-      RemoveAll(sparse);
-      HF_RETURN_IF_ERROR(EnsureDirectory(sparse));
-      HF_LOG(Info) << "calibrate: COLMAP mapper" << (a == 0 ? "" : " (again, relaxed initialisation)");
-      std::vector<std::string> mapper = {exe, "mapper", "--database_path", database.string(), "--image_path", image_path,
-                                         "--output_path", sparse.string(), "--Mapper.num_threads", std::to_string(threads)};
-      mapper.insert(mapper.end(), attempts[a].begin(), attempts[a].end());
-      const Status mapped = RunTool(mapper, log);
-      if (!mapped.ok() && a + 1 == num_attempts && best.empty()) return mapped;
-      for (const auto& entry : fs::directory_iterator(sparse)) {
-        const int registered = entry.is_directory() ? CountRegisteredImages(entry.path() / "images.bin") : 0;
-        if (registered > best_registered) {
-          best_registered = registered;
-          best = entry.path();
-        }
+  const size_t num_attempts = std::min(attempts.size(), static_cast<size_t>(options_.mapper_attempts));
+  for (size_t a = 0; a < num_attempts; ++a) {
+    const int run = runs_++;
+    const fs::path sparse = work_dir_ / ("sparse" + (run == 0 ? std::string() : "_" + std::to_string(run)));
+    RemoveAll(sparse);
+    HF_RETURN_IF_ERROR(EnsureDirectory(sparse));
+    HF_LOG(Info) << "calibrate: COLMAP mapper" << (a == 0 ? "" : " (again, relaxed initialisation)");
+    std::vector<std::string> mapper = {exe_, "mapper", "--database_path", database_.string(), "--image_path",
+                                       image_path_, "--output_path", sparse.string(), "--Mapper.num_threads", threads_};
+    mapper.insert(mapper.end(), attempts[a].begin(), attempts[a].end());
+    const Status mapped = RunTool(mapper, log_);
+    if (!mapped.ok() && a + 1 == num_attempts && best_.empty()) return mapped;
+    for (const auto& entry : fs::directory_iterator(sparse)) {
+      const int registered = entry.is_directory() ? CountRegisteredImages(entry.path() / "images.bin") : 0;
+      if (registered > best_registered_) {
+        best_registered_ = registered;
+        best_ = entry.path();
       }
-      if (best_registered >= options.retry_below * total) break;
     }
-    return Status::Ok();
-  };
-  Status mapped = map();
-  if (report->matcher == "sequential" && best_registered < options.retry_below * total &&
-      total <= options.exhaustive_fallback_max) {
-    HF_LOG(Warning) << "calibrate: COLMAP registered " << best_registered << " of " << total
+    if (Enough()) break;
+  }
+  return Status::Ok();
+}
+
+Status ColmapJob::MapWithFallback() {
+  Status mapped = Map();
+  if (report_->matcher == "sequential" && !Enough() && total_ <= options_.exhaustive_fallback_max) {
+    HF_LOG(Warning) << "calibrate: COLMAP registered " << best_registered_ << " of " << total_
                     << " images after sequential matching; matching every pair and mapping again (slow for "
                     << "many frames; where the frames lie only a few degrees apart, as every frame of a walk round "
                     << "a head does, ingesting 50-100 frames per turn with --fps lets sequential matching succeed)";
-    report->sequential_registered = best_registered;
-    HF_RETURN_IF_ERROR(match("exhaustive"));
-    mapped = map();
+    report_->sequential_registered = best_registered_;
+    HF_RETURN_IF_ERROR(Match("exhaustive"));
+    mapped = Map();
   }
   HF_RETURN_IF_ERROR(mapped);
-  if (best.empty())
-    return Status::DataError("COLMAP reconstructed nothing from " + std::to_string(total) +
-                             " images (too few features or matches: textureless frames? see " + log.string() + ")");
-  if (report->matcher == "sequential" && report->sequential_registered < 0 && options.revisit_angle_deg > 0) {
-    // Loop closure: match the views the first model shows the camera coming back to, and refine it with them.
-    const fs::path first = work_dir / "model_first";
-    RemoveAll(first);
-    HF_RETURN_IF_ERROR(EnsureDirectory(first));
-    HF_RETURN_IF_ERROR(RunTool({exe, "model_converter", "--input_path", best.string(), "--output_path", first.string(),
-                                "--output_type", "TXT"},
-                               log));
-    ColmapTextModel model;
-    std::map<long, Eigen::Vector3d> points;
-    HF_RETURN_IF_ERROR(ReadColmapCamerasAndImages(first, &model));
-    HF_RETURN_IF_ERROR(ReadColmapPoints(first, &points));
-    RemoveAll(first);
-    std::vector<std::string> order = image_names;  // as the sequential matcher orders them: by name
-    std::sort(order.begin(), order.end());
-    const auto pairs = FindRevisitPairs(model, points, order, options.revisit_angle_deg, options.overlap,
-                                        options.revisit_pairs);
-    if (!pairs.empty()) {
-      const fs::path pair_list = work_dir / "revisit_pairs.txt";
-      std::ofstream out(pair_list);
-      for (const auto& [a, b] : pairs) out << a << " " << b << "\n";
-      out.close();
-      if (!out) return Status::IoError("cannot write " + pair_list.string());
-      HF_LOG(Info) << "calibrate: the camera comes back to views it saw before: COLMAP matches " << pairs.size()
-                   << " more pairs of images (looking within " << options.revisit_angle_deg
-                   << " deg of each other) and refines the model with them";
-      HF_RETURN_IF_ERROR(RunTool({exe, "matches_importer", "--database_path", database.string(), "--match_list_path",
-                                  pair_list.string(), "--match_type", "pairs", "--SiftMatching.use_gpu", "0",
-                                  "--SiftMatching.num_threads", std::to_string(threads)},
-                                 log));
-      report->revisit_pairs = static_cast<int>(pairs.size());
-      // The first model stays the start: its points are triangulated again
-      // with the new matches (tracks that span the return merge) and the
-      // whole model is bundle adjusted, twice (the second pass merges what the
-      // first brought within reach). Mapping again from scratch instead rolls
-      // the incremental mapper's dice once more, and it sometimes returns a
-      // model that registers every image in the wrong places.
-      fs::path refined = best;
-      auto refine = [&]() -> Status {
-        for (int round = 1; round <= 2; ++round) {
-          const fs::path triangulated = work_dir / "revisit_triangulated";
-          const fs::path adjusted = work_dir / ("revisit_adjusted_" + std::to_string(round));
-          for (const fs::path& dir : {triangulated, adjusted}) {
-            RemoveAll(dir);
-            HF_RETURN_IF_ERROR(EnsureDirectory(dir));
-          }
-          HF_RETURN_IF_ERROR(RunTool({exe, "point_triangulator", "--database_path", database.string(), "--image_path",
-                                      image_path, "--input_path", refined.string(), "--output_path",
-                                      triangulated.string(), "--Mapper.num_threads", std::to_string(threads)},
-                                     log));
-          HF_RETURN_IF_ERROR(RunTool({exe, "bundle_adjuster", "--input_path", triangulated.string(),
-                                      "--output_path", adjusted.string()},
-                                     log));
-          RemoveAll(triangulated);
-          if (refined != best) RemoveAll(refined);
-          refined = adjusted;
-        }
-        return Status::Ok();
-      };
-      if (Status s = refine(); s.ok()) {
-        best = refined;
-      } else {
-        HF_LOG(Warning) << "calibrate: refining with the revisited views failed (" << s.message()
-                        << "); keeping the first model";
-      }
-    }
+  if (best_.empty())
+    return Status::DataError("COLMAP reconstructed nothing from " + std::to_string(total_) +
+                             " images (too few features or matches: textureless frames? see " + log_.string() + ")");
+  return Status::Ok();
+}
+
+Status ColmapJob::CloseLoops() {
+  if (report_->matcher != "sequential" || report_->sequential_registered >= 0 || options_.revisit_angle_deg <= 0)
+    return Status::Ok();
+  const fs::path first = work_dir_ / "model_first";
+  RemoveAll(first);
+  HF_RETURN_IF_ERROR(EnsureDirectory(first));
+  HF_RETURN_IF_ERROR(RunTool({exe_, "model_converter", "--input_path", best_.string(), "--output_path",
+                              first.string(), "--output_type", "TXT"},
+                             log_));
+  ColmapTextModel model;
+  std::map<long, Eigen::Vector3d> points;
+  HF_RETURN_IF_ERROR(ReadColmapCamerasAndImages(first, &model));
+  HF_RETURN_IF_ERROR(ReadColmapPoints(first, &points));
+  RemoveAll(first);
+  std::vector<std::string> order = image_names_;  // as the sequential matcher orders them: by name
+  std::sort(order.begin(), order.end());
+  const auto pairs =
+      FindRevisitPairs(model, points, order, options_.revisit_angle_deg, options_.overlap, options_.revisit_pairs);
+  if (pairs.empty()) return Status::Ok();
+  const fs::path pair_list = work_dir_ / "revisit_pairs.txt";
+  std::string text;
+  for (const auto& [a, b] : pairs) text += a + " " + b + "\n";
+  HF_RETURN_IF_ERROR(WriteFileAtomic(pair_list, text));
+  HF_LOG(Info) << "calibrate: the camera comes back to views it saw before: COLMAP matches " << pairs.size()
+               << " more pairs of images (looking within " << options_.revisit_angle_deg
+               << " deg of each other) and refines the model with them";
+  HF_RETURN_IF_ERROR(RunTool({exe_, "matches_importer", "--database_path", database_.string(), "--match_list_path",
+                              pair_list.string(), "--match_type", "pairs", "--SiftMatching.use_gpu", "0",
+                              "--SiftMatching.num_threads", threads_},
+                             log_));
+  report_->revisit_pairs = static_cast<int>(pairs.size());
+  fs::path refined = best_;
+  if (Status s = Refine(&refined); s.ok()) {
+    best_ = refined;
+  } else {
+    HF_LOG(Warning) << "calibrate: refining with the revisited views failed (" << s.message()
+                    << "); keeping the first model";
   }
-  const fs::path text = work_dir / "model";
+  return Status::Ok();
+}
+
+// The first model stays the start: its points are triangulated again with
+// the new matches (tracks that span the return merge) and the whole model is
+// bundle adjusted, twice (the second pass merges what the first brought
+// within reach). Mapping again from scratch instead rolls the incremental
+// mapper's dice once more, and it sometimes returns a model that registers
+// every image in the wrong places.
+Status ColmapJob::Refine(fs::path* refined) {
+  for (int round = 1; round <= 2; ++round) {
+    const fs::path triangulated = work_dir_ / "revisit_triangulated";
+    const fs::path adjusted = work_dir_ / ("revisit_adjusted_" + std::to_string(round));
+    for (const fs::path& dir : {triangulated, adjusted}) {
+      RemoveAll(dir);
+      HF_RETURN_IF_ERROR(EnsureDirectory(dir));
+    }
+    HF_RETURN_IF_ERROR(RunTool({exe_, "point_triangulator", "--database_path", database_.string(), "--image_path",
+                                image_path_, "--input_path", refined->string(), "--output_path",
+                                triangulated.string(), "--Mapper.num_threads", threads_},
+                               log_));
+    HF_RETURN_IF_ERROR(RunTool({exe_, "bundle_adjuster", "--input_path", triangulated.string(), "--output_path",
+                                adjusted.string()},
+                               log_));
+    RemoveAll(triangulated);
+    if (*refined != best_) RemoveAll(*refined);
+    *refined = adjusted;
+  }
+  return Status::Ok();
+}
+
+Status ColmapJob::ReadModel(CameraSet* cameras) {
+  const fs::path text = work_dir_ / "model";
   RemoveAll(text);
   HF_RETURN_IF_ERROR(EnsureDirectory(text));
-  HF_RETURN_IF_ERROR(RunTool({exe, "model_converter", "--input_path", best.string(), "--output_path", text.string(),
+  HF_RETURN_IF_ERROR(RunTool({exe_, "model_converter", "--input_path", best_.string(), "--output_path", text.string(),
                               "--output_type", "TXT"},
-                             log));
-  HF_RETURN_IF_ERROR(ReadColmapTextModel(text, capture, cameras, report));
-  report->total = total;
-  if (options.static_cameras) {
-    if (Status s = CheckFixedCameraInstants(*cameras, options.max_instant_rotation_deg, options.max_instant_shift);
-        !s.ok())
-      return Status::DataError("COLMAP's model is inconsistent: " + s.message() +
-                               "; --max-instant-rotation and --max-instant-shift set the limits; fewer "
-                               "--rig-instants or a rig file (--mode rig) may help; see " + log.string());
-    // Each fixed camera's pose (from its first registered instant) holds for
-    // all of its frames; registration counts the instants COLMAP was given.
-    std::map<std::string, Eigen::Isometry3d> pose;
-    for (const auto& v : cameras->views)
-      if (v.registered && !pose.count(v.camera)) pose[v.camera] = v.cam_from_world;
-    for (auto& v : cameras->views) {
-      const auto it = pose.find(v.camera);
-      v.registered = it != pose.end();
-      if (v.registered) v.cam_from_world = it->second;
-    }
+                             log_));
+  HF_RETURN_IF_ERROR(ReadColmapTextModel(text, capture_, cameras, report_));
+  report_->total = total_;
+  return Status::Ok();
+}
+
+Status ColmapJob::HoldFixedCameraPoses(CameraSet* cameras) const {
+  if (!options_.static_cameras) return Status::Ok();
+  if (Status s = CheckFixedCameraInstants(*cameras, options_.max_instant_rotation_deg, options_.max_instant_shift);
+      !s.ok())
+    return Status::DataError("COLMAP's model is inconsistent: " + s.message() +
+                             "; --max-instant-rotation and --max-instant-shift set the limits; fewer "
+                             "--rig-instants or a rig file (--mode rig) may help; see " + log_.string());
+  // Registration counts the instants COLMAP was given.
+  std::map<std::string, Eigen::Isometry3d> pose;
+  for (const auto& v : cameras->views)
+    if (v.registered && !pose.count(v.camera)) pose[v.camera] = v.cam_from_world;
+  for (auto& v : cameras->views) {
+    const auto it = pose.find(v.camera);
+    v.registered = it != pose.end();
+    if (v.registered) v.cam_from_world = it->second;
   }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status RunColmap(const ColmapOptions& options, const IngestedCapture& capture, const fs::path& work_dir,
+                 CameraSet* cameras, ColmapReport* report) {
+  HF_RETURN_IF_ERROR(options.Check());
+  const auto start = std::chrono::steady_clock::now();
+  HF_RETURN_IF_ERROR(EnsureDirectory(work_dir));
+  ColmapJob job(options, capture, work_dir, report);
+  HF_RETURN_IF_ERROR(job.ChooseImages());
+  HF_RETURN_IF_ERROR(job.ExtractFeatures());
+  HF_RETURN_IF_ERROR(job.Match(report->matcher));
+  HF_RETURN_IF_ERROR(job.MapWithFallback());
+  HF_RETURN_IF_ERROR(job.CloseLoops());
+  HF_RETURN_IF_ERROR(job.ReadModel(cameras));
+  HF_RETURN_IF_ERROR(job.HoldFixedCameraPoses(cameras));
   report->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return Status::Ok();
 }

@@ -97,79 +97,69 @@ std::string CaptureSection(const IngestedCapture& capture) {
   return html + "</div>";
 }
 
-}  // namespace
-
-Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const ReportOptions& options,
-                   std::string* note) {
-  IngestedCapture capture;
-  HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace, &capture));
-  nlohmann::json data = nlohmann::json::object();
-  std::vector<std::string> lacks;
-
-  // Cameras: every registered view's centre in the head frame.
+// Every registered view's camera centre in the head frame.
+nlohmann::json CameraData(const fs::path& workspace) {
   CameraSet cameras;
-  if (CameraSet::Read(workspace / "cameras_head.json", &cameras).ok()) {
-    nlohmann::json points = nlohmann::json::array();
-    for (const CameraView& v : cameras.views)
-      if (v.registered) {
-        const Eigen::Vector3d c = v.Centre();
-        points.push_back({{"x", c.x()}, {"y", c.y()}, {"z", c.z()}, {"camera", v.camera}, {"frame", v.frame}});
-      }
-    data["cameras"] = {{"mode", cameras.mode}, {"points", points}};
-  }
-  // Tracking: residuals, and the six blendshapes that move most.
+  if (!CameraSet::Read(workspace / "cameras_head.json", &cameras).ok()) return nullptr;
+  nlohmann::json points = nlohmann::json::array();
+  for (const CameraView& v : cameras.views)
+    if (v.registered) {
+      const Eigen::Vector3d c = v.Centre();
+      points.push_back({{"x", c.x()}, {"y", c.y()}, {"z", c.z()}, {"camera", v.camera}, {"frame", v.frame}});
+    }
+  return {{"mode", cameras.mode}, {"points", points}};
+}
+
+// Tracking: residuals, and the six blendshapes that move most.
+nlohmann::json TrackingData(const fs::path& workspace) {
   TrackingFile tracking;
-  if (ReadTracking(workspace / "tracking.json", &tracking).ok() && !tracking.frames.empty()) {
-    nlohmann::json residual = nlohmann::json::array();
-    for (const TrackedFrame& f : tracking.frames) residual.push_back({{"x", f.frame}, {"y", f.residual_px}});
-    const size_t e = tracking.expression_names.size();
-    std::vector<std::pair<double, size_t>> spread;
-    for (size_t k = 0; k < e; ++k) {
-      double sum = 0, sq = 0;
-      for (const TrackedFrame& f : tracking.frames) sum += f.expression[Eigen::Index(k)], sq += std::pow(f.expression[Eigen::Index(k)], 2);
-      const double mean = sum / double(tracking.frames.size());
-      spread.emplace_back(sq / double(tracking.frames.size()) - mean * mean, k);
-    }
-    std::sort(spread.rbegin(), spread.rend());
-    nlohmann::json curves = nlohmann::json::array();
-    for (size_t i = 0; i < std::min<size_t>(6, spread.size()); ++i) {
-      nlohmann::json points = nlohmann::json::array();
-      for (const TrackedFrame& f : tracking.frames) points.push_back({{"x", f.frame}, {"y", f.expression[Eigen::Index(spread[i].second)]}});
-      curves.push_back({{"name", tracking.expression_names[spread[i].second]}, {"points", points}});
-    }
-    data["tracking"] = {{"residual", residual}, {"curves", curves}};
+  if (!ReadTracking(workspace / "tracking.json", &tracking).ok() || tracking.frames.empty()) return nullptr;
+  nlohmann::json residual = nlohmann::json::array();
+  for (const TrackedFrame& f : tracking.frames) residual.push_back({{"x", f.frame}, {"y", f.residual_px}});
+  const size_t e = tracking.expression_names.size();
+  std::vector<std::pair<double, size_t>> spread;
+  for (size_t k = 0; k < e; ++k) {
+    double sum = 0, sq = 0;
+    for (const TrackedFrame& f : tracking.frames) sum += f.expression[Eigen::Index(k)], sq += std::pow(f.expression[Eigen::Index(k)], 2);
+    const double mean = sum / double(tracking.frames.size());
+    spread.emplace_back(sq / double(tracking.frames.size()) - mean * mean, k);
   }
-  // Training: the loss and the held-out PSNR against wall time.
-  // The model trained last (the one export takes).
-  const fs::path latest = LatestModelFolder(workspace);
-  const fs::path model = latest.empty() ? workspace / "models" / "gaussian_style" : latest;
-  nlohmann::json eval;
-  const bool trained = ReadJson(model / "eval.json", &eval).ok();
-  if (trained) {
-    nlohmann::json loss = nlohmann::json::array(), held = nlohmann::json::array();
-    for (const nlohmann::json& line : JsonLines(model / "stats.jsonl")) {
-      // The gan-avatar model's lines name the generator's loss, or the warm-up's L1.
-      std::string key = "loss";
-      if (!line.contains(key)) key = line.value("phase", "") == "adversarial" ? "loss_g" : "recon_l1";
-      if (line.contains(key)) loss.push_back({{"x", line.value("seconds", 0.0) / 60}, {"y", line[key]}});
-      if (line.contains("test_psnr_masked"))
-        held.push_back({{"x", line.value("seconds", 0.0) / 60}, {"y", line["test_psnr_masked"]}});
-    }
-    data["training"] = {{"loss", loss}, {"held_out", held}};
-  } else {
-    lacks.push_back("no trained model (run headforge train): no training or evaluation sections");
+  std::sort(spread.rbegin(), spread.rend());
+  nlohmann::json curves = nlohmann::json::array();
+  for (size_t i = 0; i < std::min<size_t>(6, spread.size()); ++i) {
+    nlohmann::json points = nlohmann::json::array();
+    for (const TrackedFrame& f : tracking.frames) points.push_back({{"x", f.frame}, {"y", f.expression[Eigen::Index(spread[i].second)]}});
+    curves.push_back({{"name", tracking.expression_names[spread[i].second]}, {"points", points}});
   }
-  // Accuracy against time: the rows `headforge bench train` left in the workspace.
+  return {{"residual", residual}, {"curves", curves}};
+}
+
+// Training: the loss and the held-out PSNR against wall time.
+nlohmann::json TrainingData(const fs::path& model) {
+  nlohmann::json loss = nlohmann::json::array(), held = nlohmann::json::array();
+  for (const nlohmann::json& line : JsonLines(model / "stats.jsonl")) {
+    // The gan-avatar model's lines name the generator's loss, or the warm-up's L1.
+    std::string key = "loss";
+    if (!line.contains(key)) key = line.value("phase", "") == "adversarial" ? "loss_g" : "recon_l1";
+    if (line.contains(key)) loss.push_back({{"x", line.value("seconds", 0.0) / 60}, {"y", line[key]}});
+    if (line.contains("test_psnr_masked"))
+      held.push_back({{"x", line.value("seconds", 0.0) / 60}, {"y", line["test_psnr_masked"]}});
+  }
+  return {{"loss", loss}, {"held_out", held}};
+}
+
+// Accuracy against time: the rows `headforge bench train` left in the workspace.
+nlohmann::json BenchData(const fs::path& workspace) {
   nlohmann::json bench = nlohmann::json::array();
   if (fs::is_directory(workspace / "bench_train"))
     for (const auto& entry : fs::directory_iterator(workspace / "bench_train")) {
       nlohmann::json saved;
       if (ReadJson(entry.path() / "bench.json", &saved).ok() && saved.contains("row")) bench.push_back(saved["row"]);
     }
-  data["bench"] = bench;
+  return bench;
+}
 
-  // The page.
-  std::string html = R"(<!doctype html>
+const char* const kPageStyle = R"(<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>HeadForge report</title>
 <style>
 body { font: 14px/1.45 system-ui, sans-serif; margin: 24px auto; max-width: 1100px; color: #222; padding: 0 16px; }
@@ -181,85 +171,9 @@ td.num { text-align: right; white-space: nowrap; }
 video { max-width: 100%; }
 </style>
 )";
-  std::string chart_js;
-  if (!options.chart_js.empty() && ReadFileToString(options.chart_js, &chart_js).ok() && !chart_js.empty()) {
-    html += "<script>" + InlineScriptText(chart_js) + "</script>\n";
-  } else {
-    chart_js.clear();
-    lacks.push_back("no charting library (scripts/install_deps.sh installs Chart.js): tables and images only");
-  }
-  html += "<script id=\"data\" type=\"application/json\">" + ScriptJson(data) + "</script>\n</head><body>\n";
-  html += "<h1>HeadForge report: " + HtmlEscape(workspace.filename().string()) + "</h1>";
-  if (!lacks.empty()) {
-    html += "<p class=\"note\">";
-    for (const std::string& l : lacks) html += HtmlEscape(l) + ". ";
-    html += "</p>";
-  }
-  html += StagesSection(workspace);
-  html += CaptureSection(capture);
-  html += "<h2>Cameras</h2><p>Each view's camera centre in the head frame (metres; the face looks toward +z), "
-          "seen from above.</p><div class=\"chart\"><canvas id=\"cameras\"></canvas></div>";
-  html += "<h2>Tracking</h2><p>The median landmark residual per frame (pixels), and the six blendshapes that "
-          "move most.</p><div class=\"chart\"><canvas id=\"residual\"></canvas></div>"
-          "<div class=\"chart\"><canvas id=\"curves\"></canvas></div>";
-  if (trained) {
-    html += "<h2>Training</h2><p>The training loss and the held-out PSNR over the head against wall time.</p>"
-            "<div class=\"chart\"><canvas id=\"training\"></canvas></div>";
-    const nlohmann::json mean = eval.value("mean", nlohmann::json::object());
-    html += "<h2>Evaluation</h2><p>Held out: " + HtmlEscape(eval.value("held_out_frames", std::string("?"))) +
-            " frames, background " + Number(eval.value("background", 0.5), 1) + ".</p><table>"
-            "<tr><th></th><th>PSNR</th><th>SSIM</th><th>L1</th><th>sharpness, render / frame</th><th>SD</th></tr>"
-            "<tr><td>held-out, over the head</td><td class=\"num\">" + Number(mean.value("psnr_masked", 0.0), 2) +
-            " dB</td><td class=\"num\">" + Number(mean.value("ssim_masked", 0.0), 3) + "</td><td class=\"num\">" +
-            Number(mean.value("l1_masked", 0.0), 4) + "</td><td class=\"num\">" +
-            Number(mean.value("sharpness", 0.0), 2) + " / " + Number(mean.value("sharpness_truth", 0.0), 2) +
-            "</td><td class=\"num\">" + Number(mean.value("sd", 0.0), 2) +
-            "</td></tr><tr><td>held-out, whole frame</td><td class=\"num\">" + Number(mean.value("psnr", 0.0), 2) +
-            " dB</td><td class=\"num\">" + Number(mean.value("ssim", 0.0), 3) +
-            "</td><td></td><td></td><td></td></tr></table><p>Sharpness: the mean gradient magnitude over the head, "
-            "in grey levels per pixel; SD, the render's minus the frame's (negative: blurrier). LPIPS is not "
-            "computed: it needs ImageNet-pretrained weights, which are not available here.</p>";
-    std::vector<nlohmann::json> views = eval.value("views", std::vector<nlohmann::json>());
-    std::sort(views.begin(), views.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
-      return a.value("psnr_masked", 0.0) > b.value("psnr_masked", 0.0);
-    });
-    if (!views.empty()) {
-      html += "<p>Best and worst held-out frames (render | frame | error ×4):</p><div class=\"row\">";
-      std::vector<size_t> picks = {0, 1, views.size() - 2, views.size() - 1};
-      picks.erase(std::unique(picks.begin(), picks.end()), picks.end());
-      for (size_t i : picks) {
-        if (i >= views.size()) continue;
-        char name[64];
-        std::snprintf(name, sizeof(name), "%s_%06d.png", views[i].value("camera", std::string("cam0")).c_str(),
-                      views[i].value("frame", 0));
-        const cv::Mat strip = cv::imread((model / "held_out" / name).string(), cv::IMREAD_COLOR);
-        if (!strip.empty())
-          html += InlineImage(strip, 520, "frame " + std::to_string(views[i].value("frame", 0)) + ": " +
-                                              Number(views[i].value("psnr_masked", 0.0), 2) + " dB");
-      }
-      html += "</div>";
-    }
-  }
-  html += "<h2>Accuracy against time</h2>";
-  if (bench.empty()) {
-    html += "<p>No <code>headforge bench train</code> results in this workspace; the training curve above is this "
-            "run's own.</p>";
-  } else {
-    html += "<p>Held-out PSNR over the head against training time for each variant <code>headforge bench train"
-            "</code> trained on this workspace.</p><div class=\"chart\"><canvas id=\"bench\"></canvas></div>";
-  }
-  // Videos and files export wrote beside the page.
-  std::string videos, files;
-  for (const std::string& f : options.exported) {
-    files += "<li><code>" + HtmlEscape(f) + "</code></li>";
-    if (f.size() > 4 && f.compare(f.size() - 4, 4, ".mp4") == 0)
-      videos += "<figure><video controls muted preload=\"metadata\" src=\"" + HtmlEscape(f) + "\"></video><figcaption>" +
-                HtmlEscape(f) + "</figcaption></figure>";
-  }
-  if (!videos.empty()) html += "<h2>Videos</h2><div class=\"row\">" + videos + "</div>";
-  if (!files.empty()) html += "<h2>Exported files</h2><ul>" + files + "</ul>";
 
-  html += R"(<script>
+// Draws the charts from the page's data once Chart.js is there.
+const char* const kChartScript = R"(<script>
 (function () {
   const data = JSON.parse(document.getElementById('data').textContent);
   if (typeof Chart === 'undefined') { window.done = true; return; }
@@ -291,6 +205,118 @@ video { max-width: 100%; }
 </script>
 </body></html>
 )";
+
+// The held-out scores, and the best and worst held-out frames of `model`.
+std::string EvaluationSection(const nlohmann::json& eval, const fs::path& model) {
+  std::string html;
+  const nlohmann::json mean = eval.value("mean", nlohmann::json::object());
+  html += "<h2>Evaluation</h2><p>Held out: " + HtmlEscape(eval.value("held_out_frames", std::string("?"))) +
+          " frames, background " + Number(eval.value("background", 0.5), 1) + ".</p><table>"
+          "<tr><th></th><th>PSNR</th><th>SSIM</th><th>L1</th><th>sharpness, render / frame</th><th>SD</th></tr>"
+          "<tr><td>held-out, over the head</td><td class=\"num\">" + Number(mean.value("psnr_masked", 0.0), 2) +
+          " dB</td><td class=\"num\">" + Number(mean.value("ssim_masked", 0.0), 3) + "</td><td class=\"num\">" +
+          Number(mean.value("l1_masked", 0.0), 4) + "</td><td class=\"num\">" +
+          Number(mean.value("sharpness", 0.0), 2) + " / " + Number(mean.value("sharpness_truth", 0.0), 2) +
+          "</td><td class=\"num\">" + Number(mean.value("sd", 0.0), 2) +
+          "</td></tr><tr><td>held-out, whole frame</td><td class=\"num\">" + Number(mean.value("psnr", 0.0), 2) +
+          " dB</td><td class=\"num\">" + Number(mean.value("ssim", 0.0), 3) +
+          "</td><td></td><td></td><td></td></tr></table><p>Sharpness: the mean gradient magnitude over the head, "
+          "in grey levels per pixel; SD, the render's minus the frame's (negative: blurrier). LPIPS is not "
+          "computed: it needs ImageNet-pretrained weights, which are not available here.</p>";
+  std::vector<nlohmann::json> views = eval.value("views", std::vector<nlohmann::json>());
+  std::sort(views.begin(), views.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
+    return a.value("psnr_masked", 0.0) > b.value("psnr_masked", 0.0);
+  });
+  if (!views.empty()) {
+    html += "<p>Best and worst held-out frames (render | frame | error ×4):</p><div class=\"row\">";
+    std::vector<size_t> picks = {0, 1, views.size() - 2, views.size() - 1};
+    picks.erase(std::unique(picks.begin(), picks.end()), picks.end());
+    for (size_t i : picks) {
+      if (i >= views.size()) continue;
+      char name[64];
+      std::snprintf(name, sizeof(name), "%s_%06d.png", views[i].value("camera", std::string("cam0")).c_str(),
+                    views[i].value("frame", 0));
+      const cv::Mat strip = cv::imread((model / "held_out" / name).string(), cv::IMREAD_COLOR);
+      if (!strip.empty())
+        html += InlineImage(strip, 520, "frame " + std::to_string(views[i].value("frame", 0)) + ": " +
+                                            Number(views[i].value("psnr_masked", 0.0), 2) + " dB");
+    }
+    html += "</div>";
+  }
+  return html;
+}
+
+// The videos and files export wrote beside the page.
+std::string ExportedSection(const std::vector<std::string>& exported) {
+  std::string videos, files, html;
+  for (const std::string& f : exported) {
+    files += "<li><code>" + HtmlEscape(f) + "</code></li>";
+    if (f.size() > 4 && f.compare(f.size() - 4, 4, ".mp4") == 0)
+      videos += "<figure><video controls muted preload=\"metadata\" src=\"" + HtmlEscape(f) + "\"></video><figcaption>" +
+                HtmlEscape(f) + "</figcaption></figure>";
+  }
+  if (!videos.empty()) html += "<h2>Videos</h2><div class=\"row\">" + videos + "</div>";
+  if (!files.empty()) html += "<h2>Exported files</h2><ul>" + files + "</ul>";
+  return html;
+}
+
+}  // namespace
+
+Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const ReportOptions& options,
+                   std::string* note) {
+  IngestedCapture capture;
+  HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace, &capture));
+  nlohmann::json data = nlohmann::json::object();
+  std::vector<std::string> lacks;
+  if (nlohmann::json cameras = CameraData(workspace); !cameras.is_null()) data["cameras"] = cameras;
+  if (nlohmann::json tracking = TrackingData(workspace); !tracking.is_null()) data["tracking"] = tracking;
+  // The model trained last (the one export takes).
+  const fs::path latest = LatestModelFolder(workspace);
+  const fs::path model = latest.empty() ? workspace / "models" / "gaussian_style" : latest;
+  nlohmann::json eval;
+  const bool trained = ReadJson(model / "eval.json", &eval).ok();
+  if (trained)
+    data["training"] = TrainingData(model);
+  else
+    lacks.push_back("no trained model (run headforge train): no training or evaluation sections");
+  data["bench"] = BenchData(workspace);
+
+  std::string html = kPageStyle;
+  std::string chart_js;
+  if (!options.chart_js.empty() && ReadFileToString(options.chart_js, &chart_js).ok() && !chart_js.empty()) {
+    html += "<script>" + InlineScriptText(chart_js) + "</script>\n";
+  } else {
+    lacks.push_back("no charting library (scripts/install_deps.sh installs Chart.js): tables and images only");
+  }
+  html += "<script id=\"data\" type=\"application/json\">" + ScriptJson(data) + "</script>\n</head><body>\n";
+  html += "<h1>HeadForge report: " + HtmlEscape(workspace.filename().string()) + "</h1>";
+  if (!lacks.empty()) {
+    html += "<p class=\"note\">";
+    for (const std::string& l : lacks) html += HtmlEscape(l) + ". ";
+    html += "</p>";
+  }
+  html += StagesSection(workspace);
+  html += CaptureSection(capture);
+  html += "<h2>Cameras</h2><p>Each view's camera centre in the head frame (metres; the face looks toward +z), "
+          "seen from above.</p><div class=\"chart\"><canvas id=\"cameras\"></canvas></div>";
+  html += "<h2>Tracking</h2><p>The median landmark residual per frame (pixels), and the six blendshapes that "
+          "move most.</p><div class=\"chart\"><canvas id=\"residual\"></canvas></div>"
+          "<div class=\"chart\"><canvas id=\"curves\"></canvas></div>";
+  if (trained) {
+    html += "<h2>Training</h2><p>The training loss and the held-out PSNR over the head against wall time.</p>"
+            "<div class=\"chart\"><canvas id=\"training\"></canvas></div>";
+    html += EvaluationSection(eval, model);
+  }
+  html += "<h2>Accuracy against time</h2>";
+  if (data["bench"].empty()) {
+    html += "<p>No <code>headforge bench train</code> results in this workspace; the training curve above is this "
+            "run's own.</p>";
+  } else {
+    html += "<p>Held-out PSNR over the head against training time for each variant <code>headforge bench train"
+            "</code> trained on this workspace.</p><div class=\"chart\"><canvas id=\"bench\"></canvas></div>";
+  }
+  html += ExportedSection(options.exported);
+  html += kChartScript;
   HF_RETURN_IF_ERROR(WriteFileAtomic(out_dir / "report.html", html));
   note->clear();
   for (const std::string& l : lacks) *note += (note->empty() ? "" : "; ") + l;

@@ -264,55 +264,96 @@ RenderOutput Simulator::RenderAt(int camera, const std::vector<double>& band_tim
   return out;
 }
 
-SimulatedView Simulator::RenderView(int frame, int camera) const {
-  const double t = FrameTime(frame);
-  SimulatedView view;
-  view.camera = CameraAt(camera, t);
-  const PinholeCamera& base = view.camera;
-  const bool distort = scene_.HasEffect("lens_distortion");
-  if (distort) {
-    view.k1 = scene_.camera.intrinsics.k1 != 0.0 || scene_.camera.intrinsics.k2 != 0.0
-                  ? scene_.camera.intrinsics.k1
-                  : scene_.Param("lens_distortion", "k1", -0.2);
-    view.k2 = scene_.camera.intrinsics.k1 != 0.0 || scene_.camera.intrinsics.k2 != 0.0
-                  ? scene_.camera.intrinsics.k2
-                  : scene_.Param("lens_distortion", "k2", 0.05);
-  }
-  // The canvas: the undistorted image, enlarged to hold every source of a distorted pixel.
-  PinholeCamera canvas = base;
-  double x_min = 0, y_min = 0;
-  if (distort) {
-    double x_max = base.width - 1, y_max = base.height - 1;
-    for (int i = 0; i <= 64; ++i) {
-      const double f = i / 64.0;
-      for (const Eigen::Vector2d& d : {Eigen::Vector2d(f * (base.width - 1), 0), Eigen::Vector2d(f * (base.width - 1), base.height - 1),
-                                       Eigen::Vector2d(0, f * (base.height - 1)), Eigen::Vector2d(base.width - 1, f * (base.height - 1))}) {
-        const Eigen::Vector2d u = Undistort(Eigen::Vector2d((d.x() - base.cx) / base.fx, (d.y() - base.cy) / base.fy), view.k1, view.k2);
-        const double px = base.fx * u.x() + base.cx, py = base.fy * u.y() + base.cy;
-        x_min = std::min(x_min, px);
-        x_max = std::max(x_max, px);
-        y_min = std::min(y_min, py);
-        y_max = std::max(y_max, py);
-      }
-    }
-    x_min = std::floor(x_min) - 2;
-    y_min = std::floor(y_min) - 2;
-    canvas.width = static_cast<int>(std::ceil(x_max - x_min)) + 3;
-    canvas.height = static_cast<int>(std::ceil(y_max - y_min)) + 3;
-    canvas.cx = base.cx - x_min;
-    canvas.cy = base.cy - y_min;
-  }
+namespace {
 
-  // Row bands (rolling shutter) and sub-frame samples (motion blur).
+// The undistorted canvas of a distorted camera: `base` enlarged to hold every
+// source of a distorted pixel.
+PinholeCamera DistortionCanvas(const PinholeCamera& base, double k1, double k2) {
+  PinholeCamera canvas = base;
+  double x_min = 0, y_min = 0, x_max = base.width - 1, y_max = base.height - 1;
+  for (int i = 0; i <= 64; ++i) {
+    const double f = i / 64.0;
+    for (const Eigen::Vector2d& d : {Eigen::Vector2d(f * (base.width - 1), 0), Eigen::Vector2d(f * (base.width - 1), base.height - 1),
+                                     Eigen::Vector2d(0, f * (base.height - 1)), Eigen::Vector2d(base.width - 1, f * (base.height - 1))}) {
+      const Eigen::Vector2d u = Undistort(Eigen::Vector2d((d.x() - base.cx) / base.fx, (d.y() - base.cy) / base.fy), k1, k2);
+      const double px = base.fx * u.x() + base.cx, py = base.fy * u.y() + base.cy;
+      x_min = std::min(x_min, px);
+      x_max = std::max(x_max, px);
+      y_min = std::min(y_min, py);
+      y_max = std::max(y_max, py);
+    }
+  }
+  x_min = std::floor(x_min) - 2;
+  y_min = std::floor(y_min) - 2;
+  canvas.width = static_cast<int>(std::ceil(x_max - x_min)) + 3;
+  canvas.height = static_cast<int>(std::ceil(y_max - y_min)) + 3;
+  canvas.cx = base.cx - x_min;
+  canvas.cy = base.cy - y_min;
+  return canvas;
+}
+
+// The canvas's colour, coverage and depth warped to the distorted image:
+// for each output pixel, where its light lands on the canvas.
+void WarpToDistorted(const PinholeCamera& base, const PinholeCamera& canvas, double k1, double k2, cv::Mat* colour,
+                     cv::Mat* coverage, cv::Mat* depth) {
+  cv::Mat map_x(base.height, base.width, CV_32F), map_y(base.height, base.width, CV_32F);
+  for (int y = 0; y < base.height; ++y)
+    for (int x = 0; x < base.width; ++x) {
+      const Eigen::Vector2d u = Undistort(Eigen::Vector2d((x - base.cx) / base.fx, (y - base.cy) / base.fy), k1, k2);
+      map_x.at<float>(y, x) = static_cast<float>(base.fx * u.x() + canvas.cx);
+      map_y.at<float>(y, x) = static_cast<float>(base.fy * u.y() + canvas.cy);
+    }
+  cv::Mat warped, warped_coverage, warped_depth;
+  cv::remap(*colour, warped, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  cv::remap(*coverage, warped_coverage, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+  cv::remap(*depth, warped_depth, map_x, map_y, cv::INTER_NEAREST, cv::BORDER_CONSTANT);
+  *colour = warped;
+  *coverage = warped_coverage;
+  *depth = warped_depth;
+}
+
+// Defocus: the circle of confusion grows with |z - focus| / z; blends
+// between blur levels.
+cv::Mat DefocusBlur(const cv::Mat& colour, const cv::Mat& depth, double focus, double strength) {
+  const std::vector<double> radii = {0, 1, 2, 4, 8, 16};
+  std::vector<cv::Mat> levels;
+  for (double r : radii) {
+    cv::Mat l;
+    if (r == 0) l = colour;
+    else cv::GaussianBlur(colour, l, cv::Size(0, 0), r / 2.0);
+    levels.push_back(l);
+  }
+  cv::Mat out = colour.clone();
+  for (int y = 0; y < colour.rows; ++y)
+    for (int x = 0; x < colour.cols; ++x) {
+      const float z = depth.at<float>(y, x);
+      const double coc = std::min(radii.back(), strength * std::abs((z > 0 ? z : 100.0) - focus) / (z > 0 ? z : 100.0));
+      size_t k = 0;
+      while (k + 2 < radii.size() && radii[k + 1] < coc) ++k;
+      const float f = static_cast<float>(std::clamp((coc - radii[k]) / (radii[k + 1] - radii[k]), 0.0, 1.0));
+      out.at<cv::Vec3f>(y, x) = (1 - f) * levels[k].at<cv::Vec3f>(y, x) + f * levels[k + 1].at<cv::Vec3f>(y, x);
+    }
+  return out;
+}
+
+}  // namespace
+
+std::vector<double> Simulator::BandOffsets() const {
+  if (!scene_.HasEffect("rolling_shutter")) return {0.0};
   const double frame_interval = 1.0 / scene_.fps;
-  const bool rolling = scene_.HasEffect("rolling_shutter");
   const double readout = scene_.Param("rolling_shutter", "readout", 0.6) * frame_interval;
-  const int bands = rolling ? std::max(2, static_cast<int>(scene_.Param("rolling_shutter", "bands", 8))) : 1;
-  std::vector<double> band_offsets(bands, 0.0);
-  if (rolling)
-    for (int b = 0; b < bands; ++b) band_offsets[b] = ((b + 0.5) / bands - 0.5) * readout;
+  const int bands = std::max(2, static_cast<int>(scene_.Param("rolling_shutter", "bands", 8)));
+  std::vector<double> offsets(size_t(bands), 0.0);
+  for (int b = 0; b < bands; ++b) offsets[size_t(b)] = ((b + 0.5) / bands - 0.5) * readout;
+  return offsets;
+}
+
+cv::Mat Simulator::Expose(int camera, double t, const PinholeCamera& canvas, RenderOutput* middle) const {
+  // Row bands (rolling shutter) and sub-frame samples (motion blur).
+  const std::vector<double> band_offsets = BandOffsets();
   const bool blur = scene_.HasEffect("motion_blur");
   const int samples = blur ? std::max(2, static_cast<int>(scene_.Param("motion_blur", "samples", 5))) : 1;
+  const double frame_interval = 1.0 / scene_.fps;
   const double shutter = scene_.Param("motion_blur", "shutter", 0.5) * frame_interval;
   cv::Mat colour;
   for (int i = 0; i < samples; ++i) {
@@ -322,56 +363,18 @@ SimulatedView Simulator::RenderView(int frame, int camera) const {
     RenderOutput r = RenderAt(camera, times, canvas);
     if (i == 0) colour = r.color.clone();
     else colour += r.color;
-    if (i == samples / 2) view.render = std::move(r);
+    if (i == samples / 2) *middle = std::move(r);
   }
   if (samples > 1) colour /= samples;
+  return colour;
+}
 
-  cv::Mat coverage = view.render.coverage;
-  cv::Mat depth = view.render.depth;
-  if (distort) {
-    // For each output (distorted) pixel, where its light lands on the canvas.
-    cv::Mat map_x(base.height, base.width, CV_32F), map_y(base.height, base.width, CV_32F);
-    for (int y = 0; y < base.height; ++y)
-      for (int x = 0; x < base.width; ++x) {
-        const Eigen::Vector2d u = Undistort(Eigen::Vector2d((x - base.cx) / base.fx, (y - base.cy) / base.fy), view.k1, view.k2);
-        map_x.at<float>(y, x) = static_cast<float>(base.fx * u.x() + canvas.cx);
-        map_y.at<float>(y, x) = static_cast<float>(base.fy * u.y() + canvas.cy);
-      }
-    cv::Mat warped;
-    cv::remap(colour, warped, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
-    colour = warped;
-    cv::remap(view.render.coverage, coverage, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
-    cv::remap(view.render.depth, depth, map_x, map_y, cv::INTER_NEAREST, cv::BORDER_CONSTANT);
-  }
-  if (scene_.HasEffect("defocus_blur")) {
-    // Circle of confusion grows with |z - focus| / z; blend between blur levels.
-    const double focus = scene_.Param("defocus_blur", "focus", (base.Centre() - scene_.camera.target).norm());
-    const double strength = scene_.Param("defocus_blur", "strength", 8.0);
-    const std::vector<double> radii = {0, 1, 2, 4, 8, 16};
-    std::vector<cv::Mat> levels;
-    for (double r : radii) {
-      cv::Mat l;
-      if (r == 0) l = colour;
-      else cv::GaussianBlur(colour, l, cv::Size(0, 0), r / 2.0);
-      levels.push_back(l);
-    }
-    cv::Mat out = colour.clone();
-    for (int y = 0; y < colour.rows; ++y)
-      for (int x = 0; x < colour.cols; ++x) {
-        const float z = depth.at<float>(y, x);
-        const double coc = std::min(radii.back(), strength * std::abs((z > 0 ? z : 100.0) - focus) / (z > 0 ? z : 100.0));
-        size_t k = 0;
-        while (k + 2 < radii.size() && radii[k + 1] < coc) ++k;
-        const float f = static_cast<float>(std::clamp((coc - radii[k]) / (radii[k + 1] - radii[k]), 0.0, 1.0));
-        out.at<cv::Vec3f>(y, x) = (1 - f) * levels[k].at<cv::Vec3f>(y, x) + f * levels[k + 1].at<cv::Vec3f>(y, x);
-      }
-    colour = out;
-  }
+void Simulator::ApplySensorEffects(int frame, int camera, double t, cv::Mat* colour) const {
   if (scene_.HasEffect("exposure_drift")) {
     const double ev = scene_.Param("exposure_drift", "amplitude", 0.3);
     const double timescale = scene_.Param("exposure_drift", "timescale", 1.0);
     const uint64_t seed = Hash64(static_cast<uint64_t>(scene_.seed) * 31 + camera + 1000);
-    colour *= std::pow(2.0, ev * ValueNoise1(t / timescale, seed));
+    *colour *= std::pow(2.0, ev * ValueNoise1(t / timescale, seed));
   }
   if (scene_.HasEffect("white_balance_drift")) {
     const double amplitude = scene_.Param("white_balance_drift", "amplitude", 0.06);
@@ -379,61 +382,91 @@ SimulatedView Simulator::RenderView(int frame, int camera) const {
     const uint64_t seed = Hash64(static_cast<uint64_t>(scene_.seed) * 37 + camera + 2000);
     const cv::Scalar gains(std::exp(amplitude * ValueNoise1(t / timescale, seed)), 1.0,
                            std::exp(amplitude * ValueNoise1(t / timescale, seed + 1)));
-    cv::multiply(colour, gains, colour);
+    cv::multiply(*colour, gains, *colour);
   }
   if (scene_.HasEffect("sensor_noise")) {
     const double read = scene_.Param("sensor_noise", "sigma", 2.0) / 255.0;
     const double shot = scene_.Param("sensor_noise", "shot", 0.01);
     cv::RNG rng(ViewSeed(scene_.seed, frame, camera, 0x5e5));
-    for (int y = 0; y < colour.rows; ++y)
-      for (int x = 0; x < colour.cols; ++x) {
-        cv::Vec3f& p = colour.at<cv::Vec3f>(y, x);
+    for (int y = 0; y < colour->rows; ++y)
+      for (int x = 0; x < colour->cols; ++x) {
+        cv::Vec3f& p = colour->at<cv::Vec3f>(y, x);
         for (int c = 0; c < 3; ++c)
           p[c] += static_cast<float>(rng.gaussian(std::sqrt(read * read + shot * std::max(0.0f, p[c]) / 255.0)));
       }
   }
-  colour.convertTo(view.image, CV_8UC3, 255.0);
-  view.mask = coverage > 0.5f;
+}
 
-  // Ground-truth landmarks at the time their row was exposed.
+void Simulator::PlaceLandmarks(int camera, double t, const PinholeCamera& canvas, SimulatedView* view) const {
+  const PinholeCamera& base = view->camera;
+  const bool rolling = scene_.HasEffect("rolling_shutter");
+  const bool distort = scene_.HasEffect("lens_distortion");
+  const std::vector<double> band_offsets = BandOffsets();
+  const int bands = static_cast<int>(band_offsets.size());
   const auto& lm = model_.landmarks_ibug68();
-  view.landmarks.resize(68);
-  view.visible.resize(68);
-  view.depth.resize(68);
-  const SubjectState at_frame = StateAt(t);
-  const Eigen::Matrix3Xf frame_vertices = WorldVertices(at_frame);
+  view->landmarks.resize(68);
+  view->visible.resize(68);
+  view->depth.resize(68);
+  const Eigen::Matrix3Xf frame_vertices = WorldVertices(StateAt(t));
   for (int i = 0; i < 68; ++i) {
     Eigen::Vector3d p = frame_vertices.col(lm[i]).cast<double>();
     PinholeCamera cam = base;
     if (rolling) {
+      // At the time the landmark's row was exposed.
       double tl = t;
       for (int iter = 0; iter < 3; ++iter) {
         const double row = cam.Project(p).y() + (canvas.cy - base.cy);
         const int band = std::clamp(static_cast<int>(row / canvas.height * bands), 0, bands - 1);
-        tl = t + band_offsets[band];
+        tl = t + band_offsets[size_t(band)];
         p = WorldVertices(StateAt(tl)).col(lm[i]).cast<double>();
         cam.cam_from_world = CameraAt(camera, tl).cam_from_world;
       }
     }
     double z = 0;
     Eigen::Vector2d px = cam.Project(p, &z);
-    view.depth[i] = z;
+    view->depth[i] = z;
     // Visible when nothing nearer covers it in the (undistorted) render.
     const int cx = static_cast<int>(std::lround(px.x() + (canvas.cx - base.cx)));
     const int cy = static_cast<int>(std::lround(px.y() + (canvas.cy - base.cy)));
     bool visible = z > 0 && cx >= 0 && cy >= 0 && cx < canvas.width && cy < canvas.height;
     if (visible) {
-      const float rendered = view.render.depth.at<float>(cy, cx);
+      const float rendered = view->render.depth.at<float>(cy, cx);
       visible = rendered > 0 && rendered > z - 0.008;
     }
     if (distort) {
-      const Eigen::Vector2d d = Distort(Eigen::Vector2d((px.x() - base.cx) / base.fx, (px.y() - base.cy) / base.fy), view.k1, view.k2);
+      const Eigen::Vector2d d = Distort(Eigen::Vector2d((px.x() - base.cx) / base.fx, (px.y() - base.cy) / base.fy), view->k1, view->k2);
       px = Eigen::Vector2d(base.fx * d.x() + base.cx, base.fy * d.y() + base.cy);
     }
     visible = visible && px.x() >= -0.5 && px.y() >= -0.5 && px.x() < base.width - 0.5 && px.y() < base.height - 0.5;
-    view.landmarks[i] = px;
-    view.visible[i] = visible;
+    view->landmarks[i] = px;
+    view->visible[i] = visible;
   }
+}
+
+SimulatedView Simulator::RenderView(int frame, int camera) const {
+  const double t = FrameTime(frame);
+  SimulatedView view;
+  view.camera = CameraAt(camera, t);
+  const PinholeCamera& base = view.camera;
+  const bool distort = scene_.HasEffect("lens_distortion");
+  if (distort) {
+    const bool given = scene_.camera.intrinsics.k1 != 0.0 || scene_.camera.intrinsics.k2 != 0.0;
+    view.k1 = given ? scene_.camera.intrinsics.k1 : scene_.Param("lens_distortion", "k1", -0.2);
+    view.k2 = given ? scene_.camera.intrinsics.k2 : scene_.Param("lens_distortion", "k2", 0.05);
+  }
+  const PinholeCamera canvas = distort ? DistortionCanvas(base, view.k1, view.k2) : base;
+  cv::Mat colour = Expose(camera, t, canvas, &view.render);
+  cv::Mat coverage = view.render.coverage;
+  cv::Mat depth = view.render.depth;
+  if (distort) WarpToDistorted(base, canvas, view.k1, view.k2, &colour, &coverage, &depth);
+  if (scene_.HasEffect("defocus_blur")) {
+    const double focus = scene_.Param("defocus_blur", "focus", (base.Centre() - scene_.camera.target).norm());
+    colour = DefocusBlur(colour, depth, focus, scene_.Param("defocus_blur", "strength", 8.0));
+  }
+  ApplySensorEffects(frame, camera, t, &colour);
+  colour.convertTo(view.image, CV_8UC3, 255.0);
+  view.mask = coverage > 0.5f;
+  PlaceLandmarks(camera, t, canvas, &view);
   return view;
 }
 

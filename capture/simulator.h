@@ -61,6 +61,18 @@ class Simulator {
   // optional larger canvas for distortion.
   RenderOutput RenderAt(int camera, const std::vector<double>& band_times, const PinholeCamera& canvas) const;
   RenderOutput RenderOnce(int camera, double t, const PinholeCamera& canvas) const;
+  // RenderView's steps. The time offsets of the row bands (one band without
+  // a rolling shutter).
+  std::vector<double> BandOffsets() const;
+  // The colour on `canvas` over the exposure (motion blur's sub-frame
+  // samples, each with its row bands); `middle` gets the middle sample's
+  // buffers.
+  cv::Mat Expose(int camera, double t, const PinholeCamera& canvas, RenderOutput* middle) const;
+  // Exposure and white-balance drift, sensor noise.
+  void ApplySensorEffects(int frame, int camera, double t, cv::Mat* colour) const;
+  // Ground-truth landmarks (at the time their row was exposed), their depth
+  // and visibility, distorted like the image.
+  void PlaceLandmarks(int camera, double t, const PinholeCamera& canvas, SimulatedView* view) const;
 
   Scene scene_;
   const FaceModel& model_;

@@ -150,6 +150,64 @@ Status LoadFitCheckpoint(const fs::path& path, torch::Device device, GaussianPar
 
 }  // namespace
 
+namespace {
+
+// The initial Gaussians: at `init`'s points, unrotated, isotropic at its
+// sizes, of opacity `init_opacity`, in its colours; trainable.
+void InitialiseGaussians(const InitPoints& init, double init_opacity, torch::Device device, GaussianParams* p) {
+  torch::NoGradGuard no_grad;
+  const int64_t n = init.positions.size(0);
+  const auto opts = torch::TensorOptions().dtype(torch::kFloat32).device(device);
+  p->means = init.positions.to(opts).clone();
+  p->quats = torch::zeros({n, 4}, opts);
+  p->quats.select(1, 0).fill_(1.0);
+  p->log_scales = init.sizes.to(opts).clamp_min(1e-6).log().unsqueeze(1).repeat({1, 3});
+  p->opacity_logits = torch::full({n}, std::log(init_opacity / (1 - init_opacity)), opts);
+  p->colour_logits = torch::logit(init.colours.to(opts).clamp(0.01, 0.99));
+  for (torch::Tensor* t : p->All()) t->requires_grad_(true);
+}
+
+// One step on `view`: render, the L1 + SSIM loss, its gradient, Adam, then
+// densification's plan (clone, split, prune, opacity reset) carried out on
+// the Gaussians and the optimiser's moments.
+Status FitStep(const SplatFitOptions& options, const PosedImage& view, const SplatRenderOptions& render_options,
+               int step, GaussianParams* p, Adam* adam, DensifyStrategy* densify, double* loss_value,
+               double* l1_value) {
+  const auto out = RenderGaussians(p->means, p->quats, p->log_scales, torch::sigmoid(p->opacity_logits),
+                                   torch::sigmoid(p->colour_logits), {}, view.camera, render_options);
+  out.means2d.retain_grad();
+  const torch::Tensor l1 = (out.image - view.image).abs().mean();
+  const torch::Tensor loss =
+      (1 - options.ssim_weight) * l1 + options.ssim_weight * (1 - Ssim(out.image, view.image));
+  *loss_value = loss.item<double>();
+  if (!std::isfinite(*loss_value)) {
+    return Status::Internal("splat-fit: the loss became " + std::to_string(*loss_value) + " at step " +
+                            std::to_string(step) +
+                            "; lower the learning rates (--lr-means, --lr-scales) or start from "
+                            "smaller Gaussians");
+  }
+  loss.backward();
+  densify->AfterBackward(out.means2d.grad(), out.radii, view.camera.width, view.camera.height);
+  adam->Step();
+  adam->ZeroGrad();
+  const DensifyPlan plan = densify->AfterStep(step, *p);
+  if (plan.keep.defined()) {
+    adam->Edit(plan.keep, {plan.append.means, plan.append.quats, plan.append.log_scales,
+                           plan.append.opacity_logits, plan.append.colour_logits});
+  }
+  if (plan.reset_opacity > 0) {
+    torch::NoGradGuard no_grad;
+    const double cap = std::log(plan.reset_opacity / (1 - plan.reset_opacity));
+    p->opacity_logits.clamp_max_(cap);
+    adam->ResetMoments(3);
+  }
+  if (!plan.summary.empty()) HF_LOG(Debug) << "splat-fit step " << step << ": " << plan.summary;
+  *l1_value = l1.item<double>();
+  return Status::Ok();
+}
+
+}  // namespace
+
 Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& train,
                  const std::vector<PosedImage>& test, const InitPoints& init, StatsLog* stats,
                  Progress* progress, SplatFitResult* result) {
@@ -165,18 +223,7 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
   const std::vector<PosedImage> test_views = OnDevice(test, device);
   const auto t0 = std::chrono::steady_clock::now();
   GaussianParams& p = result->params;
-  {
-    torch::NoGradGuard no_grad;
-    const int64_t n = init.positions.size(0);
-    const auto opts = torch::TensorOptions().dtype(torch::kFloat32).device(device);
-    p.means = init.positions.to(opts).clone();
-    p.quats = torch::zeros({n, 4}, opts);
-    p.quats.select(1, 0).fill_(1.0);
-    p.log_scales = init.sizes.to(opts).clamp_min(1e-6).log().unsqueeze(1).repeat({1, 3});
-    p.opacity_logits = torch::full({n}, std::log(options.init_opacity / (1 - options.init_opacity)), opts);
-    p.colour_logits = torch::logit(init.colours.to(opts).clamp(0.01, 0.99));
-    for (torch::Tensor* t : p.All()) t->requires_grad_(true);
-  }
+  InitialiseGaussians(init, options.init_opacity, device, &p);
   const double extent = options.densify.scene_extent;
   Adam adam;
   adam.Add(&p.means, options.lr_means * extent, true);
@@ -214,39 +261,14 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
     const PosedImage& view = train_views[state.order[slot].item<int64_t>()];
     adam.SetLr(0, options.lr_means * extent * std::pow(0.01, double(step) / options.iterations));
 
-    const auto out = RenderGaussians(p.means, p.quats, p.log_scales, torch::sigmoid(p.opacity_logits),
-                                     torch::sigmoid(p.colour_logits), {}, view.camera, render_options);
-    out.means2d.retain_grad();
-    const torch::Tensor l1 = (out.image - view.image).abs().mean();
-    const torch::Tensor loss =
-        (1 - options.ssim_weight) * l1 + options.ssim_weight * (1 - Ssim(out.image, view.image));
-    const double loss_value = loss.item<double>();
-    if (!std::isfinite(loss_value)) {
+    double loss_value = 0, l1_value = 0;
+    if (Status s = FitStep(options, view, render_options, step, &p, &adam, densify.get(), &loss_value, &l1_value);
+        !s.ok()) {
       progress->Finish("diverged");
-      return Status::Internal("splat-fit: the loss became " + std::to_string(loss_value) + " at step " +
-                              std::to_string(step) +
-                              "; lower the learning rates (--lr-means, --lr-scales) or start from "
-                              "smaller Gaussians");
+      return s;
     }
-    loss.backward();
-    densify->AfterBackward(out.means2d.grad(), out.radii, view.camera.width, view.camera.height);
-    adam.Step();
-    adam.ZeroGrad();
-    const DensifyPlan plan = densify->AfterStep(step, p);
-    if (plan.keep.defined()) {
-      adam.Edit(plan.keep, {plan.append.means, plan.append.quats, plan.append.log_scales,
-                            plan.append.opacity_logits, plan.append.colour_logits});
-    }
-    if (plan.reset_opacity > 0) {
-      torch::NoGradGuard no_grad;
-      const double cap = std::log(plan.reset_opacity / (1 - plan.reset_opacity));
-      p.opacity_logits.clamp_max_(cap);
-      adam.ResetMoments(3);
-    }
-    if (!plan.summary.empty()) HF_LOG(Debug) << "splat-fit step " << step << ": " << plan.summary;
-
     state.loss_sum += loss_value;
-    state.l1_sum += l1.item<double>();
+    state.l1_sum += l1_value;
     ++state.loss_count;
     progress->Advance();
     const bool out_of_time = options.max_minutes > 0 && elapsed() > 60.0 * options.max_minutes;

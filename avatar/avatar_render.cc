@@ -4,7 +4,6 @@
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
 
 #include <nlohmann/json.hpp>
 
@@ -26,6 +25,7 @@
 #include "core/image_io.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/video_writer.h"
 
 namespace headforge {
 namespace {
@@ -139,7 +139,7 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
   }
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   const int64_t expressions = int64_t(own.expression_names.size());
-  cv::VideoWriter video;
+  VideoFileWriter video;
   double posing = 0;
   progress->Start("render", int64_t(frames.size()));
   for (size_t i = 0; i < frames.size(); ++i) {
@@ -161,16 +161,12 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
       render = ComparisonStrip(render, driver.image, driver.mask, avatar.background);
     const cv::Mat image = TensorToImage(render);
     if (options.video) {
-      if (!video.isOpened()) {
+      if (!video.IsOpen()) {
         const fs::path path = out_dir / options.video_name;
-        // H.264, which browsers play; MPEG-4 part 2 where the FFmpeg build has no H.264 encoder.
-        video.open(path.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('a', 'v', 'c', '1'), options.fps, image.size());
-        if (!video.isOpened())
-          video.open(path.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('m', 'p', '4', 'v'), options.fps, image.size());
-        if (!video.isOpened()) return Status::IoError("render: cannot open " + path.string() + " for writing");
+        HF_RETURN_IF_ERROR(video.Open(path, options.fps, image.size()).WithContext("render"));
         summary->files.push_back(path.filename().string());
       }
-      video.write(image);
+      HF_RETURN_IF_ERROR(video.Write(image));
     } else {
       char name[48];
       std::snprintf(name, sizeof(name), "frame_%06d.png", frame);
@@ -179,6 +175,7 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     }
     progress->Advance();
   }
+  HF_RETURN_IF_ERROR(video.Close().WithContext("render"));
   progress->Finish();
   summary->frames = int(frames.size());
   summary->seconds_per_frame = frames.empty() ? 0 : posing / frames.size();

@@ -2,7 +2,6 @@
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
 
 #include <fstream>
 #include <map>
@@ -10,6 +9,7 @@
 
 #include "calibration/landmark_embedding.h"
 #include "core/log.h"
+#include "core/video_writer.h"
 #include "core/mesh_renderer.h"
 #include "core/parallel.h"
 #include "reconstruction/tracking_io.h"
@@ -261,7 +261,7 @@ Status WriteOverlays(const FaceModel& model, const IngestedCapture& capture, con
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return views[a].frame < views[b].frame; });
   progress->Start("track: overlay video", int64_t(views.size()));
-  std::map<int, cv::VideoWriter> writers;
+  std::map<int, VideoFileWriter> writers;
   int mesh_frame = -1;
   for (const size_t i : order) {
     const auto [c, position] = view_source[i];
@@ -292,15 +292,15 @@ Status WriteOverlays(const FaceModel& model, const IngestedCapture& capture, con
     auto it = writers.find(c);
     if (it == writers.end()) {
       const fs::path video = out_dir / ("overlay_" + cam.name + ".mp4");
-      cv::VideoWriter writer(video.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('m', 'p', '4', 'v'), capture.fps,
-                             drawn.size());
-      if (!writer.isOpened()) return Status::IoError("track: cannot open " + video.string() + " for writing");
+      VideoFileWriter writer;
+      HF_RETURN_IF_ERROR(writer.Open(video, capture.fps, drawn.size()).WithContext("track"));
       it = writers.emplace(c, std::move(writer)).first;
       outputs->push_back(video.filename().string());
     }
-    it->second.write(drawn);
+    HF_RETURN_IF_ERROR(it->second.Write(drawn));
     progress->Advance();
   }
+  for (auto& [camera, writer] : writers) HF_RETURN_IF_ERROR(writer.Close().WithContext("track"));
   progress->Finish();
   return Status::Ok();
 }

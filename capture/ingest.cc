@@ -593,6 +593,19 @@ Status PlanFaces(const IngestOptions& options, const std::vector<Camera>& camera
     }
     const int found = static_cast<int>(
         std::count_if(plan.faces.begin(), plan.faces.end(), [](auto* f) { return f != nullptr; }));
+    if (!options.masks.empty())
+      HF_RETURN_IF_ERROR(LoadUserMasks(options, cam.name, static_cast<int>(cameras.size()), &plan.user_masks));
+    // A camera of several that never sees the face (behind or beside the
+    // head, in a dome) is kept whole, without landmarks, when masks are given:
+    // COLMAP places it and the gan-avatar model learns the head from it.
+    const bool whole = options.crop == "none" || (options.crop == "auto" && cameras.size() > 1);
+    if (found == 0 && cam.stream.errors == 0 && cameras.size() > 1 && whole && !plan.user_masks.empty()) {
+      HF_LOG(Warning) << "ingest: " << cam.name << ": no face in any of its " << kept.size()
+                      << " frames (a camera behind or beside the head?): kept whole, without landmarks, with the "
+                         "masks of --masks";
+      summary->face_lost += static_cast<int>(kept.size());
+      continue;
+    }
     if (found == 0) {
       if (cam.stream.errors > 0)
         return Status::DataError("no face found in " + cam.source->path() + ", which is damaged or truncated "
@@ -601,7 +614,10 @@ Status PlanFaces(const IngestOptions& options, const std::vector<Camera>& camera
           "no face found in " + cam.source->path() + " (" + std::to_string(kept.size()) +
           " frames examined). Try: --detector dlib-hog or ultraface-640 (small faces), a lower "
           "--detector-threshold, a video where the face is frontal and well lit, or a higher "
-          "resolution source");
+          "resolution source" +
+          (cameras.size() > 1 ? std::string("; a camera of several that never sees the face (behind the head) is "
+                                            "kept when --masks gives every camera's head masks")
+                              : std::string()));
     }
     if (options.min_face_px > 0) {
       std::vector<double> sizes;
@@ -630,8 +646,6 @@ Status PlanFaces(const IngestOptions& options, const std::vector<Camera>& camera
       }
       plan.face_frames[i] = FaceFrameOf(plan.faces[best]->landmarks);
     }
-    if (!options.masks.empty())
-      HF_RETURN_IF_ERROR(LoadUserMasks(options, cam.name, static_cast<int>(cameras.size()), &plan.user_masks));
   }
   return Status::Ok();
 }

@@ -222,6 +222,44 @@ TEST(Ingest, UsesTheUsersMasks) {
   EXPECT_EQ(capture["cameras"][0]["masks"], "user");
 }
 
+// A camera of several that never sees the face (one behind the head in a
+// dome) is kept whole, without landmarks, when masks are given; without
+// them the error says so.
+TEST(Ingest, ACameraThatNeverSeesTheFaceIsKeptWithTheUsersMasks) {
+  const fs::path dir = ScratchDir();
+  const auto frames = GridFrames("swiz3n", 6);
+  std::vector<cv::Mat> back, masks;
+  for (const auto& f : frames) {
+    back.emplace_back(f.size(), CV_8UC3, cv::Scalar(60, 50, 40));  // the back of a head: no face
+    cv::Mat m(f.size(), CV_8U, cv::Scalar(0));
+    m(cv::Rect(f.cols / 4, f.rows / 4, f.cols / 2, f.rows / 2)).setTo(255);
+    masks.push_back(m);
+  }
+  IngestOptions options = Defaults({WriteFolder(dir / "front", frames).string(), WriteFolder(dir / "back", back).string()});
+  options.blur_ratio = 0.0;
+  ExpectFailure(Ingest(options, dir / "refused"), Status::Code::kDataError, {"no face found", "--masks"});
+  WriteFolder(dir / "masks" / "cam0", masks);
+  WriteFolder(dir / "masks" / "cam1", masks);
+  options.masks = (dir / "masks").string();
+  IngestSummary summary;
+  ASSERT_TRUE(Ingest(options, dir / "out", &summary).ok());
+  EXPECT_EQ(summary.cameras, 2);
+  EXPECT_EQ(summary.crop, "none");
+  EXPECT_EQ(summary.face_lost, 6);  // every frame of the back camera
+  IngestedCapture capture;
+  ASSERT_TRUE(ReadIngestedCapture(dir / "out", &capture).ok());
+  ASSERT_EQ(capture.cameras.size(), 2u);
+  for (const auto& frame : capture.cameras[1].frames) EXPECT_FALSE(frame.landmarks.has_value()) << frame.index;
+  int with_landmarks = 0;
+  for (const auto& frame : capture.cameras[0].frames) with_landmarks += frame.landmarks.has_value();
+  EXPECT_EQ(with_landmarks, 6);
+  const cv::Mat mask = cv::imread(capture.MaskPath("cam1", capture.cameras[1].frames[2].index).string(),
+                                  cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(mask.empty());
+  EXPECT_EQ(mask.at<uchar>(mask.rows / 2, mask.cols / 2), 255);
+  EXPECT_EQ(mask.at<uchar>(2, 2), 0);
+}
+
 TEST(IngestBadInput, MissingFile) {
   ExpectFailure(Ingest(Defaults({"/no/such/video.mp4"}), ScratchDir()), Status::Code::kNotFound,
                 {"/no/such/video.mp4"});

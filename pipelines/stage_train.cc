@@ -53,7 +53,8 @@ class TrainJob : public StageJob {
     HF_RETURN_IF_ERROR(RunTrain(*options, env.workspace->root(), env.settings->face_model,
                                 context.staging / "models" / folder, env.progress, &summary));
     result->outputs = {"models/" + folder};
-    result->message = model + " (" + options->preset + (options_.model == "auto" ? ", auto: " + why : "") +
+    const std::string how = options->generator_from.empty() ? options->preset : "the GAN of " + options->generator_from;
+    result->message = model + " (" + how + (options_.model == "auto" ? ", auto: " + why : "") +
                       "): " + summary.OneLine();
     return Status::Ok();
   }

@@ -622,6 +622,7 @@ Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, co
   const fs::path checkpoint = out_dir / "checkpoint.pt";
   GanTrainer trainer(options, data, device);
   HF_RETURN_IF_ERROR(trainer.Start(checkpoint, stats));
+  const int resumed_from = trainer.step();  // 0 unless a checkpoint was found
   std::error_code ec;
   if (!options.generator_from.empty() && !fs::exists(checkpoint, ec)) {
     HF_RETURN_IF_ERROR(trainer.ImportGenerator(options.generator_from));
@@ -633,7 +634,6 @@ Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, co
         if (!line.empty() && line.find("\"mapping_step\"") == std::string::npos) stats->Append(line);
     }
   }
-  const int resumed_from = trainer.step();
   HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
   HF_RETURN_IF_ERROR(trainer.TrainMapping(track_renders, stats, progress));
   HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));

@@ -206,6 +206,22 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
       HF_RETURN_IF_ERROR(
           RenderVideo(workspace, face_model, render, videos, "cross_reenactment.mp4", progress, &out.files));
     }
+    // The track stage's overlays (the fitted mesh on the frames), one per
+    // camera, beside the avatar's videos, where the report shows them.
+    std::vector<fs::path> overlays;
+    for (const auto& entry : fs::directory_iterator(workspace)) {
+      const std::string name = entry.path().filename().string();
+      if (entry.is_regular_file() && name.rfind("overlay_", 0) == 0 && entry.path().extension() == ".mp4")
+        overlays.push_back(entry.path());
+    }
+    std::sort(overlays.begin(), overlays.end());
+    for (const fs::path& overlay : overlays) {
+      std::string bytes;
+      HF_RETURN_IF_ERROR(ReadFileToString(overlay, &bytes));
+      const std::string name = "tracking_" + overlay.filename().string();
+      HF_RETURN_IF_ERROR(WriteFileAtomic(videos / name, bytes));
+      out.files.push_back("videos/" + name);
+    }
   }
   if (Wants(options, "viewer") && (fs::exists(out_dir / "avatar_mesh.glb") || fs::exists(out_dir / "gaussians.glb"))) {
     ViewerOptions viewer;

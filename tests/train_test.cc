@@ -332,6 +332,8 @@ TEST_F(ExportStage, WritesEveryFormatAndEachReadsBack) {
   EXPECT_EQ(CountVideoFrames(out / "videos" / "self_reenactment.mp4"), 25);
   EXPECT_EQ(CountVideoFrames(out / "videos" / "orbit.mp4"), 72);
   EXPECT_EQ(CountVideoFrames(out / "videos" / "cross_reenactment.mp4"), 125);
+  // The track stage's overlay, now H.264 too, among the videos.
+  EXPECT_EQ(CountVideoFrames(out / "videos" / "tracking_overlay_cam0.mp4"), 125);
 #ifdef HEADFORGE_GLTF_VALIDATOR
   const auto validate = [&](const fs::path& file, const std::string& extra) {
     return std::system((std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +

@@ -100,6 +100,12 @@ std::vector<BadInput> Table() {
          return std::vector<std::string>{"train", "--workspace", (d / "ws").string(), "--holdout", "2"};
        },
        2, {"--holdout must be in (0, 0.9)"}, true},
+      {"an unknown camera among the held-out ones (comma-separated)",
+       [](const fs::path& d) {
+         return std::vector<std::string>{"train", "--workspace", (d / "ws").string(), "--holdout-cameras",
+                                         "cam0,cam7", "--max-minutes", "0"};
+       },
+       2, {"no camera cam7 to hold out"}, true},
       {"an unknown model",
        [](const fs::path& d) {
          return std::vector<std::string>{"train", "--workspace", (d / "ws").string(), "--model", "nerf"};
@@ -278,7 +284,9 @@ TEST_P(BadInputs, SayWhatHappenedAndWhatToTryAndLoseNothing) {
   ASSERT_EQ(lines.size(), 1u) << bad.name << ": one line saying why, not:\n" << r.err;
   for (const std::string& part : bad.says)
     EXPECT_NE(lines[0].find(part), std::string::npos) << bad.name << ": '" << part << "' not in\n" << lines[0];
-  if (bad.on_workspace) EXPECT_EQ(Snapshot(dir / "ws"), before) << bad.name << ": the workspace changed";
+  if (bad.on_workspace) {
+    EXPECT_EQ(Snapshot(dir / "ws"), before) << bad.name << ": the workspace changed";
+  }
   fs::remove_all(dir);
 }
 

@@ -6,6 +6,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <sstream>
 #include <cmath>
 
 #include <Eigen/Geometry>
@@ -137,14 +138,21 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   for (const auto& [name, region] : model.regions())
     out.mesh_parts[name] = {region.first_triangle, region.last_triangle};
 
-  for (const std::string& name : options.holdout_cameras) {
+  // Names given one by one or comma-separated ("cam3,cam6").
+  std::vector<std::string> held_cameras;
+  for (const std::string& list : options.holdout_cameras) {
+    std::stringstream names(list);
+    for (std::string name; std::getline(names, name, ',');)
+      if (!name.empty()) held_cameras.push_back(name);
+  }
+  for (const std::string& name : held_cameras) {
     bool known = false;
     for (const IngestedCamera& cam : capture.cameras) known = known || cam.name == name;
     if (!known) return Status::InvalidArgument("no camera " + name + " to hold out (see capture.json's cameras)");
   }
   for (const IngestedCamera& cam : capture.cameras) {
-    const bool held_camera = std::find(options.holdout_cameras.begin(), options.holdout_cameras.end(), cam.name) !=
-                             options.holdout_cameras.end();
+    const bool held_camera =
+        std::find(held_cameras.begin(), held_cameras.end(), cam.name) != held_cameras.end();
     const CameraIntrinsics* lens = cameras.FindCamera(cam.name);
     if (!lens) return Status::DataError("cameras_head.json has no camera " + cam.name + "; run headforge align again");
     const double scale = double(options.resolution) / std::max(cam.width, cam.height);

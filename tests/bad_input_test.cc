@@ -69,15 +69,18 @@ void EditJson(const fs::path& path, const std::function<void(nlohmann::json*)>& 
   WriteText(path, j.dump());
 }
 
-std::vector<BadInput> Table() {
-  const auto video = [](const fs::path& dir, const std::vector<std::string>& extra) {
-    std::vector<std::string> args = {"ingest", "--workspace", (dir / "w").string()};
-    args.insert(args.end(), extra.begin(), extra.end());
-    return args;
-  };
+// An ingest command line into dir/w with `extra`.
+std::vector<std::string> IngestArgs(const fs::path& dir, const std::vector<std::string>& extra) {
+  std::vector<std::string> args = {"ingest", "--workspace", (dir / "w").string()};
+  args.insert(args.end(), extra.begin(), extra.end());
+  return args;
+}
+
+// The command line (exit 2).
+std::vector<BadInput> CommandLineCases() {
+  const auto video = IngestArgs;
   const std::string grid = (kGrid / "bbaf2n.mpg").string();
   return {
-      // The command line (exit 2).
       {"an unknown command", [](const fs::path&) { return std::vector<std::string>{"frobnicate"}; }, 2,
        {"unknown command 'frobnicate'", "--help"}},
       {"an unknown option", [=](const fs::path& d) { return video(d, {"--video", grid, "--frobnicate", "1"}); }, 2,
@@ -149,8 +152,14 @@ std::vector<BadInput> Table() {
       {"pack without --out",
        [](const fs::path& d) { return std::vector<std::string>{"pack", "--workspace", (d / "ws").string()}; }, 2,
        {"--out"}, true},
+  };
+}
 
-      // The inputs (exit 1).
+// The inputs (exit 1).
+std::vector<BadInput> InputCases() {
+  const auto video = IngestArgs;
+  const std::string grid = (kGrid / "bbaf2n.mpg").string();
+  return {
       {"a missing video", [=](const fs::path& d) { return video(d, {"--video", (d / "none.mp4").string()}); }, 1,
        {"not found", "none.mp4"}},
       {"an empty video file",
@@ -262,6 +271,12 @@ std::vector<BadInput> Table() {
        },
        1, {"6 frames", "at least", "longer video"}},
   };
+}
+
+std::vector<BadInput> Table() {
+  std::vector<BadInput> table = CommandLineCases();
+  for (BadInput& input : InputCases()) table.push_back(std::move(input));
+  return table;
 }
 
 class BadInputs : public ::testing::TestWithParam<size_t> {};

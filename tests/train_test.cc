@@ -458,7 +458,7 @@ TEST_F(ExportStage, TheReportReferencesOnlyFilesThatExist) {
     }
   }
   EXPECT_GE(inlined, 6);  // capture thumbnails and held-out strips
-  EXPECT_EQ(beside, 3);   // the three videos
+  EXPECT_EQ(beside, 4);   // the videos: self-reenactment, orbit, cross-reenactment, the tracking overlay
   EXPECT_NE(html.find("<code>viewer/index.html</code>"), std::string::npos);
 }
 

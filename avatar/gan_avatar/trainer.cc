@@ -13,7 +13,6 @@
 #include <cstdio>
 #include <map>
 #include <sstream>
-#include <thread>
 
 #include "avatar/gan_avatar/avatar_io.h"
 #include "avatar/gaussian_style/trainer.h"

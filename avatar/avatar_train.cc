@@ -367,14 +367,7 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
     sampling.threads = std::max(1, int(std::thread::hardware_concurrency()));
     return EstimateRenderExpressions(generator, camera, width, height, model, tracking, sampling, random, p, out);
   };
-  StatsLog stats;
-  HF_RETURN_IF_ERROR(OpenTrainStats(out_dir, &stats));
-  *summary = TrainSummary();
-  HF_RETURN_IF_ERROR(TrainGanAvatar(resolved, data, track_renders, out_dir, &stats, progress, summary));
-  summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json", "held_out"};
-  std::error_code ec;
-  if (fs::exists(out_dir / "previews", ec)) summary->outputs.push_back("previews");
-  return Status::Ok();
+  return TrainGanAvatar(resolved, data, track_renders, out_dir, progress, summary);
 }
 
 Status WriteTrainPack(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,

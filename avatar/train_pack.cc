@@ -9,7 +9,6 @@
 #include "avatar/torch_runtime.h"
 #include "avatar/train/dataset_pack.h"
 #include "avatar/train/image_file.h"
-#include "avatar/train/loop.h"
 #include "core/log.h"
 
 namespace headforge {
@@ -77,11 +76,7 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
   if (!options.generator_from.empty())
     return Status::InvalidArgument("--set generator_from: a pack trains the GAN itself; --generator-from is headforge "
                                    "train's, on the workspace");
-  StatsLog stats;
-  HF_RETURN_IF_ERROR(OpenTrainStats(out_dir, &stats));
-  *summary = TrainSummary();
-  HF_RETURN_IF_ERROR(TrainGanAvatar(options, data, /*track_renders=*/{}, out_dir, &stats, progress, summary));
-  summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json"};
+  HF_RETURN_IF_ERROR(TrainGanAvatar(options, data, /*track_renders=*/{}, out_dir, progress, summary));
   if (options.mapping_steps > 0)
     HF_LOG(Info) << "train: the GAN is trained; on the workspace's machine, headforge train --workspace WS --model "
                     "gan-avatar --generator-from " << out_dir.string()

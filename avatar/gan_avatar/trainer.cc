@@ -28,6 +28,7 @@
 #include "core/interrupt.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/stats_log.h"
 
 namespace headforge {
 namespace {
@@ -615,9 +616,13 @@ GanAvatarOptions GanArchitecture(const TrainOptions& options, const AvatarDatase
 }
 
 Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const RenderTracker& track_renders,
-                      const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary) {
+                      const fs::path& out_dir, Progress* progress, TrainSummary* summary) {
   torch::Device device = torch::kCPU;
   HF_RETURN_IF_ERROR(ParseDevice("train", options.device, &device));
+  StatsLog log;
+  HF_RETURN_IF_ERROR(OpenTrainStats(out_dir, &log));
+  StatsLog* stats = &log;
+  *summary = TrainSummary();
   const fs::path checkpoint = out_dir / "checkpoint.pt";
   GanTrainer trainer(options, data, device);
   HF_RETURN_IF_ERROR(trainer.Start(checkpoint, stats));
@@ -637,6 +642,8 @@ Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, co
   HF_RETURN_IF_ERROR(trainer.TrainMapping(track_renders, stats, progress));
   HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
   summary->resumed_from = resumed_from;
+  summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json", "held_out"};
+  if (fs::exists(out_dir / "previews", ec)) summary->outputs.push_back("previews");
   fs::remove(checkpoint, ec);
   return Status::Ok();
 }

@@ -15,7 +15,6 @@
 #include "avatar/gan_avatar/expression_mapping.h"
 #include "avatar/gan_avatar/model.h"
 #include "avatar/train/dataset.h"
-#include "core/stats_log.h"
 
 namespace headforge {
 
@@ -42,8 +41,9 @@ using RenderTracker =
 // the LibTorch-only program) the model has no mapping and draws every frame
 // with the mean latent. With options.generator_from (a folder this function
 // wrote for the same views and architecture) the GAN is that folder's and
-// only the mapping trains.
+// only the mapping trains. Opens out_dir's stats.jsonl and lists the
+// summary's outputs: the train stage's run, and a run from a pack.
 Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const RenderTracker& track_renders,
-                      const fs::path& out_dir, StatsLog* stats, Progress* progress, TrainSummary* summary);
+                      const fs::path& out_dir, Progress* progress, TrainSummary* summary);
 
 }  // namespace headforge

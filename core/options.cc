@@ -14,11 +14,7 @@ namespace headforge {
 
 namespace po = boost::program_options;
 
-namespace internal {
-namespace {
-
-// Splits list items given as "a,b c" into tokens.
-std::vector<std::string> SplitList(const std::vector<std::string>& tokens) {
+std::vector<std::string> SplitCommaList(const std::vector<std::string>& tokens) {
   std::vector<std::string> items;
   for (const auto& token : tokens) {
     std::string current;
@@ -34,6 +30,9 @@ std::vector<std::string> SplitList(const std::vector<std::string>& tokens) {
   }
   return items;
 }
+
+namespace internal {
+namespace {
 
 Status ExpectOne(const std::vector<std::string>& tokens) {
   if (tokens.size() != 1)
@@ -108,7 +107,7 @@ Status ParseTokens(const std::vector<std::string>& tokens, std::vector<std::stri
 }
 Status ParseTokens(const std::vector<std::string>& tokens, std::vector<int>* value) {
   std::vector<int> parsed;
-  for (const auto& item : SplitList(tokens)) {
+  for (const auto& item : SplitCommaList(tokens)) {
     int number = 0;
     HF_RETURN_IF_ERROR(ParseNumber(item, &number));
     parsed.push_back(number);
@@ -118,7 +117,7 @@ Status ParseTokens(const std::vector<std::string>& tokens, std::vector<int>* val
 }
 Status ParseTokens(const std::vector<std::string>& tokens, std::vector<double>* value) {
   std::vector<double> parsed;
-  for (const auto& item : SplitList(tokens)) {
+  for (const auto& item : SplitCommaList(tokens)) {
     double number = 0;
     HF_RETURN_IF_ERROR(ParseNumber(item, &number));
     parsed.push_back(number);

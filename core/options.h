@@ -20,6 +20,11 @@
 
 namespace headforge {
 
+// A text-list option's tokens with comma-separated items split: {"a,b", "c"}
+// -> {"a", "b", "c"} (number lists are split so when parsed; text lists keep
+// their tokens whole, as a path may hold a comma).
+std::vector<std::string> SplitCommaList(const std::vector<std::string>& tokens);
+
 class OptionSet {
  public:
   // Options that change a stage's outputs enter its fingerprint; the others

@@ -1,5 +1,6 @@
 // The export stage's job: the trained avatar in the formats other tools open, into export/.
 #include "core/hash.h"
+#include "core/options.h"
 #include "export/export.h"
 #include "pipelines/stage_jobs.h"
 
@@ -12,14 +13,7 @@ class ExportJob : public StageJob {
   void Resolve(const StageSettings& settings, const OptionSet&) override {
     workspace_ = settings.workspace;
     // --formats mesh,report as well as --formats mesh report.
-    std::vector<std::string> formats;
-    for (const std::string& item : options_.formats) {
-      size_t start = 0;
-      for (size_t comma; (comma = item.find(',', start)) != std::string::npos; start = comma + 1)
-        if (comma > start) formats.push_back(item.substr(start, comma - start));
-      if (start < item.size()) formats.push_back(item.substr(start));
-    }
-    options_.formats = formats;
+    options_.formats = SplitCommaList(options_.formats);
   }
   Status Check() const override { return options_.Check(); }
   // The trained model is not an upstream stage (the mesh avatar and the

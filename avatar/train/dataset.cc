@@ -6,7 +6,6 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
-#include <sstream>
 #include <cmath>
 
 #include <Eigen/Geometry>
@@ -15,6 +14,7 @@
 #include "capture/capture_io.h"
 #include "core/camera_set.h"
 #include "core/mesh_renderer.h"
+#include "core/options.h"
 #include "reconstruction/tracking_io.h"
 
 namespace headforge {
@@ -139,12 +139,7 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
     out.mesh_parts[name] = {region.first_triangle, region.last_triangle};
 
   // Names given one by one or comma-separated ("cam3,cam6").
-  std::vector<std::string> held_cameras;
-  for (const std::string& list : options.holdout_cameras) {
-    std::stringstream names(list);
-    for (std::string name; std::getline(names, name, ',');)
-      if (!name.empty()) held_cameras.push_back(name);
-  }
+  const std::vector<std::string> held_cameras = SplitCommaList(options.holdout_cameras);
   for (const std::string& name : held_cameras) {
     bool known = false;
     for (const IngestedCamera& cam : capture.cameras) known = known || cam.name == name;

@@ -198,7 +198,7 @@ const char* const kChartScript = R"(<script>
                            y: { type: 'logarithmic', title: { display: true, text: 'loss' } },
                            y1: { position: 'right', title: { display: true, text: 'dB' } } } } });
   if (data.bench.length) chart('bench', { type: 'scatter', data: { datasets: data.bench.map(r => ({
-      label: r.variant, data: [{ x: r.seconds / 60, y: r.psnr_masked }], pointRadius: 6 })) },
+      label: r.what || r.variant, data: [{ x: r.seconds / 60, y: r.psnr_masked }], pointRadius: 6 })) },
       options: { scales: axes('training time (minutes)', 'held-out PSNR, head (dB)') } });
   window.done = true;
 })();
@@ -312,8 +312,23 @@ Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const Rep
     html += "<p>No <code>headforge bench train</code> results in this workspace; the training curve above is this "
             "run's own.</p>";
   } else {
-    html += "<p>Held-out PSNR over the head against training time for each variant <code>headforge bench train"
-            "</code> trained on this workspace.</p><div class=\"chart\"><canvas id=\"bench\"></canvas></div>";
+    html += "<p>Held-out PSNR over the head against training time for each variant and each rung of the ladder "
+            "<code>headforge bench train</code> trained on this workspace (a preset's rung is the preset as "
+            "<code>headforge run</code> trains it).</p><div class=\"chart\"><canvas id=\"bench\"></canvas></div>"
+            "<table><tr><th>variant or rung</th><th>model</th><th>steps</th><th>training time</th>"
+            "<th>held-out PSNR / SSIM, head</th><th>held-out PSNR, frame</th></tr>";
+    std::vector<nlohmann::json> rows(data["bench"].begin(), data["bench"].end());
+    std::sort(rows.begin(), rows.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
+      return a.value("seconds", 0.0) < b.value("seconds", 0.0);
+    });
+    for (const nlohmann::json& r : rows)
+      html += "<tr><td>" + HtmlEscape(r.value("what", r.value("variant", std::string("?")))) + "</td><td>" +
+              HtmlEscape(r.value("model", std::string("gaussian-style"))) + "</td><td class=\"num\">" +
+              std::to_string(r.value("steps", 0)) + "</td><td class=\"num\">" +
+              Number(r.value("seconds", 0.0) / 60, 1) + " min</td><td class=\"num\">" +
+              Number(r.value("psnr_masked", 0.0), 2) + " dB / " + Number(r.value("ssim_masked", 0.0), 3) +
+              "</td><td class=\"num\">" + Number(r.value("psnr", 0.0), 2) + " dB</td></tr>";
+    html += "</table>";
   }
   html += ExportedSection(options.exported);
   html += kChartScript;

@@ -1,8 +1,9 @@
-// `headforge bench train`: the gaussian-style avatar's ablation on one
-// tracked workspace. Trains each variant (stage 1 only, stages 1+2 without
-// the region loss, stages 1+2, the canonical deformation, mesh riding) with
-// the same options into its own folder and prints held-out accuracy against
-// training time.
+// `headforge bench train`: held-out accuracy against training time on one
+// tracked workspace. Trains each variant (the gaussian-style ablation: stage
+// 1 only, stages 1+2 without the region loss, stages 1+2, the canonical
+// deformation, mesh riding) and each rung of a ladder (steps, Gaussian
+// count, or a preset as it stands) into its own folder and prints a row for
+// each; the report plots the rows.
 #include <nlohmann/json.hpp>
 
 #include <cstdio>
@@ -30,6 +31,46 @@ const Variant kVariants[] = {
     {"mesh-riding", "stages 1+2, mesh riding", [](TrainOptions* t) { t->mesh_riding = true; }},
 };
 
+// One rung of --ladder: "STEPS", "STEPS/GAUSSIANS" (the gaussian-style
+// model's largest count), or a preset's name (the preset with its time
+// limit). Other rungs train without a time limit: their steps set the
+// schedule, which a limit would cut short.
+struct Rung {
+  std::string name, what;
+  std::string preset;  // set for a preset rung
+  int steps = 0;
+  int64_t gaussians = 0;
+};
+
+Status ParseRung(const std::string& text, Rung* rung) {
+  rung->name = text;
+  if (text == "draft" || text == "standard" || text == "high") {
+    rung->preset = text;
+    rung->what = text + " preset";
+    return Status::Ok();
+  }
+  const Status bad = Status::InvalidArgument("--ladder: '" + text +
+                                             "' is not STEPS, STEPS/GAUSSIANS or a preset (draft, standard, high)");
+  const size_t slash = text.find('/');
+  try {
+    size_t used = 0;
+    rung->steps = std::stoi(text.substr(0, slash), &used);
+    if (used != text.substr(0, slash).size()) return bad;
+    if (slash != std::string::npos) {
+      const std::string count = text.substr(slash + 1);
+      rung->gaussians = std::stoll(count, &used);
+      if (used != count.size()) return bad;
+    }
+  } catch (const std::exception&) {
+    return bad;
+  }
+  if (rung->steps < 1 || (slash != std::string::npos && rung->gaussians < 1)) return bad;
+  rung->name = "ladder_" + std::to_string(rung->steps) + (rung->gaussians ? "_" + std::to_string(rung->gaussians) : "");
+  rung->what = std::to_string(rung->steps) + " steps" +
+               (rung->gaussians ? ", at most " + std::to_string(rung->gaussians) + " Gaussians" : "");
+  return Status::Ok();
+}
+
 }  // namespace
 
 int BenchTrain(const std::vector<std::string>& args) {
@@ -43,6 +84,13 @@ int BenchTrain(const std::vector<std::string>& args) {
   bool json = false;
   options.Add("bench.variants", &variants, "Variants to train: stage1, no-region, full (the options as given), canonical (the paper's deformation "
               "in canonical space), mesh-riding.", "variants");
+  std::vector<std::string> ladder;
+  options.Add("bench.ladder", &ladder,
+              "Rungs to train besides the variants (alone when --variants is not given): STEPS, STEPS/GAUSSIANS, or a "
+              "preset's name (draft, standard, high: the preset with its time limit); e.g. "
+              "500,1000,2000,1000/20000,draft. The rungs train the options as given (the full variant) without a time "
+              "limit.",
+              "ladder");
   options.Add("bench.out", &out, "Folder for the variants' models (default: WORKSPACE/bench_train); an "
                                  "interrupted variant resumes from its checkpoint there, and one trained with "
                                  "the same options is scored again, not retrained.", "out");
@@ -52,15 +100,31 @@ int BenchTrain(const std::vector<std::string>& args) {
               "truth");
   options.Add("bench.json", &json, "Print one JSON document instead of the table.", "json");
   const int parsed = ParseOrExit(
-      &options, args, "headforge bench train --workspace DIR [--variants A,B] [--preset draft] [train options]",
-      "Trains the gaussian-style avatar on a tracked workspace once per variant, with the same\n"
-      "options (those of headforge train), and prints each variant's held-out PSNR and SSIM\n"
-      "over the head and over the frame, the training views' PSNR, and the training time.");
+      &options, args, "headforge bench train --workspace DIR [--variants A,B] [--ladder R1,R2] [--preset draft] [train options]",
+      "Trains the avatar on a tracked workspace once per variant and per rung of the ladder,\n"
+      "with the same options (those of headforge train), and prints each one's held-out PSNR\n"
+      "and SSIM over the head and over the frame, the training views' PSNR, and the training\n"
+      "time: what accuracy costs in time. The variants are the gaussian-style model's ablation;\n"
+      "the ladder's rungs apply to either model. The workspace's report plots every row.");
   if (parsed >= 0) return parsed;
   if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
   if (Status s = ApplyTrainPreset(options, &train); !s.ok()) return ReportFailure(s);
   if (Status s = train.Check(); !s.ok()) return ReportFailure(s);
-  std::vector<const Variant*> chosen;
+  // Names given one by one or comma-separated ("stage1,full").
+  variants = SplitCommaList(variants);
+  ladder = SplitCommaList(ladder);
+  if (!ladder.empty() && !options.WasGiven("bench.variants")) variants.clear();
+  if (train.model == "gan-avatar")
+    for (const std::string& name : variants)
+      if (name != "full")
+        return ReportFailure(Status::InvalidArgument("--variants: '" + name +
+                                                     "' is a gaussian-style variant; the gan-avatar model has 'full' and --ladder"));
+  // Each variant and rung: its folder's name, its row's label and its options.
+  struct Job {
+    std::string name, what;
+    TrainOptions options;
+  };
+  std::vector<Job> jobs;
   for (const std::string& name : variants) {
     const Variant* found = nullptr;
     for (const Variant& v : kVariants)
@@ -68,7 +132,29 @@ int BenchTrain(const std::vector<std::string>& args) {
     if (!found)
       return ReportFailure(Status::InvalidArgument("--variants: no variant '" + name +
                                                    "' (stage1, no-region, full, canonical, mesh-riding)"));
-    chosen.push_back(found);
+    jobs.push_back({found->name, found->what, train});
+    found->apply(&jobs.back().options);
+  }
+  for (const std::string& text : ladder) {
+    Rung rung;
+    if (Status s = ParseRung(text, &rung); !s.ok()) return ReportFailure(s);
+    Job job{rung.name, rung.what, train};
+    if (!rung.preset.empty()) {
+      job.options.preset = rung.preset;
+      if (Status s = ApplyTrainPreset(options, &job.options); !s.ok()) return ReportFailure(s);
+    } else {
+      job.options.steps = rung.steps;
+      job.options.max_minutes = 0;
+      if (rung.gaussians) {
+        if (train.model == "gan-avatar")
+          return ReportFailure(Status::InvalidArgument("--ladder: '" + text + "' gives a Gaussian count, which the "
+                                                       "gan-avatar model has not"));
+        job.options.max_gaussians = rung.gaussians;
+        job.options.init_gaussians = std::min<int64_t>(job.options.init_gaussians, rung.gaussians);
+      }
+    }
+    if (Status s = job.options.Check(); !s.ok()) return ReportFailure(s.WithContext("--ladder " + text));
+    jobs.push_back(std::move(job));
   }
   ApplyCommonOptions(common);
   if (json) SetLogLevel(LogLevel::kWarning);
@@ -80,23 +166,22 @@ int BenchTrain(const std::vector<std::string>& args) {
   }
   nlohmann::json rows = nlohmann::json::array();
   std::vector<std::string> novel_lines;
-  for (const Variant* v : chosen) {
-    TrainOptions t = train;
-    v->apply(&t);
-    const fs::path dir = root / v->name;
+  for (const Job& job : jobs) {
+    const TrainOptions& t = job.options;
+    const fs::path dir = root / job.name;
     // A variant trained earlier with the same options is not trained again.
-    const std::string key = options.ToIni("train", true) + "variant = " + v->name + "\n";
+    const std::string key = options.ToIni("train", true) + "variant = " + job.name + "\n";
     nlohmann::json row, saved;
     if (ReadJson(dir / "bench.json", &saved).ok() && saved.value("options", "") == key) {
       row = saved.at("row");
-      HF_LOG(Info) << "bench train: " << v->name << " was trained with these options; scoring it again";
+      HF_LOG(Info) << "bench train: " << job.name << " was trained with these options; scoring it again";
     } else {
       TrainSummary s;
       StderrProgress progress;
       if (Status status = RunTrain(t, common.workspace, common.Settings().face_model, dir, &progress, &s);
           !status.ok())
-        return ReportFailure(status.WithContext(std::string("bench train: ") + v->name));
-      row = {{"variant", v->name}, {"steps", s.steps}, {"seconds", s.seconds}, {"gaussians", s.gaussians},
+        return ReportFailure(status.WithContext("bench train: " + job.name));
+      row = {{"variant", job.name}, {"what", job.what}, {"model", t.model}, {"preset", t.preset}, {"steps", s.steps}, {"seconds", s.seconds}, {"gaussians", s.gaussians},
              {"psnr_masked", s.psnr_masked}, {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full},
              {"ssim", s.ssim_full}, {"train_psnr_masked", s.train_psnr_masked}};
       if (Status status = WriteJsonAtomic(dir / "bench.json", {{"options", key}, {"row", row}}, 1); !status.ok())
@@ -107,13 +192,13 @@ int BenchTrain(const std::vector<std::string>& args) {
       if (Status status = ScoreNovelViews(common.workspace, dir, common.Settings().face_model, truth,
                                           dir / "novel_views", &novel);
           !status.ok())
-        return ReportFailure(status.WithContext(std::string("bench train: ") + v->name));
+        return ReportFailure(status.WithContext("bench train: " + job.name));
       nlohmann::json cams = nlohmann::json::array();
       for (const NovelViewScore& n : novel) {
         cams.push_back({{"camera", n.camera}, {"yaw_deg", n.yaw_deg}, {"pitch_deg", n.pitch_deg}, {"views", n.views},
                         {"psnr_masked", n.psnr_masked}, {"ssim_masked", n.ssim_masked}, {"psnr", n.psnr_full}});
         char line[256];
-        std::snprintf(line, sizeof(line), "| %s | %s | %+.0f° / %+.0f° | %d | %.2f dB / %.3f | %.2f dB |", v->what,
+        std::snprintf(line, sizeof(line), "| %s | %s | %+.0f° / %+.0f° | %d | %.2f dB / %.3f | %.2f dB |", job.what.c_str(),
                       n.camera.c_str(), n.yaw_deg, n.pitch_deg, n.views, n.psnr_masked, n.ssim_masked, n.psnr_full);
         novel_lines.push_back(line);
       }
@@ -121,7 +206,7 @@ int BenchTrain(const std::vector<std::string>& args) {
     }
     rows.push_back(row);
     if (!json) {
-      std::printf("| %s | %d | %.1f min | %lld | %.2f dB / %.3f | %.2f dB / %.3f | %.2f dB |\n", v->what,
+      std::printf("| %s | %d | %.1f min | %lld | %.2f dB / %.3f | %.2f dB / %.3f | %.2f dB |\n", job.what.c_str(),
                   row["steps"].get<int>(), row["seconds"].get<double>() / 60,
                   static_cast<long long>(row["gaussians"].get<int64_t>()), row["psnr_masked"].get<double>(),
                   row["ssim_masked"].get<double>(), row["psnr"].get<double>(), row["ssim"].get<double>(),

@@ -438,6 +438,41 @@ TEST_F(ExportStage, TheBakedMeshAvatarRedrawsTheFrames) {
   }
 }
 
+// `headforge bench train --ladder`: each rung trained with the options
+// given, its steps as named, a second call scoring the rungs it finds
+// instead of training them again, and the rows in the report's table.
+TEST_F(ExportStage, TheBenchLadderTrainsEachRungAndTheReportTablesThem) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path ws = CopyOf(reference_, Scratch("bench_ladder"));
+  std::vector<std::string> args = {"bench", "train", "--workspace", ws.string(), "--ladder", "30,60", "--json"};
+  for (const auto& a : TinyOptions()) args.push_back(a);
+  const Result first = Headforge(args);
+  ASSERT_EQ(first.code, 0) << first.err;
+  const nlohmann::json rows = nlohmann::json::parse(first.out).at("variants");
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0]["steps"], 30);
+  EXPECT_EQ(rows[1]["steps"], 60);
+  EXPECT_EQ(rows[1]["what"], "60 steps");
+  for (const nlohmann::json& r : rows) {
+    EXPECT_GT(r["seconds"].get<double>(), 0);
+    EXPECT_GT(r["psnr_masked"].get<double>(), 10);
+  }
+  // The longer rung fits its training views better.
+  EXPECT_GT(rows[1]["train_psnr_masked"].get<double>(), rows[0]["train_psnr_masked"].get<double>());
+  const Result again = Headforge(args);
+  ASSERT_EQ(again.code, 0) << again.err;
+  EXPECT_EQ(nlohmann::json::parse(again.out).at("variants"), rows);
+  EXPECT_EQ(again.err.find("train: gaussian-style"), std::string::npos) << again.err;  // nothing trained
+  // A rung that is not one is refused before anything trains.
+  const Result bad = Headforge({"bench", "train", "--workspace", ws.string(), "--ladder", "30,12x"});
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_NE(bad.err.find("'12x' is not STEPS, STEPS/GAUSSIANS or a preset"), std::string::npos) << bad.err;
+  const Result report = Headforge({"export", "--workspace", ws.string(), "--formats", "report"});
+  ASSERT_EQ(report.code, 0) << report.err;
+  const std::string html = Slurp(ws / "export" / "report.html");
+  EXPECT_NE(html.find("<tr><td>60 steps</td><td>gaussian-style</td><td class=\"num\">60</td>"), std::string::npos);
+}
+
 // report.html: every file it references (videos beside it) exists, and
 // everything else is inlined.
 TEST_F(ExportStage, TheReportReferencesOnlyFilesThatExist) {

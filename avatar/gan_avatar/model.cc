@@ -39,59 +39,63 @@ GanGeneratorImpl::GanGeneratorImpl(const GanAvatarOptions& options) : options_(o
 
 void GanGeneratorImpl::Field(const torch::Tensor& planes, const torch::Tensor& points, torch::Tensor* density,
                              torch::Tensor* features) {
-  const int64_t n = points.size(0), c = options_.plane_channels;
+  const int64_t c = options_.plane_channels, fc = options_.feature_channels;
+  std::vector<int64_t> shape = points.sizes().vec();
+  shape.pop_back();  // the points' leading dimensions: [N] or [B, N]
   // EG3D's aggregation: the mean of the three planes' features.
-  const torch::Tensor sampled = nn::SampleTriplane(planes, options_.box.Normalise(points)).view({n, 3, c}).mean(1);
-  const torch::Tensor out = decoder_->forward(sampled);  // [N, 1 + F]
-  *density = F::softplus(out.select(1, 0) - 1) * options_.density_scale;
+  const torch::Tensor sampled =
+      nn::SampleTriplane(planes, options_.box.Normalise(points)).reshape({-1, 3, c}).mean(1);
+  const torch::Tensor out = decoder_->forward(sampled);  // [N', 1 + F]
+  *density = (F::softplus(out.select(1, 0) - 1) * options_.density_scale).view(shape);
   // Colour and features squashed to a little over [0, 1], as EG3D's decoder does.
-  *features = torch::sigmoid(out.narrow(1, 1, options_.feature_channels)) * (1 + 2 * 0.001) - 0.001;
+  shape.push_back(fc);
+  *features = (torch::sigmoid(out.narrow(1, 1, fc)) * (1 + 2 * 0.001) - 0.001).view(shape);
 }
 
 GanRender GanGeneratorImpl::Render(const torch::Tensor& w, const std::vector<SplatCamera>& cameras, int64_t out_width,
                                    int64_t out_height, double background, at::Generator* jitter) {
   const int64_t batch = w.size(0);
-  TORCH_CHECK(int64_t(cameras.size()) == batch, "gan-avatar: one camera per latent");
-  const torch::Tensor planes = Planes(w);
+  TORCH_CHECK(int64_t(cameras.size()) == batch && batch > 0, "gan-avatar: one camera per latent");
+  const int64_t h = cameras[0].height, wd = cameras[0].width;
+  for (const SplatCamera& camera : cameras)
+    TORCH_CHECK(camera.width == wd && camera.height == h, "gan-avatar: the batch's cameras differ in size");
+  const torch::Tensor planes = Planes(w);  // [B, 3, C, R, R]
   const int64_t fc = options_.feature_channels;
-  std::vector<torch::Tensor> images, opacities;
-  for (int64_t b = 0; b < batch; ++b) {
-    const SplatCamera& camera = cameras[size_t(b)];
-    volume::Rays rays = volume::GenerateRays(camera, w.device());
-    rays.origins = rays.origins.to(w.dtype());
-    rays.directions = rays.directions.to(w.dtype());
-    const volume::Segments segments = volume::IntersectBox(rays, options_.box);
-    const int64_t r = rays.origins.size(0);
-    auto evaluate = [&](const torch::Tensor& depths, torch::Tensor* sigma, torch::Tensor* feat) {
-      const int64_t s = depths.size(1);
-      const torch::Tensor points = rays.origins.unsqueeze(1) + rays.directions.unsqueeze(1) * depths.unsqueeze(2);
-      Field(planes[b], points.view({r * s, 3}), sigma, feat);
-      *sigma = sigma->view({r, s});
-      *feat = feat->view({r, s, fc});
-    };
-    const torch::Tensor coarse = volume::StratifiedDepths(segments, options_.coarse_samples, jitter);
-    torch::Tensor sigma0, feat0;
-    evaluate(coarse, &sigma0, &feat0);
-    volume::Composite composite = volume::CompositeSamples(sigma0, feat0, coarse, segments);
-    if (options_.fine_samples > 0) {
-      const torch::Tensor fine =
-          volume::ImportanceDepths(segments, coarse, composite.weights, options_.fine_samples, jitter);
-      torch::Tensor sigma1, feat1;
-      evaluate(fine, &sigma1, &feat1);
-      const volume::Samples merged = volume::MergeSamples({coarse, {sigma0, feat0}}, {fine, {sigma1, feat1}});
-      composite = volume::CompositeSamples(merged.values[0], merged.values[1], merged.depths, segments);
-    }
-    images.push_back(composite.features.t().reshape({fc, camera.height, camera.width}));
-    opacities.push_back(composite.opacity.view({1, camera.height, camera.width}));
+  // Every camera's rays, sample by sample: [B * h * w, 3].
+  std::vector<torch::Tensor> origins, directions;
+  for (const SplatCamera& camera : cameras) {
+    const volume::Rays r = volume::GenerateRays(camera, w.device());
+    origins.push_back(r.origins);
+    directions.push_back(r.directions);
+  }
+  volume::Rays rays{torch::cat(origins).to(w.dtype()), torch::cat(directions).to(w.dtype())};
+  const volume::Segments segments = volume::IntersectBox(rays, options_.box);
+  const int64_t per_camera = h * wd;
+  auto evaluate = [&](const torch::Tensor& depths, torch::Tensor* sigma, torch::Tensor* feat) {
+    const int64_t s = depths.size(1);
+    const torch::Tensor points = rays.origins.unsqueeze(1) + rays.directions.unsqueeze(1) * depths.unsqueeze(2);
+    Field(planes, points.view({batch, per_camera * s, 3}), sigma, feat);
+    *sigma = sigma->view({batch * per_camera, s});
+    *feat = feat->view({batch * per_camera, s, fc});
+  };
+  const torch::Tensor coarse = volume::StratifiedDepths(segments, options_.coarse_samples, jitter);
+  torch::Tensor sigma0, feat0;
+  evaluate(coarse, &sigma0, &feat0);
+  volume::Composite composite = volume::CompositeSamples(sigma0, feat0, coarse, segments);
+  if (options_.fine_samples > 0) {
+    const torch::Tensor fine = volume::ImportanceDepths(segments, coarse, composite.weights, options_.fine_samples, jitter);
+    torch::Tensor sigma1, feat1;
+    evaluate(fine, &sigma1, &feat1);
+    const volume::Samples merged = volume::MergeSamples({coarse, {sigma0, feat0}}, {fine, {sigma1, feat1}});
+    composite = volume::CompositeSamples(merged.values[0], merged.values[1], merged.depths, segments);
   }
   GanRender out;
-  out.features = torch::stack(images);   // [B, F, h, w]
-  out.opacity = torch::stack(opacities);  // [B, 1, h, w]
+  out.features = composite.features.view({batch, h, wd, fc}).permute({0, 3, 1, 2});  // [B, F, h, w]
+  out.opacity = composite.opacity.view({batch, 1, h, wd});
   out.raw = out.features.narrow(1, 0, 3) + (1 - out.opacity) * background;
   // Super-resolution: the raw colour upsampled, plus what the modulated
   // convolutions make of the features (with the background) at each doubling.
   torch::Tensor x = torch::cat({out.raw, out.features.narrow(1, 3, fc - 3)}, 1);
-  const int64_t h = x.size(2), wd = x.size(3);
   const int doublings = options_.super_resolution_doublings;
   for (int i = 0; i < doublings; ++i) {
     const bool last = i + 1 == doublings;

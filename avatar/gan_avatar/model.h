@@ -60,14 +60,16 @@ class GanGeneratorImpl : public torch::nn::Module {
   torch::Tensor Planes(const torch::Tensor& w) { return planes_->Synthesize(w); }  // -> [B, 3, C, R, R]
 
   // The field at `points` [N, 3] (head frame) on planes [3, C, R, R]:
-  // densities [N] and features [N, F].
+  // densities [N] and features [N, F]; batched, points [B, N, 3] on planes
+  // [B, 3, C, R, R]: densities [B, N] and features [B, N, F].
   void Field(const torch::Tensor& planes, const torch::Tensor& points, torch::Tensor* density,
              torch::Tensor* features);
 
   // Renders sample b of w [B, w_dim] from cameras[b] (at the volume render's
-  // resolution) over `background` (grey level of the colour channels), then
-  // super-resolves to out_width x out_height. `jitter` (may be null) jitters
-  // the depths; without it they are the bins' centres.
+  // resolution, the same size for every b) over `background` (grey level of
+  // the colour channels), then super-resolves to out_width x out_height.
+  // `jitter` (may be null) jitters the depths; without it they are the bins'
+  // centres. The batch's rays go through the volume render together.
   GanRender Render(const torch::Tensor& w, const std::vector<SplatCamera>& cameras, int64_t out_width,
                    int64_t out_height, double background, at::Generator* jitter);
 

@@ -107,6 +107,37 @@ TEST(GanGenerator, SameLatentAndCameraGiveTheSameImageAndTheCameraMatters) {
                            g->Render(w, {front, side}, 16, 16, 0.5, &j2).image));
 }
 
+TEST(GanGenerator, ABatchRendersAsItsSamplesDoOneByOne) {
+  // The batch's rays go through the volume render together, each sample's
+  // points on its own planes: the same images, and the same gradients, as
+  // rendering the samples one at a time.
+  torch::manual_seed(6);
+  GanGenerator g(TinyOptions());
+  const torch::Tensor z = torch::randn({3, 8});
+  const std::vector<SplatCamera> cameras = {FrontCamera(10), FrontCamera(10, 0.7), FrontCamera(10, -2.5)};
+  g->zero_grad();
+  const GanRender batch = g->Render(g->Map(z), cameras, 20, 20, 0.5, nullptr);
+  batch.image.square().sum().backward();
+  std::vector<torch::Tensor> batch_grads;
+  for (const torch::Tensor& p : g->parameters()) batch_grads.push_back(p.grad().clone());
+  g->zero_grad();
+  for (int64_t b = 0; b < 3; ++b) {
+    const GanRender one = g->Render(g->Map(z.narrow(0, b, 1)), {cameras[size_t(b)]}, 20, 20, 0.5, nullptr);
+    EXPECT_TRUE(torch::allclose(one.image, batch.image.narrow(0, b, 1), 1e-5, 1e-6)) << b;
+    EXPECT_TRUE(torch::allclose(one.opacity, batch.opacity.narrow(0, b, 1), 1e-5, 1e-6)) << b;
+    one.image.square().sum().backward();
+  }
+  size_t i = 0;
+  for (const torch::Tensor& p : g->parameters()) {
+    const torch::Tensor& want = p.grad();
+    EXPECT_TRUE(torch::allclose(batch_grads[i], want, 1e-4, 1e-5 * (1 + want.abs().max().item<double>()))) << i;
+    ++i;
+  }
+  // A batch whose cameras differ in size is refused, not rendered wrong.
+  EXPECT_THROW(g->Render(g->Map(z.narrow(0, 0, 2)), {FrontCamera(10), FrontCamera(12)}, 20, 20, 0.5, nullptr),
+               c10::Error);
+}
+
 TEST(GanDiscriminator, TheCameraEntersByProjection) {
   // logit(x, c) - logit(x, c') = <embed(c) - embed(c'), h(x)> / sqrt(D),
   // with h the discriminator's final feature; unconditional ignores c.

@@ -71,19 +71,25 @@ torch::Tensor ModulatedConv2dImpl::forward(const torch::Tensor& x, const torch::
 }
 
 torch::Tensor SampleTriplane(const torch::Tensor& planes, const torch::Tensor& points) {
-  TORCH_CHECK(planes.dim() == 4 && planes.size(0) == 3, "triplane: planes must be [3, C, R, R]");
-  TORCH_CHECK(points.dim() == 2 && points.size(1) == 3, "triplane: points must be [N, 3]");
-  const int64_t n = points.size(0), c = planes.size(1);
-  const torch::Tensor x = points.select(1, 0), y = points.select(1, 1), z = points.select(1, 2);
-  // [3, 1, N, 2]: (u, v) on the xy, xz and zy planes.
-  const torch::Tensor grid =
-      torch::stack({torch::stack({x, y}, 1), torch::stack({x, z}, 1), torch::stack({z, y}, 1)}).unsqueeze(1);
-  const torch::Tensor sampled = F::grid_sample(planes, grid.to(planes.dtype()),
+  const bool batched = planes.dim() == 5;
+  TORCH_CHECK((planes.dim() == 4 || batched) && planes.size(batched ? 1 : 0) == 3,
+              "triplane: planes must be [3, C, R, R] or [B, 3, C, R, R]");
+  TORCH_CHECK(points.dim() == (batched ? 3 : 2) && points.size(-1) == 3 &&
+                  (!batched || points.size(0) == planes.size(0)),
+              "triplane: points must be [N, 3], or [B, N, 3] with batched planes");
+  const int64_t b = batched ? planes.size(0) : 1, n = points.size(-2), c = planes.size(-3), r = planes.size(-1);
+  const torch::Tensor p = points.reshape({b, n, 3});
+  const torch::Tensor x = p.select(2, 0), y = p.select(2, 1), z = p.select(2, 2);
+  // [B, 3, N, 2]: (u, v) on the xy, xz and zy planes, one grid per plane.
+  const torch::Tensor grid = torch::stack({torch::stack({x, y}, 2), torch::stack({x, z}, 2), torch::stack({z, y}, 2)}, 1);
+  const torch::Tensor sampled = F::grid_sample(planes.reshape({b * 3, c, r, r}),
+                                               grid.reshape({b * 3, 1, n, 2}).to(planes.dtype()),
                                                F::GridSampleFuncOptions()
                                                    .mode(torch::kBilinear)
                                                    .padding_mode(torch::kBorder)
-                                                   .align_corners(false));  // [3, C, 1, N]
-  return sampled.squeeze(2).permute({2, 0, 1}).reshape({n, 3 * c});
+                                                   .align_corners(false));  // [B * 3, C, 1, N]
+  const torch::Tensor out = sampled.view({b, 3, c, n}).permute({0, 3, 1, 2}).reshape({b, n, 3 * c});
+  return batched ? out : out.squeeze(0);
 }
 
 TriplaneGeneratorImpl::TriplaneGeneratorImpl(const TriplaneGeneratorOptions& options) : options_(options) {

@@ -113,6 +113,17 @@ TEST(Triplane, LookUpMatchesAPlainBilinearReference) {
   ExpectGradientMatchesFiniteDifferences([&](const torch::Tensor& q) { return SampleTriplane(planes, q); }, inside, 1e-5);
 }
 
+TEST(Triplane, ABatchLooksEachSampleUpOnItsOwnPlanes) {
+  torch::manual_seed(5);
+  const torch::Tensor planes = torch::randn({2, 3, 4, 8, 8}, kDouble);
+  const torch::Tensor points = torch::rand({2, 30, 3}, kDouble) * 2.4 - 1.2;
+  const torch::Tensor got = SampleTriplane(planes, points);
+  ASSERT_EQ(got.sizes(), torch::IntArrayRef({2, 30, 12}));
+  for (int64_t b = 0; b < 2; ++b)
+    EXPECT_TRUE(torch::allclose(got[b], SampleTriplane(planes[b], points[b]), 1e-14, 1e-14)) << b;
+  EXPECT_THROW(SampleTriplane(planes, points[0]), c10::Error);  // batched planes, unbatched points
+}
+
 TEST(Triplane, GeneratorMakesPlanesThatFollowTheLatent) {
   torch::manual_seed(4);
   TriplaneGeneratorOptions options;

@@ -18,7 +18,8 @@ namespace headforge::nn {
 // on `planes` [3, C, R, R] (the xy, xz and zy planes; image u along the first
 // axis named, v along the second), bilinearly with pixel centres at
 // (i + 0.5) / R * 2 - 1 and the border value outside -> [N, 3C].
-// Differentiable with respect to both.
+// Differentiable with respect to both. Batched: planes [B, 3, C, R, R] and
+// points [B, N, 3] -> [B, N, 3C], each sample's points on its own planes.
 torch::Tensor SampleTriplane(const torch::Tensor& planes, const torch::Tensor& points);
 
 struct TriplaneGeneratorOptions {

@@ -8,6 +8,7 @@
 
 #include "avatar/avatar_export.h"
 #include "avatar/avatar_render.h"
+#include "avatar/face_metrics.h"
 #include "avatar/model_folder.h"
 #include "core/camera_set.h"
 #include "core/face_model.h"
@@ -63,10 +64,58 @@ Status RenderVideo(const fs::path& workspace, const std::string& face_model, Ava
   return Status::Ok();
 }
 
+// face_metrics.json: the held-out renders' identity similarity (CSIM) and
+// landmark distance (F-LMD) to their frames, or why there are none. A
+// metric that cannot be computed is said, not fatal.
+Status WriteFaceMetrics(const ExportOptions& options, const fs::path& model_dir, const fs::path& out_dir) {
+  nlohmann::json record = {
+      {"version", 1},
+      {"csim", "cosine of face-api's face descriptors (dlib's ResNet, 128-d), render against frame, both cropped at "
+               "the frame's face"},
+      {"flmd", "mean distance between the 68 landmarks of frame and render (ingest's landmark model, from the "
+               "frame's face box), pixels of the held-out images"}};
+  std::string missing;
+  if (options.face_api.empty()) {
+    missing = "not asked for (--face-api is empty)";
+  } else {
+    FaceMetricsOptions metric_options;
+    metric_options.face_api_models = fs::path(options.face_api) / "@vladmandic" / "face-api" / "model";
+    metric_options.landmark_model = options.landmark_model;
+    metric_options.ultraface_dir = options.ultraface_dir;
+    std::unique_ptr<FaceMetrics> metrics;
+    HeldOutFaceScores scores;
+    Status status = FaceMetrics::Load(metric_options, &metrics);
+    if (status.ok()) status = ScoreHeldOutFaces(*metrics, model_dir / "held_out", &scores);
+    if (status.ok()) {
+      nlohmann::json views = nlohmann::json::array();
+      for (const FaceScore& s : scores.per_view)
+        views.push_back({{"view", s.view},
+                         {"csim", s.face ? nlohmann::json(s.cosine) : nlohmann::json()},
+                         {"flmd_px", s.face ? nlohmann::json(s.landmark_px) : nlohmann::json()}});
+      record["views"] = scores.views;
+      record["scored"] = scores.scored;
+      record["image_size"] = scores.image_size;
+      record["mean_csim"] = scores.mean_cosine;
+      record["mean_flmd_px"] = scores.mean_landmark_px;
+      record["per_view"] = views;
+      HF_LOG(Info) << "export: CSIM " << scores.mean_cosine << ", F-LMD " << scores.mean_landmark_px << " px over "
+                   << scores.scored << " of " << scores.views << " held-out views";
+    } else {
+      missing = status.message();
+    }
+  }
+  if (!missing.empty()) {
+    record["missing"] = missing;
+    HF_LOG(Warning) << "export: no face metrics (CSIM, F-LMD): " << missing;
+  }
+  return WriteJsonAtomic(out_dir / "face_metrics.json", record, 1);
+}
+
 }  // namespace
 
 const char* const ExportOptions::kDefaultChartJs = HEADFORGE_WEB_TOOLS "/chart.js/dist/chart.umd.min.js";
 const char* const ExportOptions::kDefaultPlayCanvasJs = HEADFORGE_WEB_TOOLS "/playcanvas/build/playcanvas.min.js";
+const char* const ExportOptions::kDefaultFaceApi = HEADFORGE_WEB_TOOLS;
 
 Status ExportOptions::Check() const {
   for (const std::string& f : formats)
@@ -109,6 +158,11 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "chart-js", OptionSet::Effect::kRuntime);
   o->Add("export.playcanvas_js", &e->playcanvas_js, "PlayCanvas's UMD build, inlined into viewer/index.html.",
          "playcanvas-js", OptionSet::Effect::kRuntime);
+  o->Add("export.face_api", &e->face_api,
+         "node_modules folder holding @vladmandic/face-api (scripts/install_deps.sh installs it): the report scores "
+         "each held-out render's identity against its frame with its face-recognition network, run in LibTorch "
+         "(CSIM), beside the landmark distance (F-LMD); empty: neither is scored.",
+         "face-api", OptionSet::Effect::kRuntime);
   o->Add("export.device", &e->device, "cpu, or cuda with a CUDA LibTorch (renders the videos).", "export-device",
          OptionSet::Effect::kRuntime);
 }
@@ -232,6 +286,10 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
     out.files.push_back("viewer/index.html");
   }
   if (Wants(options, "report")) {
+    if (trained) {
+      HF_RETURN_IF_ERROR(WriteFaceMetrics(options, model_dir, out_dir));
+      out.files.push_back("face_metrics.json");
+    }
     ReportOptions report;
     report.chart_js = options.chart_js;
     report.exported = out.files;

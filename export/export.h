@@ -5,6 +5,7 @@
 //   export/weights/                weights.safetensors + config.json
 //   export/videos/                 self-reenactment (render | frame | error), orbit, cross-reenactment
 //   export/viewer/index.html       the avatars in a page that opens offline (PlayCanvas)
+//   export/face_metrics.json       the held-out renders' identity similarity (CSIM) and landmark distance (F-LMD)
 //   export/report.html             one self-contained page about the run
 //   export/export.json             what was written, and the options
 #pragma once
@@ -36,9 +37,17 @@ struct ExportOptions {
   std::string device = "cpu";
   std::string chart_js = kDefaultChartJs;            // inlined into report.html
   std::string playcanvas_js = kDefaultPlayCanvasJs;  // inlined into viewer/index.html
+  // node_modules holding @vladmandic/face-api, whose recognition network's
+  // weights give the identity score the report shows beside the landmark
+  // distance (avatar/face_metrics.h); empty: neither is scored. The faces
+  // are found with ingest's detector and landmark model (set by the export
+  // stage from the data folder).
+  std::string face_api = kDefaultFaceApi;
+  std::string ultraface_dir, landmark_model;
 
   static const char* const kDefaultChartJs;
   static const char* const kDefaultPlayCanvasJs;
+  static const char* const kDefaultFaceApi;
   Status Check() const;
 };
 

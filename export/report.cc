@@ -207,7 +207,7 @@ const char* const kChartScript = R"(<script>
 )";
 
 // The held-out scores, and the best and worst held-out frames of `model`.
-std::string EvaluationSection(const nlohmann::json& eval, const fs::path& model) {
+std::string EvaluationSection(const nlohmann::json& eval, const fs::path& model, const nlohmann::json& faces) {
   std::string html;
   const nlohmann::json mean = eval.value("mean", nlohmann::json::object());
   html += "<h2>Evaluation</h2><p>Held out: " + HtmlEscape(eval.value("held_out_frames", std::string("?"))) +
@@ -223,6 +223,22 @@ std::string EvaluationSection(const nlohmann::json& eval, const fs::path& model)
           "</td><td></td><td></td><td></td></tr></table><p>Sharpness: the mean gradient magnitude over the head, "
           "in grey levels per pixel; SD, the render's minus the frame's (negative: blurrier). LPIPS is not "
           "computed: it needs ImageNet-pretrained weights, which are not available here.</p>";
+  if (faces.value("scored", 0) == 0 && faces.contains("views"))
+    html += "<p class=\"note\">Identity (CSIM) and landmark distance (F-LMD) not measured: the face detector "
+            "found no face in the " + std::to_string(faces.value("views", 0)) +
+            " held-out frames (too small, or turned away).</p>";
+  else if (faces.contains("mean_csim"))
+    html += "<p>Identity (CSIM): <b>" + Number(faces["mean_csim"].get<double>(), 3) +
+            "</b>, the cosine of a face-recognition network's descriptors of render and frame (face-api's, dlib's "
+            "ResNet; 1 is the same face; two frames of one person score about 0.99, two people 0.80-0.92; not the "
+            "ArcFace CSIM papers give). Landmark distance (F-LMD): <b>" +
+            Number(faces.value("mean_flmd_px", 0.0), 2) + " px</b>, the mean distance between the 68 landmarks of "
+            "frame and render, in pixels of the " + std::to_string(faces.value("image_size", 0)) +
+            " px held-out images. Over " + std::to_string(faces.value("scored", 0)) + " of " +
+            std::to_string(faces.value("views", 0)) + " held-out views (those whose frame shows a face).</p>";
+  else if (faces.contains("missing"))
+    html += "<p class=\"note\">Identity (CSIM) and landmark distance (F-LMD) not measured: " +
+            HtmlEscape(faces["missing"].get<std::string>()) + ".</p>";
   std::vector<nlohmann::json> views = eval.value("views", std::vector<nlohmann::json>());
   std::sort(views.begin(), views.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
     return a.value("psnr_masked", 0.0) > b.value("psnr_masked", 0.0);
@@ -305,7 +321,9 @@ Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const Rep
   if (trained) {
     html += "<h2>Training</h2><p>The training loss and the held-out PSNR over the head against wall time.</p>"
             "<div class=\"chart\"><canvas id=\"training\"></canvas></div>";
-    html += EvaluationSection(eval, model);
+    nlohmann::json faces;
+    (void)ReadJson(out_dir / "face_metrics.json", &faces);
+    html += EvaluationSection(eval, model, faces);
   }
   html += "<h2>Accuracy against time</h2>";
   if (data["bench"].empty()) {

@@ -1,6 +1,7 @@
 // The export stage's job: the trained avatar in the formats other tools open, into export/.
 #include "core/hash.h"
 #include "core/options.h"
+#include "core/paths.h"
 #include "export/export.h"
 #include "pipelines/stage_jobs.h"
 
@@ -14,6 +15,9 @@ class ExportJob : public StageJob {
     workspace_ = settings.workspace;
     // --formats mesh,report as well as --formats mesh report.
     options_.formats = SplitCommaList(options_.formats);
+    // The identity score finds faces as ingest does.
+    options_.ultraface_dir = (fs::path(settings.data_dir) / "models" / "ultraface").string();
+    options_.landmark_model = DefaultLandmarkModel();
   }
   Status Check() const override { return options_.Check(); }
   // The trained model is not an upstream stage (the mesh avatar and the

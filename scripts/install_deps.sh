@@ -35,9 +35,12 @@ done
 # The tools the exports are checked with (npm), when node and npm are there:
 # the Gaussian-splat converter, Khronos' glTF validator, the viewers' engines
 # (three.js; PlayCanvas, which reads KHR_gaussian_splatting), the driver of
-# headless Chromium, and the charting library report.html inlines.
+# headless Chromium, the charting library report.html inlines, and the
+# face-recognition network (face-api, with TensorFlow.js and its WebAssembly
+# backend) the report's identity score runs.
 NODE_TOOLS=(@playcanvas/splat-transform@3.7.0 gltf-validator@2.0.0-dev.3.10 three@0.187.0 playcanvas@2.23.3
-            puppeteer-core@25.16.0 chart.js@4.5.1)
+            puppeteer-core@25.16.0 chart.js@4.5.1 @vladmandic/face-api@1.7.15 @tensorflow/tfjs@4.22.0
+            @tensorflow/tfjs-backend-wasm@4.22.0)
 install_node_tools() {
   local root tools wanted=()
   root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

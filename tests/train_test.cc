@@ -328,6 +328,10 @@ TEST_F(ExportStage, WritesEveryFormatAndEachReadsBack) {
                            "weights/config.json", "videos/self_reenactment.mp4", "videos/orbit.mp4",
                            "viewer/index.html", "report.html", "export.json"})
     EXPECT_TRUE(fs::exists(out / file)) << file;
+  // The face metrics: their record, measured or saying why not.
+  nlohmann::json faces;
+  ASSERT_TRUE(ReadJson(out / "face_metrics.json", &faces).ok());
+  EXPECT_TRUE(faces.value("views", 0) == 25 || !faces.value("missing", std::string()).empty()) << faces;
   // H.264 videos: the 25 held-out frames, and a 72-step orbit.
   EXPECT_EQ(CountVideoFrames(out / "videos" / "self_reenactment.mp4"), 25);
   EXPECT_EQ(CountVideoFrames(out / "videos" / "orbit.mp4"), 72);

@@ -1,0 +1,214 @@
+// The face metrics: the TensorFlow.js weights reader on a file the test
+// writes; face-api's recognition network in LibTorch against face-api's own
+// JavaScript on the same crops (node); identity on real faces, GRID's
+// speakers, whose identities are known (ten speakers; id2_vcd_swwp2s and
+// pwij3p are the same man); both metrics on held-out strips as training
+// writes them.
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <cstdlib>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "avatar/face_metrics.h"
+#include "avatar/metrics/face_recognition.h"
+#include "core/json_io.h"
+#include "core/paths.h"
+
+namespace headforge {
+namespace {
+
+fs::path Scratch() {
+  const fs::path dir = fs::temp_directory_path() / "hf_face_metrics_test";
+  fs::create_directories(dir);
+  return dir;
+}
+
+TEST(TfjsWeights, QuantisedAndPlainTensorsAcrossShards) {
+  const fs::path dir = Scratch() / "tfjs";
+  fs::create_directories(dir);
+  // a: uint8 (min -1, scale 0.5); b: float32; c (second group, two
+  // shards): uint16 (min 2, scale 0.25) then float16.
+  std::string shard0 = {char(0), char(1), char(4)};
+  const float plain[2] = {3.5f, -0.125f};
+  shard0.append(reinterpret_cast<const char*>(plain), sizeof(plain));
+  const std::string shard1 = {char(3), char(0), char(0x10), char(0x01)};  // 3, 272 (uint16, little-endian)
+  const std::string shard2 = {char(0x00), char(0x3c), char(0x00), char(0xc0)};  // 1.0 and -2.0 as float16
+  ASSERT_TRUE(WriteFileAtomic(dir / "g0", shard0).ok());
+  ASSERT_TRUE(WriteFileAtomic(dir / "g1a", shard1).ok());
+  ASSERT_TRUE(WriteFileAtomic(dir / "g1b", shard2).ok());
+  const nlohmann::json manifest = nlohmann::json::parse(R"([
+    {"paths": ["g0"], "weights": [
+      {"name": "a", "shape": [3], "dtype": "float32", "quantization": {"dtype": "uint8", "scale": 0.5, "min": -1}},
+      {"name": "b", "shape": [1, 2], "dtype": "float32"}]},
+    {"paths": ["g1a", "g1b"], "weights": [
+      {"name": "c", "shape": [2], "dtype": "float32", "quantization": {"dtype": "uint16", "scale": 0.25, "min": 2}},
+      {"name": "d", "shape": [2], "dtype": "float32", "quantization": {"dtype": "float16"}}]}])");
+  ASSERT_TRUE(WriteJsonAtomic(dir / "m.json", manifest, 1).ok());
+  std::map<std::string, torch::Tensor> t;
+  ASSERT_TRUE(ReadTfjsWeights(dir / "m.json", &t).ok());
+  EXPECT_TRUE(torch::equal(t["a"], torch::tensor({-1.0f, -0.5f, 1.0f})));
+  EXPECT_TRUE(torch::equal(t["b"], torch::tensor({3.5f, -0.125f}).view({1, 2})));
+  EXPECT_TRUE(torch::equal(t["c"], torch::tensor({2.75f, 70.0f})));
+  EXPECT_TRUE(torch::equal(t["d"], torch::tensor({1.0f, -2.0f})));
+  // A shard shorter than its tensors, and a storage type it does not know.
+  ASSERT_TRUE(WriteFileAtomic(dir / "g1b", std::string(2, '\0')).ok());
+  EXPECT_EQ(ReadTfjsWeights(dir / "m.json", &t).code(), Status::Code::kDataError);
+  nlohmann::json odd = manifest;
+  odd[0]["weights"][0]["quantization"]["dtype"] = "int4";
+  ASSERT_TRUE(WriteJsonAtomic(dir / "m.json", odd, 1).ok());
+  EXPECT_EQ(ReadTfjsWeights(dir / "m.json", &t).code(), Status::Code::kDataError);
+}
+
+#ifdef HEADFORGE_FACE_API
+// Frame `index` of a GRID clip.
+cv::Mat GridFrame(const std::string& clip, int index) {
+  cv::VideoCapture video(DefaultDataDir() + "/video/grid/" + clip + ".mpg");
+  cv::Mat frame;
+  for (int i = 0; i <= index; ++i) video.read(frame);
+  return frame;
+}
+
+std::unique_ptr<FaceMetrics> LoadMetrics() {
+  FaceMetricsOptions options;
+  options.face_api_models = fs::path(HEADFORGE_FACE_API) / "model";
+  options.landmark_model = DefaultLandmarkModel();
+  options.ultraface_dir = DefaultDataDir() + "/models/ultraface";
+  std::unique_ptr<FaceMetrics> metrics;
+  const Status s = FaceMetrics::Load(options, &metrics);
+  EXPECT_TRUE(s.ok()) << s.message();
+  return metrics;
+}
+
+// The crop of the face in a GRID frame.
+cv::Mat GridCrop(FaceMetrics& metrics, const std::string& clip, int index) {
+  const cv::Mat frame = GridFrame(clip, index);
+  FaceMetrics::Face face;
+  EXPECT_TRUE(metrics.FindFace(frame, &face)) << clip;
+  return FaceMetrics::Crop(frame, face.square);
+}
+
+#ifdef HEADFORGE_NODE
+TEST(FaceRecognition, MatchesFaceApiOwnJavaScriptOnTheSameCrops) {
+  std::unique_ptr<FaceMetrics> metrics = LoadMetrics();
+  ASSERT_TRUE(metrics);
+  const std::vector<cv::Mat> crops = {GridCrop(*metrics, "bbaf2n", 10), GridCrop(*metrics, "lbax4n", 40),
+                                      GridCrop(*metrics, "sbwe5n", 20)};
+  std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_FACE_DESCRIPTORS_SCRIPT + "' '" +
+                        (Scratch() / "js.json").string() + "'";
+  for (size_t i = 0; i < crops.size(); ++i) {
+    const fs::path ppm = Scratch() / ("crop" + std::to_string(i) + ".ppm");
+    ASSERT_TRUE(cv::imwrite(ppm.string(), crops[i]));
+    command += " '" + ppm.string() + "'";
+  }
+  command += std::string(" --modules '") + HEADFORGE_NODE_MODULES + "'";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+  nlohmann::json js;
+  ASSERT_TRUE(ReadJson(Scratch() / "js.json", &js).ok());
+  const std::vector<std::vector<float>> ours = metrics->Describe(crops);
+  ASSERT_EQ(js["descriptors"].size(), crops.size());
+  for (size_t i = 0; i < crops.size(); ++i) {
+    const std::vector<float> theirs = js["descriptors"][i].get<std::vector<float>>();
+    ASSERT_EQ(theirs.size(), 128u);
+    double worst = 0, size = 0;
+    for (size_t k = 0; k < 128; ++k) {
+      worst = std::max(worst, double(std::abs(ours[i][k] - theirs[k])));
+      size = std::max(size, double(std::abs(theirs[k])));
+    }
+    // Float32 in both, summed in different orders: entries of about 0.1 agree
+    // to 1e-4 (measured: a few 1e-6).
+    EXPECT_LT(worst, 1e-4) << "crop " << i << " (largest entry " << size << ")";
+    EXPECT_GT(DescriptorCosine(ours[i], theirs), 0.99999) << i;
+  }
+}
+#endif
+
+TEST(FaceRecognition, TellsOnePersonFromAnother) {
+  std::unique_ptr<FaceMetrics> metrics = LoadMetrics();
+  ASSERT_TRUE(metrics);
+  const std::vector<std::vector<float>> d = metrics->Describe(
+      {GridCrop(*metrics, "bbaf2n", 10), GridCrop(*metrics, "bbaf2n", 60), GridCrop(*metrics, "id2_vcd_swwp2s", 10),
+       GridCrop(*metrics, "pwij3p", 10), GridCrop(*metrics, "lbax4n", 10), GridCrop(*metrics, "swiz3n", 10)});
+  // One speaker in two frames, one man in two clips: near 1 (measured 0.995,
+  // 0.981); two people: lower (measured 0.80-0.92), every pair of two
+  // people below both pairs of one.
+  const double same1 = DescriptorCosine(d[0], d[1]), same2 = DescriptorCosine(d[2], d[3]);
+  EXPECT_GT(same1, 0.97);
+  EXPECT_GT(same2, 0.97);
+  for (size_t i = 0; i < d.size(); ++i)
+    for (size_t j = i + 1; j < d.size(); ++j) {
+      if ((i == 0 && j == 1) || (i == 2 && j == 3)) continue;
+      EXPECT_LT(DescriptorCosine(d[i], d[j]), 0.95) << i << " " << j;
+      EXPECT_LT(DescriptorCosine(d[i], d[j]), std::min(same1, same2) - 0.03) << i << " " << j;
+    }
+  EXPECT_NEAR(DescriptorCosine(d[0], d[0]), 1.0, 1e-12);
+}
+
+TEST(FaceRecognition, ScoresHeldOutStripsRenderAgainstFrame) {
+  std::unique_ptr<FaceMetrics> metrics = LoadMetrics();
+  ASSERT_TRUE(metrics);
+  const fs::path held = Scratch() / "held_out";
+  fs::remove_all(held);
+  fs::create_directories(held);
+  // render | frame | error, as training writes them: a render that is the
+  // frame, one of another speaker, and a frame with no face.
+  const cv::Mat frame = GridFrame("bbaf2n", 30)(cv::Rect(52, 0, 256, 256)).clone();
+  const cv::Mat other = GridFrame("swiz3n", 30)(cv::Rect(52, 0, 256, 256)).clone();
+  const cv::Mat grey(256, 256, CV_8UC3, cv::Scalar(128, 128, 128));
+  auto strip = [&](const cv::Mat& render, const cv::Mat& truth, const std::string& name) {
+    cv::Mat out;
+    cv::hconcat(std::vector<cv::Mat>{render, truth, grey}, out);
+    ASSERT_TRUE(cv::imwrite((held / name).string(), out));
+  };
+  // The frame moved 6 px to the right: the landmarks follow it.
+  cv::Mat moved;
+  const cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, 6, 0, 1, 0);
+  cv::warpAffine(frame, moved, shift, frame.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  strip(frame, frame, "cam0_000001.png");
+  strip(other, frame, "cam0_000002.png");
+  strip(frame, grey, "cam0_000003.png");
+  strip(moved, frame, "cam0_000004.png");
+  HeldOutFaceScores scores;
+  ASSERT_TRUE(ScoreHeldOutFaces(*metrics, held, &scores).ok());
+  EXPECT_EQ(scores.views, 4);
+  EXPECT_EQ(scores.scored, 3);
+  ASSERT_EQ(scores.per_view.size(), 4u);
+  EXPECT_EQ(scores.per_view[0].view, "cam0_000001");
+  EXPECT_EQ(scores.image_size, 256);
+  // The render that is the frame: the same face, the same landmarks.
+  EXPECT_NEAR(scores.per_view[0].cosine, 1.0, 1e-9);
+  EXPECT_NEAR(scores.per_view[0].landmark_px, 0.0, 1e-9);
+  // Another speaker: another face.
+  EXPECT_LT(scores.per_view[1].cosine, 0.9);
+  EXPECT_FALSE(scores.per_view[2].face);
+  // Moved 6 px: F-LMD near 6 px, and the identity, cropped where the frame's
+  // face is, a little lower than 1.
+  EXPECT_NEAR(scores.per_view[3].landmark_px, 6.0, 1.5);
+  EXPECT_LT(scores.per_view[3].cosine, 0.999);
+  EXPECT_GT(scores.per_view[3].cosine, 0.9);
+  const double n = 3;
+  EXPECT_NEAR(scores.mean_cosine, (scores.per_view[0].cosine + scores.per_view[1].cosine + scores.per_view[3].cosine) / n,
+              1e-12);
+  EXPECT_NEAR(scores.mean_landmark_px,
+              (scores.per_view[1].landmark_px + scores.per_view[3].landmark_px) / n, 1e-12);
+  // Not a strip: said, not scored.
+  ASSERT_TRUE(cv::imwrite((held / "cam0_000005.png").string(), cv::Mat(10, 10, CV_8UC3, cv::Scalar(0, 0, 0))));
+  EXPECT_EQ(ScoreHeldOutFaces(*metrics, held, &scores).code(), Status::Code::kDataError);
+}
+#endif  // HEADFORGE_FACE_API
+
+TEST(FaceRecognition, MissingWeightsSayHowToInstallThem) {
+  FaceMetricsOptions options;
+  options.face_api_models = Scratch() / "no_such_folder";
+  std::unique_ptr<FaceMetrics> metrics;
+  const Status s = FaceMetrics::Load(options, &metrics);
+  EXPECT_EQ(s.code(), Status::Code::kNotFound);
+  EXPECT_NE(s.message().find("install_deps"), std::string::npos) << s.message();
+}
+
+}  // namespace
+}  // namespace headforge

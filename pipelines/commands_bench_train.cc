@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdio>
+#include <limits>
 
 #include "avatar/avatar_render.h"
 #include "avatar/avatar_train.h"
@@ -43,28 +44,29 @@ struct Rung {
 };
 
 Status ParseRung(const std::string& text, Rung* rung) {
-  rung->name = text;
   if (text == "draft" || text == "standard" || text == "high") {
-    rung->preset = text;
+    rung->name = rung->preset = text;
     rung->what = text + " preset";
     return Status::Ok();
   }
   const Status bad = Status::InvalidArgument("--ladder: '" + text +
                                              "' is not STEPS, STEPS/GAUSSIANS or a preset (draft, standard, high)");
-  const size_t slash = text.find('/');
-  try {
+  // A whole positive number, all of `part`.
+  auto positive = [](const std::string& part, int64_t* value) {
     size_t used = 0;
-    rung->steps = std::stoi(text.substr(0, slash), &used);
-    if (used != text.substr(0, slash).size()) return bad;
-    if (slash != std::string::npos) {
-      const std::string count = text.substr(slash + 1);
-      rung->gaussians = std::stoll(count, &used);
-      if (used != count.size()) return bad;
+    try {
+      *value = std::stoll(part, &used);
+    } catch (const std::exception&) {
+      return false;
     }
-  } catch (const std::exception&) {
+    return used == part.size() && *value >= 1;
+  };
+  const size_t slash = text.find('/');
+  int64_t steps = 0;
+  if (!positive(text.substr(0, slash), &steps) || steps > std::numeric_limits<int>::max() ||
+      (slash != std::string::npos && !positive(text.substr(slash + 1), &rung->gaussians)))
     return bad;
-  }
-  if (rung->steps < 1 || (slash != std::string::npos && rung->gaussians < 1)) return bad;
+  rung->steps = int(steps);
   rung->name = "ladder_" + std::to_string(rung->steps) + (rung->gaussians ? "_" + std::to_string(rung->gaussians) : "");
   rung->what = std::to_string(rung->steps) + " steps" +
                (rung->gaussians ? ", at most " + std::to_string(rung->gaussians) + " Gaussians" : "");

@@ -1,5 +1,7 @@
 #include "avatar/avatar_export.h"
 
+#include <map>
+
 #include <torch/torch.h>
 
 #include <nlohmann/json.hpp>
@@ -19,8 +21,9 @@ std::vector<float> Floats(const torch::Tensor& t) {
 
 }  // namespace
 
-Status PoseAvatarSplats(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
-                        int frame, AvatarSplats* splats) {
+Status PoseAvatarFrames(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                        const std::vector<int>& frames,
+                        const std::function<Status(int frame, const AvatarSplats& splats)>& each) {
   GaussianStyleAvatar avatar;
   TrainOptions trained;
   FaceModel model;
@@ -29,26 +32,37 @@ Status PoseAvatarSplats(const fs::path& workspace, const fs::path& model_dir, co
   AvatarDataset data;
   HF_RETURN_IF_ERROR(
       LoadTrained(workspace, model_dir, face_model, torch::kCPU, 0, &loading, &avatar, &trained, &model, &data));
-  const int wanted = frame == kNeutralFrame ? 0 : frame;
-  const AvatarView* view = nullptr;
+  std::map<int, const AvatarView*> views;
   for (const auto* list : {&data.train, &data.test})
-    for (const AvatarView& v : *list)
-      if (v.frame == wanted && !view) view = &v;
-  if (!view)
-    return Status::InvalidArgument("export: no frame " + std::to_string(wanted) + " (the frames run 0-" +
-                                   std::to_string(data.num_frames - 1) + ")");
-  torch::Tensor condition = view->condition.clone();
-  if (frame == kNeutralFrame) condition.slice(0, 0, int64_t(data.expression_names.size())).zero_();
-  torch::NoGradGuard no_grad;
-  const PosedGaussians posed = avatar.Pose(data, condition, 0, avatar.deform);
-  AvatarSplats out;
-  out.means = Floats(posed.means);
-  out.rotations = Floats(torch::nn::functional::normalize(posed.quats, torch::nn::functional::NormalizeFuncOptions().dim(1)));
-  out.scales = Floats(posed.log_scales.exp());
-  out.opacities = Floats(posed.opacities);
-  out.colours = Floats(posed.features.slice(1, 0, 3).clamp(0, 1));
-  *splats = std::move(out);
+    for (const AvatarView& v : *list) views.emplace(v.frame, &v);
+  for (int frame : frames) {
+    const int wanted = frame == kNeutralFrame ? 0 : frame;
+    const auto view = views.find(wanted);
+    if (view == views.end())
+      return Status::InvalidArgument("export: no frame " + std::to_string(wanted) + " (the frames run 0-" +
+                                     std::to_string(data.num_frames - 1) + ")");
+    torch::Tensor condition = view->second->condition.clone();
+    if (frame == kNeutralFrame) condition.slice(0, 0, int64_t(data.expression_names.size())).zero_();
+    torch::NoGradGuard no_grad;
+    const PosedGaussians posed = avatar.Pose(data, condition, 0, avatar.deform);
+    AvatarSplats out;
+    out.means = Floats(posed.means);
+    out.rotations =
+        Floats(torch::nn::functional::normalize(posed.quats, torch::nn::functional::NormalizeFuncOptions().dim(1)));
+    out.scales = Floats(posed.log_scales.exp());
+    out.opacities = Floats(posed.opacities);
+    out.colours = Floats(posed.features.slice(1, 0, 3).clamp(0, 1));
+    HF_RETURN_IF_ERROR(each(frame, out));
+  }
   return Status::Ok();
+}
+
+Status PoseAvatarSplats(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                        int frame, AvatarSplats* splats) {
+  return PoseAvatarFrames(workspace, model_dir, face_model, {frame}, [&](int, const AvatarSplats& posed) {
+    *splats = posed;
+    return Status::Ok();
+  });
 }
 
 Status ExportAvatarWeights(const fs::path& workspace, const fs::path& model_dir, const fs::path& out_dir,

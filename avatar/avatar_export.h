@@ -3,6 +3,7 @@
 // weights.safetensors + config.json.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -28,6 +29,11 @@ constexpr int kNeutralFrame = -1;
 // `workspace` (its tracked expression and head pose), or at kNeutralFrame.
 Status PoseAvatarSplats(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
                         int frame, AvatarSplats* splats);
+// The same for each of `frames` in turn (the model loaded once), handed to
+// `each`; the first error, of a frame or of `each`, ends it.
+Status PoseAvatarFrames(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                        const std::vector<int>& frames,
+                        const std::function<Status(int frame, const AvatarSplats& splats)>& each);
 
 // The avatar's Gaussians and networks as `out_dir`/weights.safetensors and
 // `out_dir`/config.json: the training config plus what a reader needs to

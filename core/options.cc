@@ -31,6 +31,38 @@ std::vector<std::string> SplitCommaList(const std::vector<std::string>& tokens) 
   return items;
 }
 
+Status ParseFrameList(const std::vector<std::string>& tokens, int count, std::vector<int>* frames) {
+  // A whole number of digits alone (no sign, no space, no trailing text).
+  const auto whole = [](const std::string& text, int* value) {
+    if (text.empty() || text.size() > 9 || text.find_first_not_of("0123456789") != std::string::npos) return false;
+    *value = std::stoi(text);
+    return true;
+  };
+  std::vector<int> out;
+  for (const std::string& item : SplitCommaList(tokens)) {
+    const std::string usage = "'" + item + "' is not all, N, A-B or A-B:S";
+    const size_t dash = item.find('-'), colon = item.find(':');
+    int first = 0, last = count - 1, step = 1;
+    if (item == "all") {
+    } else if (dash == std::string::npos) {
+      if (!whole(item, &first)) return Status::InvalidArgument(usage);
+      last = first;
+    } else {
+      const std::string to = item.substr(dash + 1, colon == std::string::npos ? std::string::npos : colon - dash - 1);
+      if (!whole(item.substr(0, dash), &first) || !whole(to, &last)) return Status::InvalidArgument(usage);
+      if (colon != std::string::npos && (!whole(item.substr(colon + 1), &step) || step < 1))
+        return Status::InvalidArgument(usage);
+      if (last < first) return Status::InvalidArgument("'" + item + "' runs backwards");
+    }
+    if (item != "all" && last >= count)
+      return Status::InvalidArgument("'" + item + "' names a frame past the last (the frames run 0-" +
+                                     std::to_string(count - 1) + ")");
+    for (int f = first; f <= last; f += step) out.push_back(f);
+  }
+  *frames = std::move(out);
+  return Status::Ok();
+}
+
 namespace internal {
 namespace {
 

@@ -25,6 +25,12 @@ namespace headforge {
 // their tokens whole, as a path may hold a comma).
 std::vector<std::string> SplitCommaList(const std::vector<std::string>& tokens);
 
+// Frames named by `tokens` out of `count` (numbered 0 to count - 1), in the
+// order given: "all", N, A-B (both included) and A-B:S (every S-th from A),
+// comma-separated or as separate tokens. InvalidArgument, naming the item,
+// for text that is none of these or a frame outside the range.
+Status ParseFrameList(const std::vector<std::string>& tokens, int count, std::vector<int>* frames);
+
 class OptionSet {
  public:
   // Options that change a stage's outputs enter its fingerprint; the others

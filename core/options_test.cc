@@ -151,5 +151,27 @@ TEST(OptionSet, TakenShortFlagFallsBackToDottedKey) {
   EXPECT_EQ(b, 4);
 }
 
+TEST(FrameList, AllNumbersRangesAndSteps) {
+  std::vector<int> frames;
+  ASSERT_TRUE(ParseFrameList({"all"}, 4, &frames).ok());
+  EXPECT_EQ(frames, (std::vector<int>{0, 1, 2, 3}));
+  ASSERT_TRUE(ParseFrameList({"7,2-4", "10-20:5"}, 30, &frames).ok());
+  EXPECT_EQ(frames, (std::vector<int>{7, 2, 3, 4, 10, 15, 20}));
+  ASSERT_TRUE(ParseFrameList({"0-9:4"}, 10, &frames).ok());
+  EXPECT_EQ(frames, (std::vector<int>{0, 4, 8}));
+  ASSERT_TRUE(ParseFrameList({"all"}, 0, &frames).ok());
+  EXPECT_TRUE(frames.empty());
+  // Refused, naming the item; the list given keeps its old value.
+  frames = {5};
+  for (const char* bad : {"x", "-3", "3-", "4-2", "1-5:0", "1-5:x", "2:3", "1.5", "99999999999"}) {
+    const Status s = ParseFrameList({bad}, 100, &frames);
+    EXPECT_EQ(s.code(), Status::Code::kInvalidArgument) << bad;
+    EXPECT_NE(s.message().find(std::string("'") + bad + "'"), std::string::npos) << s.message();
+  }
+  const Status past = ParseFrameList({"3,120"}, 100, &frames);
+  EXPECT_NE(past.message().find("the frames run 0-99"), std::string::npos) << past.message();
+  EXPECT_EQ(frames, (std::vector<int>{5}));
+}
+
 }  // namespace
 }  // namespace headforge

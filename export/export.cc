@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <set>
 
 #include <nlohmann/json.hpp>
 
@@ -14,10 +15,12 @@
 #include "core/face_model.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "reconstruction/tracking_io.h"
 #include "export/gaussian_glb.h"
 #include "export/gaussian_ply.h"
 #include "export/mesh_avatar.h"
 #include "export/report.h"
+#include "export/splat_clip.h"
 #include "export/viewer.h"
 
 namespace headforge {
@@ -34,24 +37,6 @@ bool Wants(const ExportOptions& options, const std::string& format) {
 bool IsTrainedGan(const fs::path& dir) {
   nlohmann::json config;
   return ReadJson(dir / "config.json", &config).ok() && config.value("model", "") == "gan-avatar";
-}
-
-// The splats as 3D Gaussian Splatting's PLY: log scales, logit opacity, and
-// the colour as the degree-0 coefficient.
-GaussianCloud ToCloud(const AvatarSplats& s) {
-  constexpr float kShC0 = 0.28209479177387814f;
-  GaussianCloud cloud;
-  cloud.means = s.means;
-  cloud.rotations = s.rotations;
-  for (size_t i = 0; i < s.size(); ++i) {
-    const float o = std::clamp(s.opacities[i], 1e-6f, 1 - 1e-6f);
-    cloud.opacities.push_back(std::log(o / (1 - o)));
-    for (int c = 0; c < 3; ++c) {
-      cloud.log_scales.push_back(std::log(std::max(s.scales[3 * i + c], 1e-9f)));
-      cloud.sh_dc.push_back((s.colours[3 * i + c] - 0.5f) / kShC0);
-    }
-  }
-  return cloud;
 }
 
 Status RenderVideo(const fs::path& workspace, const std::string& face_model, AvatarRenderOptions render,
@@ -116,6 +101,7 @@ Status WriteFaceMetrics(const ExportOptions& options, const fs::path& model_dir,
 const char* const ExportOptions::kDefaultChartJs = HEADFORGE_WEB_TOOLS "/chart.js/dist/chart.umd.min.js";
 const char* const ExportOptions::kDefaultPlayCanvasJs = HEADFORGE_WEB_TOOLS "/playcanvas/build/playcanvas.min.js";
 const char* const ExportOptions::kDefaultFaceApi = HEADFORGE_WEB_TOOLS;
+const char* const ExportOptions::kDefaultSplatTransform = HEADFORGE_WEB_TOOLS "/.bin/splat-transform";
 
 Status ExportOptions::Check() const {
   for (const std::string& f : formats)
@@ -127,6 +113,7 @@ Status ExportOptions::Check() const {
   if (bake_views < 1) return Status::InvalidArgument("export: --bake-views must be at least 1");
   if (!(orbit_deg >= 0 && orbit_deg <= 180)) return Status::InvalidArgument("export: --orbit-deg must lie in [0, 180]");
   if (splat_frame < -1) return Status::InvalidArgument("export: --splat-frame is a frame number, or -1 for the neutral pose");
+  HF_RETURN_IF_ERROR(CheckClipFormat(clip_format));
   if (model != "auto" && model != "gaussian-style" && model != "gan-avatar")
     return Status::InvalidArgument("export: --model must be auto, gaussian-style or gan-avatar, not '" + model + "'");
   return Status::Ok();
@@ -140,6 +127,18 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "formats");
   o->Add("export.splat_frame", &e->splat_frame,
          "The frame whose Gaussians are written (-1: every expression weight 0, frame 0's head pose).", "splat-frame");
+  o->Add("export.frames", &e->frames,
+         "Bake a clip of the Gaussian avatar: its Gaussians at these frames, one file a frame, into clip/ (all, N, "
+         "A-B, A-B:S, comma-separated; e.g. all, 0-99, 0-124:5); the viewer page plays it. Empty: no clip.",
+         "frames");
+  o->Add("export.clip_format", &e->clip_format,
+         "The clip's files: spz (compact, through splat-transform), compressed.ply (PlayCanvas's) or ply (3D "
+         "Gaussian Splatting's, written directly).",
+         "clip-format");
+  o->Add("export.splat_transform", &e->splat_transform,
+         "The splat-transform command (npm's @playcanvas/splat-transform; scripts/install_deps.sh installs it) that "
+         "writes the clip's SPZ and compressed PLY files.",
+         "splat-transform", OptionSet::Effect::kRuntime);
   o->Add("export.texture_size", &e->texture_size,
          "The mesh avatar's texture: texels per side of the skin's square (the atlas is twice it on each side).",
          "texture-size");
@@ -197,8 +196,13 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
       if (std::string(f) != "gaussians" && Wants(options, f)) kept.push_back(f);
     options.formats = kept;
   }
+  const bool clip = !options.frames.empty();
+  if (gan && clip)
+    return Status::InvalidArgument("export: --frames bakes the Gaussian avatar's clip; the gan-avatar model is a volume "
+                                   "and has no Gaussians (its videos show it moving)");
   // Refused before anything is written: the formats that need a trained model.
-  const bool needs_model = Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos");
+  const bool needs_model =
+      Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos") || clip;
   if (needs_model && !trained)
     return Status::NotFound("no trained avatar in " + model_dir.string() + " (run headforge train" +
                             (gan ? " --model gan-avatar" : "") + " first, or export --formats mesh report alone)");
@@ -219,10 +223,44 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
   if (Wants(options, "gaussians")) {
     AvatarSplats splats;
     HF_RETURN_IF_ERROR(PoseAvatarSplats(workspace, model_dir, face_model, options.splat_frame, &splats));
-    HF_RETURN_IF_ERROR(WriteGaussianPly(out_dir / "gaussians.ply", ToCloud(splats)));
+    HF_RETURN_IF_ERROR(WriteGaussianPly(out_dir / "gaussians.ply", CloudFromSplats(splats)));
     HF_RETURN_IF_ERROR(WriteGaussianGlb(out_dir / "gaussians.glb", splats));
     out.files.push_back("gaussians.ply");
     out.files.push_back("gaussians.glb");
+  }
+  SplatClip baked;
+  const fs::path viewer_clip = out_dir / "viewer_clip";
+  if (clip) {
+    TrackingFile tracking;
+    HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", &tracking));
+    int count = 0;
+    std::set<int> tracked;
+    for (const TrackedFrame& f : tracking.frames) {
+      tracked.insert(f.frame);
+      count = std::max(count, f.frame + 1);
+    }
+    std::vector<int> asked;
+    HF_RETURN_IF_ERROR(ParseFrameList(options.frames, count, &asked).WithContext("export --frames"));
+    SplatClipOptions clip_options;
+    for (int f : asked)
+      if (tracked.count(f)) clip_options.frames.push_back(f);
+    if (clip_options.frames.size() < asked.size())
+      HF_LOG(Warning) << "export: " << asked.size() - clip_options.frames.size()
+                      << " of the clip's frames were not tracked (no face found) and are left out";
+    if (clip_options.frames.empty()) return Status::InvalidArgument("export: none of --frames was tracked");
+    clip_options.format = options.clip_format;
+    clip_options.splat_transform = options.splat_transform;
+    // The viewer's copies need splat-transform too; without it a ply clip is
+    // written and the viewer shows the still Gaussians.
+    if (Wants(options, "viewer")) {
+      if (options.clip_format != "ply" || fs::exists(options.splat_transform, ec))
+        clip_options.viewer_dir = viewer_clip;
+      else
+        HF_LOG(Warning) << "export: no splat-transform (" << options.splat_transform
+                        << "): the viewer page shows the still Gaussians, not the clip";
+    }
+    HF_RETURN_IF_ERROR(WriteSplatClip(workspace, model_dir, face_model, clip_options, out_dir, progress, &baked));
+    for (const std::string& f : baked.files) out.files.push_back(f);
   }
   if (Wants(options, "weights")) {
     std::vector<std::string> files;
@@ -277,14 +315,20 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
       out.files.push_back("videos/" + name);
     }
   }
-  if (Wants(options, "viewer") && (fs::exists(out_dir / "avatar_mesh.glb") || fs::exists(out_dir / "gaussians.glb"))) {
+  if (Wants(options, "viewer") && (fs::exists(out_dir / "avatar_mesh.glb") || fs::exists(out_dir / "gaussians.glb") ||
+                                   !baked.viewer_files.empty())) {
     ViewerOptions viewer;
     viewer.playcanvas_js = options.playcanvas_js;
     if (fs::exists(out_dir / "avatar_mesh.glb")) viewer.mesh_glb = out_dir / "avatar_mesh.glb";
     if (fs::exists(out_dir / "gaussians.glb")) viewer.gaussians_glb = out_dir / "gaussians.glb";
+    viewer.clip_files = baked.viewer_files;
+    viewer.clip_times.assign(baked.times.begin(), baked.times.begin() + long(baked.viewer_files.size()));
+    viewer.clip_frames = int(baked.frames.size());
+    viewer.clip_fps = baked.fps > 0 ? baked.fps : 25;
     HF_RETURN_IF_ERROR(WriteViewer(out_dir / "viewer", viewer));
     out.files.push_back("viewer/index.html");
   }
+  fs::remove_all(viewer_clip, ec);
   if (Wants(options, "report")) {
     if (trained) {
       HF_RETURN_IF_ERROR(WriteFaceMetrics(options, model_dir, out_dir));
@@ -303,6 +347,7 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
                                  {"files", out.files},
                                  {"formats", options.formats},
                                  {"splat_frame", options.splat_frame},
+                                 {"clip_frames", baked.frames.size()},
                                  {"texture_size", options.texture_size},
                                  {"seconds", out.seconds}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "export.json", record, 2));

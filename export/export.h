@@ -2,6 +2,7 @@
 //   export/avatar_mesh.glb         the mesh avatar (glTF: morph targets, the tracked animation, a baked texture)
 //   export/gaussians.ply           the Gaussians of one pose (3D Gaussian Splatting's PLY)
 //   export/gaussians.glb           the same as glTF with KHR_gaussian_splatting
+//   export/clip/                   a baked clip: the Gaussians of each of --frames, one SPZ file a frame
 //   export/weights/                weights.safetensors + config.json
 //   export/videos/                 self-reenactment (render | frame | error), orbit, cross-reenactment
 //   export/viewer/index.html       the avatars in a page that opens offline (PlayCanvas)
@@ -23,6 +24,11 @@ namespace headforge {
 struct ExportOptions {
   std::vector<std::string> formats = {"mesh", "gaussians", "weights", "videos", "viewer", "report"};
   int splat_frame = -1;      // the frame whose Gaussians are written (-1: neutral expression, frame 0's pose)
+  // A baked clip of the Gaussian avatar (export/splat_clip.h): the frames
+  // as ParseFrameList reads them ("all", "0-49", "0-124:5", ...); empty: none.
+  std::vector<std::string> frames;
+  std::string clip_format = "spz";  // spz, compressed.ply or ply
+  std::string splat_transform = kDefaultSplatTransform;
   int texture_size = 512;    // the mesh avatar's texture: texels per side of the skin's square
   int bake_views = 24;       // views baked into it
   // The orbit video swings the camera this far each way; 180 turns it all
@@ -48,6 +54,7 @@ struct ExportOptions {
   static const char* const kDefaultChartJs;
   static const char* const kDefaultPlayCanvasJs;
   static const char* const kDefaultFaceApi;
+  static const char* const kDefaultSplatTransform;
   Status Check() const;
 };
 

@@ -1,5 +1,8 @@
 #include "export/viewer.h"
 
+#include <cctype>
+#include <cstdio>
+
 #include "export/html_util.h"
 
 namespace headforge {
@@ -45,14 +48,14 @@ const char* const kViewerScript = R"JS(
     place();
   });
 
-  const blobUrl = (id) => {
+  const blobUrl = (id, type) => {
     const text = document.getElementById(id).textContent.trim();
     const bytes = Uint8Array.from(atob(text), (c) => c.charCodeAt(0));
-    return URL.createObjectURL(new Blob([bytes], { type: 'model/gltf-binary' }));
+    return URL.createObjectURL(new Blob([bytes], { type }));
   };
   const load = (id, x, done) => {
     if (!document.getElementById(id)) { done(null); return; }
-    const asset = new pc.Asset(id, 'container', { url: blobUrl(id), filename: id + '.glb' });
+    const asset = new pc.Asset(id, 'container', { url: blobUrl(id, 'model/gltf-binary'), filename: id + '.glb' });
     asset.on('load', () => {
       const entity = asset.resource.instantiateRenderEntity();
       const holder = new pc.Entity(id);
@@ -65,13 +68,60 @@ const char* const kViewerScript = R"JS(
     app.assets.add(asset);
     app.assets.load(asset);
   };
-  let pending = 2;
+  // The baked clip: one splat entity a frame, the one whose time has come
+  // shown (or the K-th held with ?clip=K).
+  const clipBlocks = Array.from(document.querySelectorAll('script[data-clip-time]'));
+  const clip = { entities: [], times: clipBlocks.map((b) => Number(b.dataset.clipTime)), shown: -1 };
+  const hold = new URLSearchParams(location.search).get('clip');
+  const showClip = (index) => {
+    if (index === clip.shown) return;
+    clip.entities.forEach((e, i) => { e.enabled = i === index; });
+    clip.shown = index;
+    window.clipShown = index;
+  };
+  const loadClip = (x, done) => {
+    if (!clipBlocks.length) { done(); return; }
+    const holder = new pc.Entity('clip');
+    holder.setPosition(x, 0, 0);
+    app.root.addChild(holder);
+    let left = clipBlocks.length;
+    clipBlocks.forEach((block, i) => {
+      const asset = new pc.Asset(block.id, 'gsplat',
+                                 { url: blobUrl(block.id, 'application/octet-stream'), filename: block.id + '.compressed.ply' });
+      asset.on('load', () => {
+        const entity = new pc.Entity(block.id);
+        entity.addComponent('gsplat', { asset });
+        entity.enabled = false;
+        holder.addChild(entity);
+        clip.entities[i] = entity;
+        if (--left === 0) {
+          const period = clip.times[clip.times.length - 1] + 1 / Number(document.body.dataset.clipFps || 25);
+          let t = 0;
+          showClip(hold !== null ? Math.min(Math.max(Number(hold), 0), clip.entities.length - 1) : 0);
+          if (hold === null) {
+            app.on('update', (dt) => {
+              t = (t + dt) % period;
+              let index = 0;
+              while (index + 1 < clip.times.length && clip.times[index + 1] <= t) ++index;
+              showClip(index);
+            });
+          }
+          done();
+        }
+      });
+      asset.on('error', (e) => { window.failed = block.id + ': ' + e; });
+      app.assets.add(asset);
+      app.assets.load(asset);
+    });
+  };
+  let pending = 3;
   const ready = () => {
     if (--pending > 0) return;
     let frames = 0;
     app.on('frameend', () => { if (++frames === 30) window.done = true; });
   };
-  const both = document.getElementById('mesh') && document.getElementById('gaussians');
+  const gaussians = document.getElementById('gaussians') || clipBlocks.length;
+  const both = document.getElementById('mesh') && gaussians;
   load('mesh', both ? -0.13 : 0, (asset, entity) => {
     if (asset && asset.resource.animations.length) {
       // Loop the tracked sequence on the head node.
@@ -81,6 +131,7 @@ const char* const kViewerScript = R"JS(
     ready();
   });
   load('gaussians', both ? 0.13 : 0, () => ready());
+  loadClip(both ? 0.13 : 0, () => ready());
 })();
 )JS";
 
@@ -100,21 +151,47 @@ canvas { width: 100%; height: 100%; display: block; }
 #legend { position: absolute; left: 12px; top: 10px; color: #ddd; }
 </style>
 )";
-  html += "<script>" + InlineScriptText(engine) + "</script>\n</head><body>\n<canvas id=\"view\"></canvas>\n";
+  html += "<script>" + InlineScriptText(engine) + "</script>\n</head><body data-clip-fps=\"" +
+          std::to_string(options.clip_fps) + "\">\n<canvas id=\"view\"></canvas>\n";
   std::string legend;
-  for (const auto& [id, path, what] :
-       {std::tuple<const char*, fs::path, const char*>{"mesh", options.mesh_glb, "the mesh avatar, playing the tracked sequence"},
-        std::tuple<const char*, fs::path, const char*>{"gaussians", options.gaussians_glb, "the Gaussian avatar"}}) {
+  const auto inline_file = [&](const fs::path& path, const std::string& attributes, std::string* block) {
     std::string bytes;
-    if (path.empty() || !ReadFileToString(path, &bytes).ok()) continue;
-    html += std::string("<script id=\"") + id + "\" type=\"application/octet-stream\">" + Base64(bytes) + "</script>\n";
-    legend += std::string(legend.empty() ? "" : "; ") + what;
+    if (path.empty() || !ReadFileToString(path, &bytes).ok()) return false;
+    *block = "<script " + attributes + " type=\"application/octet-stream\">" + Base64(bytes) + "</script>\n";
+    return true;
+  };
+  std::string block;
+  if (inline_file(options.mesh_glb, "id=\"mesh\"", &block)) {
+    html += block;
+    legend = "the mesh avatar, playing the tracked sequence";
+  }
+  if (options.clip_times.size() != options.clip_files.size())
+    return Status::InvalidArgument("export: the viewer's clip has " + std::to_string(options.clip_files.size()) +
+                                   " files but " + std::to_string(options.clip_times.size()) + " times");
+  int clip_shown = 0;
+  for (size_t i = 0; i < options.clip_files.size(); ++i) {
+    char attributes[96];
+    std::snprintf(attributes, sizeof(attributes), "id=\"clip%zu\" data-clip-time=\"%.6f\"", i, options.clip_times[i]);
+    if (!inline_file(options.clip_files[i], attributes, &block))
+      return Status::NotFound("export: the viewer's clip frame " + options.clip_files[i].string() + " is missing");
+    html += block;
+    ++clip_shown;
+  }
+  if (clip_shown > 0) {
+    legend += std::string(legend.empty() ? "" : "; ") + "the Gaussian avatar playing the baked clip" +
+              (clip_shown < options.clip_frames
+                   ? " (its first " + std::to_string(clip_shown) + " of " + std::to_string(options.clip_frames) +
+                         " frames, the whole clip in clip/)"
+                   : "");
+  } else if (inline_file(options.gaussians_glb, "id=\"gaussians\"", &block)) {
+    html += block;
+    legend += std::string(legend.empty() ? "" : "; ") + "the Gaussian avatar";
   }
   if (legend.empty()) return Status::NotFound("export: the viewer has no avatar to show (no mesh or Gaussian GLB)");
   const bool both = legend.find(';') != std::string::npos;
   html += "<div id=\"legend\">" +
           HtmlEscape(both ? "Left: " + legend.substr(0, legend.find(';')) + ". Right:" + legend.substr(legend.find(';') + 1) + "."
-                          : legend + ".") +
+                          : std::string(1, char(std::toupper(legend[0]))) + legend.substr(1) + ".") +
           " Drag to turn, wheel to zoom.</div>\n";
   html += std::string("<script>") + kViewerScript + "</script>\n</body></html>\n";
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));

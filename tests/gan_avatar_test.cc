@@ -255,7 +255,8 @@ TEST_F(GanAvatarTrain, RenderDrawsItFromTurnedCamerasAndDrivenByAnotherCapture) 
 
 // Export of a workspace whose only model is gan-avatar: the mesh avatar and
 // the report, the model's weights (which render the same image as the
-// trained folder) and its videos; no Gaussians, which it does not have.
+// trained folder) and its videos; no Gaussians (nor a clip of them), which
+// it does not have.
 TEST_F(GanAvatarTrain, ExportWritesTheModelsWeightsAndVideosAndNoGaussians) {
   ASSERT_EQ(first_.code, 0) << first_.err;
   const fs::path ws = CopyOf(reference_, Scratch("export"));
@@ -285,6 +286,10 @@ TEST_F(GanAvatarTrain, ExportWritesTheModelsWeightsAndVideosAndNoGaussians) {
   const Result gaussians = Headforge({"export", "--workspace", ws.string(), "--formats", "gaussians"});
   EXPECT_EQ(gaussians.code, 2);
   EXPECT_NE(gaussians.err.find("has no Gaussians"), std::string::npos) << gaussians.err;
+  // And so is a baked clip of Gaussians.
+  const Result clip = Headforge({"export", "--workspace", ws.string(), "--formats", "report", "--frames", "0-9"});
+  EXPECT_EQ(clip.code, 2);
+  EXPECT_NE(clip.err.find("--frames bakes the Gaussian avatar's clip"), std::string::npos) << clip.err;
 }
 
 TEST(GanAvatarOptions, ARenderSizeThatDoesNotDivideTheOutputIsRefused) {

@@ -27,6 +27,7 @@
 #include "core/mesh_renderer.h"
 #include "core/paths.h"
 #include "export/mesh_avatar.h"
+#include "export/splat_clip.h"
 #include "tests/run_headforge.h"
 #include "tests/shared_workspace.h"
 
@@ -556,27 +557,30 @@ TEST_F(ExportStage, ThreeJsPlaysTheMeshAvatarAsTheMeshRendererDrawsIt) {
   EXPECT_LT(crossed, std::min(psnrs[20], psnrs[90]) - 3.0);
 }
 
-// PlayCanvas, which implements KHR_gaussian_splatting and reads 3D Gaussian
-// Splatting's PLY, draws the exported Gaussians of frame 0 through frame 0's
-// camera as `headforge render` does.
-TEST_F(ExportStage, PlayCanvasDrawsTheGaussianGlbAsHeadForgeRendersIt) {
-  ASSERT_EQ(exported_.code, 0) << exported_.err;
-  const fs::path ws = CopyOf(reference_, Scratch("playcanvas"));
-  const Result e = Headforge({"export", "--workspace", ws.string(), "--formats", "gaussians", "--splat-frame", "0"});
-  ASSERT_EQ(e.code, 0) << e.err;
-  const int size = 128;
-  const fs::path ours = Scratch("playcanvas_ours");
-  const Result r = Headforge({"render", "--workspace", ws.string(), "--frames", "0", "--background", "0",
-                              "--resolution", std::to_string(size), "--out", ours.string()});
+// What PlayCanvas's picture of one frame's Gaussians is compared with:
+// `headforge render` of that frame at `size` pixels over a black background,
+// the head's mask (eroded) where it is compared, and splat_view.html's query
+// for the frame's camera in the head frame (its view times the tracked head
+// motion).
+struct SplatViewCheck {
+  cv::Mat ours, head;
+  std::string query;
+  int size = 0;
+};
+void PrepareSplatView(const fs::path& ws, int frame, int size, SplatViewCheck* check) {
+  const fs::path ours = Scratch("splat_view_ours_" + std::to_string(frame));
+  const Result r = Headforge({"render", "--workspace", ws.string(), "--frames", std::to_string(frame), "--background",
+                              "0", "--resolution", std::to_string(size), "--out", ours.string()});
   ASSERT_EQ(r.code, 0) << r.err;
-  // Frame 0's camera in the head frame: its view times the tracked head motion, at `size` pixels.
   nlohmann::json cameras, tracking;
   ASSERT_TRUE(ReadJson(ws / "cameras_head.json", &cameras).ok());
   ASSERT_TRUE(ReadJson(ws / "tracking.json", &tracking).ok());
-  Eigen::Isometry3d view = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d view = Eigen::Isometry3d::Identity(), motion = Eigen::Isometry3d::Identity();
   for (const auto& v : cameras["views"])
-    if (v["frame"] == 0) view = PoseFromJson(v["cam_from_world"]);
-  const Eigen::Isometry3d pose = view * PoseFromJson(tracking["frames"][0]["head_motion"]);
+    if (v["frame"] == frame) view = PoseFromJson(v["cam_from_world"]);
+  for (const auto& f : tracking["frames"])
+    if (f["frame"] == frame) motion = PoseFromJson(f["head_motion"]);
+  const Eigen::Isometry3d pose = view * motion;
   const nlohmann::json& lens = cameras["cameras"][0];
   const double scale = double(size) / std::max(lens["width"].get<int>(), lens["height"].get<int>());
   char query[2048];
@@ -585,28 +589,51 @@ TEST_F(ExportStage, PlayCanvasDrawsTheGaussianGlbAsHeadForgeRendersIt) {
                          (lens["cx"].get<double>() + 0.5) * scale - 0.5, (lens["cy"].get<double>() + 0.5) * scale - 0.5);
   for (int i = 0; i < 16; ++i)
     at += std::snprintf(query + at, sizeof(query) - size_t(at), "%s%.12g", i ? "," : "", pose.matrix()(i / 4, i % 4));
-  const cv::Mat mine = cv::imread((ours / "frame_000000.png").string());
-  cv::Mat mask = cv::imread((ws / "masks" / "cam0" / "000000.png").string(), cv::IMREAD_GRAYSCALE), head;
-  cv::resize(mask, mask, mine.size(), 0, 0, cv::INTER_AREA);
-  cv::erode(mask > 128, head, cv::Mat(), cv::Point(-1, -1), 1);
-  ASSERT_GT(cv::countNonZero(head), 500);
+  char name[32];
+  std::snprintf(name, sizeof(name), "frame_%06d.png", frame);
+  check->ours = cv::imread((ours / name).string());
+  ASSERT_FALSE(check->ours.empty());
+  std::snprintf(name, sizeof(name), "%06d.png", frame);
+  cv::Mat mask = cv::imread((ws / "masks" / "cam0" / name).string(), cv::IMREAD_GRAYSCALE);
+  cv::resize(mask, mask, check->ours.size(), 0, 0, cv::INTER_AREA);
+  cv::erode(mask > 128, check->head, cv::Mat(), cv::Point(-1, -1), 1);
+  ASSERT_GT(cv::countNonZero(check->head), 500);
+  check->query = query;
+  check->size = size;
+}
+// PlayCanvas's picture of `file` (.glb, .ply or .compressed.ply) through
+// the check's camera, against HeadForge's: PSNR over the head (-1 when the
+// page did not draw).
+double PlayCanvasPsnr(const SplatViewCheck& check, const fs::path& file) {
+  const fs::path shot = Scratch("playcanvas_" + file.filename().string() + ".png");
+  const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
+                              "/scripts/web/screenshot.cjs' --page splat_view.html --file '" + file.string() +
+                              "' --query '" + check.query + "' --width " + std::to_string(check.size) + " --height " +
+                              std::to_string(check.size) + " --out '" + shot.string() + "' --chromium '" +
+                              HEADFORGE_CHROMIUM + "'";
+  if (std::system(command.c_str()) != 0) return -1;
+  const cv::Mat theirs = cv::imread(shot.string());
+  if (theirs.size() != check.ours.size()) return -1;
+  const double mse = cv::norm(theirs, check.ours, cv::NORM_L2SQR, check.head) / (3.0 * cv::countNonZero(check.head));
+  const double psnr = 10 * std::log10(255.0 * 255.0 / std::max(mse, 1e-9));
+  std::printf("PlayCanvas (%s) against headforge render at %d px: %.2f dB over %d px of head\n",
+              file.filename().c_str(), check.size, psnr, cv::countNonZero(check.head));
+  return psnr;
+}
+
+// PlayCanvas, which implements KHR_gaussian_splatting and reads 3D Gaussian
+// Splatting's PLY, draws the exported Gaussians of frame 0 through frame 0's
+// camera as `headforge render` does.
+TEST_F(ExportStage, PlayCanvasDrawsTheGaussianGlbAsHeadForgeRendersIt) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path ws = CopyOf(reference_, Scratch("playcanvas"));
+  const Result e = Headforge({"export", "--workspace", ws.string(), "--formats", "gaussians", "--splat-frame", "0"});
+  ASSERT_EQ(e.code, 0) << e.err;
+  SplatViewCheck check;
+  ASSERT_NO_FATAL_FAILURE(PrepareSplatView(ws, 0, 128, &check));
   // The glTF, and the PLY the same engine reads as 3D Gaussian Splatting's layout.
-  for (const char* file : {"gaussians.glb", "gaussians.ply"}) {
-    const fs::path shot = Scratch(std::string("playcanvas_") + file + ".png");
-    const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
-                                "/scripts/web/screenshot.cjs' --page splat_view.html --file '" +
-                                (ws / "export" / file).string() + "' --query '" + query + "' --width " +
-                                std::to_string(size) + " --height " + std::to_string(size) + " --out '" +
-                                shot.string() + "' --chromium '" + HEADFORGE_CHROMIUM + "'";
-    ASSERT_EQ(std::system(command.c_str()), 0) << command;
-    const cv::Mat theirs = cv::imread(shot.string());
-    ASSERT_EQ(theirs.size(), mine.size());
-    const double mse = cv::norm(theirs, mine, cv::NORM_L2SQR, head) / (3.0 * cv::countNonZero(head));
-    const double psnr = 10 * std::log10(255.0 * 255.0 / std::max(mse, 1e-9));
-    std::printf("PlayCanvas (%s) against headforge render, frame 0 at %d px: %.2f dB over %d px of head\n", file,
-                size, psnr, cv::countNonZero(head));
-    EXPECT_GE(psnr, 30.0) << file;
-  }
+  for (const char* file : {"gaussians.glb", "gaussians.ply"})
+    EXPECT_GE(PlayCanvasPsnr(check, ws / "export" / file), 30.0) << file;
 }
 
 // report.html opens in headless Chromium: no console error, no request for a
@@ -648,6 +675,81 @@ TEST_F(ExportStage, TheViewerPageShowsBothAvatars) {
         head += cv::norm(cv::Vec3i(page.at<cv::Vec3b>(y, x)) - cv::Vec3i(background)) > 40 ? 1 : 0;
     EXPECT_GT(head, 5000) << "x from " << half.x;
   }
+}
+#endif
+
+#ifdef HEADFORGE_SPLAT_TRANSFORM
+// A baked clip (--frames, SPZ): splat-transform reads frame 80's file back
+// to frame 80's Gaussians, in order, within SPZ's quantisation (positions
+// 1/4096 m, colour and opacity 8 bits, log scales 1/16, rotations 10 bits
+// a component); PlayCanvas draws what it read through frame 80's camera as
+// `headforge render` draws frame 80; the viewer page holds the clip's four
+// frames and opens with its third shown.
+TEST_F(ExportStage, TheBakedClipHoldsEachFrameAndTheViewerPlaysIt) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path ws = CopyOf(reference_, Scratch("clip"));
+  const Result e = Headforge({"export", "--workspace", ws.string(), "--formats", "viewer", "--frames", "0-124:40"});
+  ASSERT_EQ(e.code, 0) << e.err;
+  nlohmann::json clip;
+  ASSERT_TRUE(ReadJson(ws / "export" / "clip" / "clip.json", &clip).ok());
+  EXPECT_EQ(clip["frames"], nlohmann::json({0, 40, 80, 120}));
+  EXPECT_EQ(clip["format"], "spz");
+  EXPECT_NEAR(clip["times_s"][2].get<double>(), 80 / clip["fps"].get<double>(), 1e-6);
+  const fs::path back = Scratch("clip_80.ply");
+  const std::string convert = std::string("'") + HEADFORGE_SPLAT_TRANSFORM + "' -q -w '" +
+                              (ws / "export" / "clip" / "frame_000080.spz").string() + "' '" + back.string() + "'";
+  ASSERT_EQ(std::system(convert.c_str()), 0) << convert;
+  GaussianCloud read;
+  ASSERT_TRUE(ReadGaussianPly(back, &read).ok());
+  AvatarSplats posed;
+  ASSERT_TRUE(PoseAvatarSplats(ws, ws / kModelDir, DefaultDataDir() + "/ict_facekit/ict_face_model.h5", 80, &posed).ok());
+  const GaussianCloud truth = CloudFromSplats(posed);
+  ASSERT_EQ(read.size(), truth.size());
+  const auto sigmoid = [](float x) { return 1 / (1 + std::exp(-double(x))); };
+  double position = 0, colour = 0, opacity = 0, scale = 0, turn = 0;
+  for (size_t i = 0; i < truth.size(); ++i) {
+    double dot = 0;
+    for (int c = 0; c < 4; ++c) dot += read.rotations[4 * i + c] * truth.rotations[4 * i + c];
+    turn = std::max(turn, 1 - std::abs(dot));
+    opacity = std::max(opacity, std::abs(sigmoid(read.opacities[i]) - sigmoid(truth.opacities[i])));
+    for (int c = 0; c < 3; ++c) {
+      position = std::max(position, double(std::abs(read.means[3 * i + c] - truth.means[3 * i + c])));
+      colour = std::max(colour, 0.2820948 * std::abs(read.sh_dc[3 * i + c] - truth.sh_dc[3 * i + c]));
+      if (truth.log_scales[3 * i + c] > -10 && truth.log_scales[3 * i + c] < 5.9)  // SPZ's range
+        scale = std::max(scale, double(std::abs(read.log_scales[3 * i + c] - truth.log_scales[3 * i + c])));
+    }
+  }
+  std::printf("frame 80 read back from SPZ, largest errors: position %.2g m, colour %.2g, opacity %.2g, log scale "
+              "%.2g, rotation 1-|dot| %.2g\n", position, colour, opacity, scale, turn);
+  EXPECT_LE(position, 1.3e-4);
+  EXPECT_LE(colour, 0.004);
+  EXPECT_LE(opacity, 0.003);
+  EXPECT_LE(scale, 0.035);
+  EXPECT_LE(turn, 1e-3);
+  // Not frame 0's Gaussians: the expression moved some of them.
+  AvatarSplats first;
+  ASSERT_TRUE(PoseAvatarSplats(ws, ws / kModelDir, DefaultDataDir() + "/ict_facekit/ict_face_model.h5", 0, &first).ok());
+  double moved = 0;
+  for (size_t i = 0; i < first.means.size(); ++i) moved = std::max(moved, double(std::abs(first.means[i] - posed.means[i])));
+  EXPECT_GT(moved, 10 * position);
+#ifdef HEADFORGE_BROWSER_CHECKS
+  SplatViewCheck check;
+  ASSERT_NO_FATAL_FAILURE(PrepareSplatView(ws, 80, 128, &check));
+  EXPECT_GE(PlayCanvasPsnr(check, back), 30.0);
+  // The page: four frames inlined, opened with the third held.
+  const std::string page = Slurp(ws / "export" / "viewer" / "index.html");
+  size_t blocks = 0;
+  for (size_t at = page.find("<script id=\"clip"); at != std::string::npos; at = page.find("<script id=\"clip", at + 1))
+    ++blocks;
+  EXPECT_EQ(blocks, 4u);
+  const fs::path shot = fs::path(HEADFORGE_TEST_BINARY_DIR) / "artefacts" / "viewer_clip.png";
+  fs::create_directories(shot.parent_path());
+  const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
+                              "/scripts/web/screenshot.cjs' --dir '" + (ws / "export" / "viewer").string() +
+                              "' --page index.html --query clip=2 --width 320 --height 320 --out '" + shot.string() +
+                              "' --chromium '" + HEADFORGE_CHROMIUM + "'";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+#endif
 }
 #endif
 

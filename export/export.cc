@@ -162,8 +162,23 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "each held-out render's identity against its frame with its face-recognition network, run in LibTorch "
          "(CSIM), beside the landmark distance (F-LMD); empty: neither is scored.",
          "face-api", OptionSet::Effect::kRuntime);
+  o->Add("export.bench_results", &e->bench_results,
+         "results.json files of headforge bench calibrate and bench track, whose accuracy against time the report "
+         "plots (default: the workspace's bench_calibrate/results.json and bench_track/results.json, where they "
+         "exist).",
+         "bench-results");
   o->Add("export.device", &e->device, "cpu, or cuda with a CUDA LibTorch (renders the videos).", "export-device",
          OptionSet::Effect::kRuntime);
+}
+
+std::vector<fs::path> BenchResultFiles(const ExportOptions& options, const fs::path& workspace) {
+  std::vector<fs::path> files(options.bench_results.begin(), options.bench_results.end());
+  if (files.empty())
+    for (const char* bench : {"bench_calibrate", "bench_track"}) {
+      std::error_code ec;
+      if (fs::exists(workspace / bench / "results.json", ec)) files.push_back(workspace / bench / "results.json");
+    }
+  return files;
 }
 
 std::string ExportSummary::OneLine() const {
@@ -337,6 +352,7 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
     ReportOptions report;
     report.chart_js = options.chart_js;
     report.exported = out.files;
+    report.bench_results = BenchResultFiles(options, workspace);
     std::string note;
     HF_RETURN_IF_ERROR(WriteReport(workspace, out_dir, report, &note));
     if (!note.empty()) HF_LOG(Warning) << "export: report.html: " << note;

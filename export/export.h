@@ -49,6 +49,10 @@ struct ExportOptions {
   // are found with ingest's detector and landmark model (set by the export
   // stage from the data folder).
   std::string face_api = kDefaultFaceApi;
+  // results.json files of `headforge bench calibrate` and `bench track`
+  // shown in the report; empty: the workspace's bench_calibrate/ and
+  // bench_track/ ones, where they exist (BenchResultFiles).
+  std::vector<std::string> bench_results;
   std::string ultraface_dir, landmark_model;
 
   static const char* const kDefaultChartJs;
@@ -59,6 +63,9 @@ struct ExportOptions {
 };
 
 void AddExportOptions(OptionSet* options, ExportOptions* exported);
+
+// The bench results the report of `workspace` shows (ExportOptions::bench_results).
+std::vector<fs::path> BenchResultFiles(const ExportOptions& options, const fs::path& workspace);
 
 struct ExportSummary {
   std::vector<std::string> files;  // relative to the output folder

@@ -159,6 +159,63 @@ nlohmann::json BenchData(const fs::path& workspace) {
   return bench;
 }
 
+// The rows of `headforge bench calibrate` and `bench track` results files,
+// as {"calibrate": [...], "track": [...], "sources": {"calibrate": [...],
+// "track": [...]}}; files that
+// cannot be read go to `lacks`.
+nlohmann::json BenchResults(const std::vector<fs::path>& files, std::vector<std::string>* lacks) {
+  nlohmann::json out = {{"calibrate", nlohmann::json::array()},
+                        {"track", nlohmann::json::array()},
+                        {"sources", {{"calibrate", nlohmann::json::array()}, {"track", nlohmann::json::array()}}}};
+  for (const fs::path& file : files) {
+    nlohmann::json results;
+    if (Status s = ReadJson(file, &results); !s.ok()) {
+      lacks->push_back("bench results " + file.string() + " unreadable: " + s.message());
+      continue;
+    }
+    const std::string bench = results.value("bench", "");
+    const char* rows = bench == "calibrate" ? "settings" : bench == "track" ? "tracks" : nullptr;
+    if (!rows || !results.contains(rows) || !results[rows].is_array()) {
+      lacks->push_back("bench results " + file.string() + " are not from headforge bench calibrate or track");
+      continue;
+    }
+    for (const nlohmann::json& row : results[rows])
+      if (row.value("ok", false)) out[bench].push_back(row);
+    out["sources"][bench].push_back(file.string());
+  }
+  return out;
+}
+
+// The tables beside the calibration and tracking benches' charts.
+std::string CalibrationBenchTable(const nlohmann::json& rows) {
+  std::string html =
+      "<table><tr><th>scene</th><th>setting</th><th>wall time</th><th>registered</th><th>rotation error median / "
+      "max</th><th>centre error median</th><th>focal error</th><th>aligned head-frame rotation</th></tr>";
+  for (const nlohmann::json& r : rows)
+    html += "<tr><td>" + HtmlEscape(r.value("scene", "")) + "</td><td>" + HtmlEscape(r.value("setting", "")) +
+            "</td><td class=\"num\">" + Number(r.value("seconds", 0.0), 0) + " s</td><td class=\"num\">" +
+            std::to_string(r.value("registered", 0)) + "/" + std::to_string(r.value("frames", 0)) +
+            "</td><td class=\"num\">" + Number(r.value("rotation_deg_median", 0.0), 3) + " / " +
+            Number(r.value("rotation_deg_max", 0.0), 3) + "°</td><td class=\"num\">" +
+            Number(r.value("centre_mm_median", 0.0), 2) + " mm</td><td class=\"num\">" +
+            Number(100 * r.value("focal_error", 0.0), 2) + "%</td><td class=\"num\">" +
+            Number(r.value("aligned_rotation_deg_median", 0.0), 2) + "°</td></tr>";
+  return html + "</table>";
+}
+std::string TrackingBenchTable(const nlohmann::json& rows) {
+  std::string html = "<table><tr><th>subject</th><th>landmark points</th><th>track time</th><th>landmark residual</th>"
+                     "<th>head rotation error</th><th>blendshape error (jawOpen)</th></tr>";
+  for (const nlohmann::json& r : rows) {
+    const nlohmann::json mae = r.value("blendshape_mae", nlohmann::json::object());
+    html += "<tr><td>" + HtmlEscape(r.value("subject", "")) + "</td><td>" + HtmlEscape(r.value("points", "")) +
+            "</td><td class=\"num\">" + Number(r.value("seconds", 0.0), 0) + " s</td><td class=\"num\">" +
+            Number(r.value("residual_px", 0.0), 2) + " px</td><td class=\"num\">" +
+            Number(r.value("rotation_deg", 0.0), 2) + "°</td><td class=\"num\">" +
+            Number(mae.value("jawOpen", 0.0), 3) + "</td></tr>";
+  }
+  return html + "</table>";
+}
+
 const char* const kPageStyle = R"(<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>HeadForge report</title>
 <style>
@@ -197,6 +254,19 @@ const char* const kChartScript = R"(<script>
       options: { scales: { x: { type: 'linear', title: { display: true, text: 'minutes' } },
                            y: { type: 'logarithmic', title: { display: true, text: 'loss' } },
                            y1: { position: 'right', title: { display: true, text: 'dB' } } } } });
+  // One dataset per group (a scene, a set of landmark points): time against error.
+  const grouped = (rows, key, x, y) => {
+    const groups = {};
+    rows.forEach(r => { (groups[r[key]] = groups[r[key]] || []).push({ x: r[x], y: r[y] }); });
+    return Object.keys(groups).map(k => ({ label: k, data: groups[k], pointRadius: 5 }));
+  };
+  if (data.benches.calibrate.length) chart('bench_calibrate', { type: 'scatter',
+      data: { datasets: grouped(data.benches.calibrate, 'scene', 'seconds', 'rotation_deg_median') },
+      options: { scales: { x: { type: 'logarithmic', title: { display: true, text: 'calibrate + align wall time (s)' } },
+                           y: { type: 'logarithmic', title: { display: true, text: 'camera rotation error, median (deg)' } } } } });
+  if (data.benches.track.length) chart('bench_track', { type: 'scatter',
+      data: { datasets: grouped(data.benches.track, 'points', 'seconds', 'rotation_deg') },
+      options: { scales: axes('track wall time (s)', 'head rotation error (deg)') } });
   if (data.bench.length) chart('bench', { type: 'scatter', data: { datasets: data.bench.map(r => ({
       label: r.what || r.variant, data: [{ x: r.seconds / 60, y: r.psnr_masked }], pointRadius: 6 })) },
       options: { scales: axes('training time (minutes)', 'held-out PSNR, head (dB)') } });
@@ -296,6 +366,7 @@ Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const Rep
   else
     lacks.push_back("no trained model (run headforge train): no training or evaluation sections");
   data["bench"] = BenchData(workspace);
+  data["benches"] = BenchResults(options.bench_results, &lacks);
 
   std::string html = kPageStyle;
   std::string chart_js;
@@ -326,6 +397,30 @@ Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const Rep
     html += EvaluationSection(eval, model, faces);
   }
   html += "<h2>Accuracy against time</h2>";
+  const nlohmann::json& benches = data["benches"];
+  const auto sources = [&](const char* bench) {
+    std::string text;
+    for (const auto& f : benches["sources"][bench]) text += (text.empty() ? "" : ", ") + f.get<std::string>();
+    return HtmlEscape(text);
+  };
+  if (!benches["calibrate"].empty())
+    html += "<h3>Cameras</h3><p>Each setting of <code>headforge bench calibrate</code> on simulated scenes: the "
+            "wall time of calibrate and align against the median rotation error of its cameras after the best "
+            "similarity to the simulator's truth (one colour a scene). From " + sources("calibrate") +
+            ".</p><div class=\"chart\"><canvas id=\"bench_calibrate\"></canvas></div>" +
+            CalibrationBenchTable(benches["calibrate"]);
+  if (!benches["track"].empty())
+    html += "<h3>Tracking</h3><p>Each subject of <code>headforge bench track</code> (talking_static with another "
+            "simulated face): the track stage's wall time against its head rotation error, with the plain landmark "
+            "points and with their identity columns. From " + sources("track") +
+            ".</p><div class=\"chart\"><canvas id=\"bench_track\"></canvas></div>" +
+            TrackingBenchTable(benches["track"]);
+  if (benches["calibrate"].empty() && benches["track"].empty())
+    html += "<p>No <code>headforge bench calibrate</code> or <code>bench track</code> results: run them with "
+            "<code>--out WORKSPACE/bench_calibrate</code> and <code>--out WORKSPACE/bench_track</code> (or give "
+            "export <code>--bench-results FILE</code>) to see what the cameras' and the tracking's accuracy cost "
+            "here.</p>";
+  html += "<h3>Training</h3>";
   if (data["bench"].empty()) {
     html += "<p>No <code>headforge bench train</code> results in this workspace; the training curve above is this "
             "run's own.</p>";

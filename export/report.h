@@ -4,7 +4,9 @@
 // mask outlines); the cameras round the head; tracking (residuals,
 // blendshape curves); training (loss and held-out PSNR against wall time);
 // the held-out scores with the best and worst frames; the videos export
-// wrote beside it; and accuracy against time from `headforge bench train`.
+// wrote beside it; and accuracy against time from `headforge bench train`
+// (its rows in the workspace) and from `headforge bench calibrate` and
+// `headforge bench track` (their results.json files).
 #pragma once
 
 #include <string>
@@ -20,6 +22,9 @@ struct ReportOptions {
   // missing: the page says so and shows the tables and images alone.
   std::string chart_js;
   std::vector<std::string> exported;  // files beside the report, relative to it (listed, and the videos shown)
+  // results.json files `headforge bench calibrate` and `bench track` wrote;
+  // one that cannot be read is said on the page.
+  std::vector<fs::path> bench_results;
 };
 
 // Writes `out_dir`/report.html about `workspace`. `*note` says what the page

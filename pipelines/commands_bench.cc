@@ -258,7 +258,9 @@ int BenchCalibrate(const std::vector<std::string>& args) {
                                  "setting: wall time, registered frames, rotation and camera-centre errors after the\n"
                                  "best similarity to the truth, the scale error of align, the focal error, and the\n"
                                  "errors of the aligned head-frame cameras (with and without align's surface fit).\n"
-                                 "Without --quick, orbit_360 also runs with two more random subjects.");
+                                 "Without --quick, orbit_360 also runs with two more random subjects.\n"
+                                 "The rows are kept in OUT/results.json; with --out WORKSPACE/bench_calibrate the\n"
+                                 "workspace's report shows them.");
   if (parsed >= 0) return parsed;
   if (repeat < 1) return ReportFailure(Status::InvalidArgument("--repeat must be at least 1"));
   ApplyCommonOptions(common);
@@ -368,10 +370,14 @@ int BenchCalibrate(const std::vector<std::string>& args) {
       rows.push_back(RowJson(r));
     }
   }
+  nlohmann::json subjects = nlohmann::json::array();
+  for (const auto& [scene, o] : offsets)
+    if (o.ok) subjects.push_back({{"scene", scene}, {"face_scale", o.scale}, {"face_rotation_deg", o.rotation_deg}});
+  // Kept for the report (export's --bench-results; a workspace's
+  // bench_calibrate/results.json is read by default).
+  const nlohmann::json results = {{"version", 1}, {"bench", "calibrate"}, {"settings", rows}, {"subjects", subjects}};
+  if (Status s = WriteJsonAtomic(fs::path(out) / "results.json", results, 1); !s.ok()) return ReportFailure(s);
   if (json) {
-    nlohmann::json subjects = nlohmann::json::array();
-    for (const auto& [scene, o] : offsets)
-      if (o.ok) subjects.push_back({{"scene", scene}, {"face_scale", o.scale}, {"face_rotation_deg", o.rotation_deg}});
     std::printf("%s\n", nlohmann::json{{"settings", rows}, {"subjects", subjects}}.dump(1).c_str());
   } else {
     std::printf("\n| scene | subject's face size / the mean face's | subject's face tilt against the mean face |\n");
@@ -402,7 +408,9 @@ int BenchTrack(const std::vector<std::string>& args) {
                                  "Simulates talking_static with each subject, calibrates head-pose cameras and tracks\n"
                                  "it with the plain landmark points and with the points' identity columns, and\n"
                                  "prints per subject and points: landmark residual, head rotation error (also after\n"
-                                 "one constant rotation of the head frame, and that rotation), blendshape MAE.");
+                                 "one constant rotation of the head frame, and that rotation), blendshape MAE.\n"
+                                 "The rows are kept in OUT/results.json; with --out WORKSPACE/bench_track the\n"
+                                 "workspace's report shows them.");
   if (parsed >= 0) return parsed;
   if (seeds.empty()) return ReportFailure(Status::InvalidArgument("--seeds names no subject"));
   ApplyCommonOptions(common);
@@ -475,6 +483,8 @@ int BenchTrack(const std::vector<std::string>& args) {
       std::fflush(stdout);
     }
   }
+  const nlohmann::json results = {{"version", 1}, {"bench", "track"}, {"tracks", rows}};
+  if (Status s = WriteJsonAtomic(fs::path(out) / "results.json", results, 1); !s.ok()) return ReportFailure(s);
   if (json) {
     std::printf("%s\n", nlohmann::json{{"tracks", rows}}.dump(1).c_str());
   } else {

@@ -34,6 +34,9 @@ class ExportJob : public StageJob {
         }
       }
     }
+    // The benches' results the report shows.
+    for (const fs::path& file : BenchResultFiles(options_, workspace_))
+      HF_RETURN_IF_ERROR(hasher->AddFileStamp(file));
     return Status::Ok();
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {

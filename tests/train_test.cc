@@ -478,6 +478,67 @@ TEST_F(ExportStage, TheBenchLadderTrainsEachRungAndTheReportTablesThem) {
   EXPECT_NE(html.find("<tr><td>60 steps</td><td>gaussian-style</td><td class=\"num\">60</td>"), std::string::npos);
 }
 
+// The calibration and tracking benches' results in the report: the
+// workspace's bench_calibrate/ and bench_track/ files by default (rows in
+// the layout `headforge bench calibrate|track` writes), a changed file runs
+// export again, --bench-results names others, and a file that is not a
+// bench's is said on the page.
+TEST_F(ExportStage, TheReportPlotsTheCalibrationAndTrackingBenches) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path ws = CopyOf(reference_, Scratch("bench_results"));
+  const nlohmann::json calibrate = {
+      {"version", 1},
+      {"bench", "calibrate"},
+      {"settings",
+       {{{"scene", "rig_8cam"}, {"setting", "baseline"}, {"ok", true}, {"seconds", 41.5}, {"registered", 24},
+         {"frames", 24}, {"rotation_deg_median", 0.031}, {"rotation_deg_max", 0.07}, {"centre_mm_median", 0.52},
+         {"focal_error", 0.0012}, {"aligned_rotation_deg_median", 0.61}},
+        {{"scene", "rig_8cam"}, {"setting", "no COLMAP"}, {"ok", false}, {"seconds", 1.0}}}},
+      {"subjects", nlohmann::json::array()}};
+  const nlohmann::json track = {{"version", 1},
+                                {"bench", "track"},
+                                {"tracks",
+                                 {{{"subject", "identity seed 3"}, {"points", "plain"}, {"ok", true}, {"seconds", 12.0},
+                                   {"residual_px", 0.81}, {"rotation_deg", 1.72},
+                                   {"blendshape_mae", {{"jawOpen", 0.043}}}}}}};
+  ASSERT_TRUE(WriteJsonAtomic(ws / "bench_calibrate" / "results.json", calibrate, 1).ok());
+  ASSERT_TRUE(WriteJsonAtomic(ws / "bench_track" / "results.json", track, 1).ok());
+  const Result r = Headforge({"export", "--workspace", ws.string(), "--formats", "report"});
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::string html = Slurp(ws / "export" / "report.html");
+  for (const char* part : {"<canvas id=\"bench_calibrate\">", "<canvas id=\"bench_track\">",
+                           "<tr><td>rig_8cam</td><td>baseline</td><td class=\"num\">42 s</td><td class=\"num\">24/24",
+                           "<td class=\"num\">0.031 / 0.070°</td>", "<td>identity seed 3</td><td>plain</td>",
+                           "<td class=\"num\">1.72°</td><td class=\"num\">0.043</td>"})
+    EXPECT_NE(html.find(part), std::string::npos) << part;
+  EXPECT_EQ(html.find("no COLMAP"), std::string::npos);  // a failed setting has no figures to plot
+#ifdef HEADFORGE_BROWSER_CHECKS
+  // Both charts drawn, no console error; the screenshot kept as an artefact.
+  const fs::path shot = fs::path(HEADFORGE_TEST_BINARY_DIR) / "artefacts" / "report_benches.png";
+  fs::create_directories(shot.parent_path());
+  const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
+                              "/scripts/web/screenshot.cjs' --dir '" + (ws / "export").string() +
+                              "' --page report.html --width 1100 --height 900 --full-page 1 --out '" + shot.string() +
+                              "' --chromium '" + HEADFORGE_CHROMIUM + "'";
+  EXPECT_EQ(std::system(command.c_str()), 0) << command;
+#endif
+  // A bench run again changes its file, and export runs again.
+  nlohmann::json again = track;
+  again["tracks"][0]["rotation_deg"] = 2.5;
+  ASSERT_TRUE(WriteJsonAtomic(ws / "bench_track" / "results.json", again, 1).ok());
+  ASSERT_EQ(Headforge({"export", "--workspace", ws.string(), "--formats", "report"}).code, 0);
+  html = Slurp(ws / "export" / "report.html");
+  EXPECT_NE(html.find("<td class=\"num\">2.50°</td>"), std::string::npos);
+  // Named files instead; one that no bench wrote is said.
+  const Result named = Headforge({"export", "--workspace", ws.string(), "--formats", "report", "--bench-results",
+                                  (ws / "bench_track" / "results.json").string(), (ws / "tracking.json").string()});
+  ASSERT_EQ(named.code, 0) << named.err;
+  html = Slurp(ws / "export" / "report.html");
+  EXPECT_EQ(html.find("<canvas id=\"bench_calibrate\">"), std::string::npos);
+  EXPECT_NE(html.find("<canvas id=\"bench_track\">"), std::string::npos);
+  EXPECT_NE(html.find("tracking.json are not from headforge bench calibrate or track"), std::string::npos);
+}
+
 // report.html: every file it references (videos beside it) exists, and
 // everything else is inlined.
 TEST_F(ExportStage, TheReportReferencesOnlyFilesThatExist) {

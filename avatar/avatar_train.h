@@ -113,6 +113,9 @@ TrainOptions TrainOptionsFromJson(const nlohmann::json& j);
 void AddTrainOptions(OptionSet* options, TrainOptions* train);
 // Gives the preset's values to the options `parsed` says nobody set.
 Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* train);
+// The frames a preset trains on at most (ingest's --select in `headforge
+// run`): draft 300, standard 2000, high 6000; 0 for a name that is none.
+int PresetFrameBudget(const std::string& preset);
 
 // The model `--model auto` (the train stage's default) trains on an aligned
 // workspace: gan-avatar when its cameras are several, or its views spread

@@ -57,7 +57,7 @@ struct IngestedCamera {
 struct DroppedSample {
   int sample = 0;
   std::map<std::string, int64_t> source_frames;  // camera -> its source frame
-  std::string reason;                            // blur or missing
+  std::string reason;                            // blur, missing or unselected
   std::string detail;
 };
 

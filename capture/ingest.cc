@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <map>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
 #include <set>
 
 #include "capture/background_motion.h"
@@ -29,6 +31,7 @@ Status IngestOptions::Check() const {
     return Status::InvalidArgument("no input: give one video file or image folder per camera with --video");
   if (fps < 0.0) return Status::InvalidArgument("--fps must be >= 0 (0 keeps the source rate)");
   if (max_frames < 0) return Status::InvalidArgument("--max-frames must be >= 0 (0: no bound)");
+  if (select < 0) return Status::InvalidArgument("--select must be >= 0 (0 keeps every frame)");
   if (start < 0.0) return Status::InvalidArgument("--start must be >= 0 seconds");
   if (end < 0.0) return Status::InvalidArgument("--end must be >= 0 seconds (0: to the end)");
   if (end > 0.0 && end <= start)
@@ -63,8 +66,13 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
   o->Add("ingest.fps", &in->fps,
          "Frames per second to sample; 0 keeps every source frame (a variable frame rate: sampled at its mean rate).",
          "fps");
-  o->Add("ingest.max_frames", &in->max_frames, "Most frames to sample; 0 for no bound.",
+  o->Add("ingest.max_frames", &in->max_frames, "Most frames to sample, the first ones; 0 for no bound.",
          "max-frames");
+  o->Add("ingest.select", &in->select,
+         "Keep at most this many frames, chosen over the whole time range for their coverage of head poses and "
+         "expressions, the sharpest of alike ones (a long recording's budget); 0 keeps every frame. headforge run "
+         "gives the training preset's budget (draft 300, standard 2000, high 6000) unless this is set.",
+         "select");
   o->Add("ingest.start", &in->start, "Start of the time range to sample, seconds.", "start");
   o->Add("ingest.end", &in->end, "End of the time range, seconds; 0 means the end of the video.",
          "end");
@@ -153,9 +161,11 @@ Status AddIngestInputs(const IngestOptions& options, Hasher* hasher) {
 std::string IngestSummary::OneLine() const {
   char text[256];
   std::snprintf(text, sizeof(text),
-                "%d of %d frames kept (%d blurred, %d missing in a camera), %d camera(s), "
+                "%d of %d frames kept (%d blurred, %d missing in a camera%s), %d camera(s), "
                 "landmarks on %d, face lost on %d, crop %s",
-                kept, sampled, dropped_blur, dropped_missing, cameras, with_landmarks, face_lost, crop.c_str());
+                kept, sampled, dropped_blur, dropped_missing,
+                dropped_unselected > 0 ? (", " + std::to_string(dropped_unselected) + " not selected").c_str() : "",
+                cameras, with_landmarks, face_lost, crop.c_str());
   std::string line = text;
   for (const std::string& d : damaged) line += "; DAMAGED INPUT: " + d;
   for (const std::string& f : faces) line += "; " + f;
@@ -570,6 +580,142 @@ Status KeepSamples(const IngestOptions& options, std::vector<Camera>* cameras, s
   return Status::Ok();
 }
 
+// A long recording's frames chosen for what they show rather than when they
+// were taken. Each kept frame's followed face (the first camera's) gives its
+// 68 landmarks brought by a similarity onto their mean shape: what is left is
+// the head's turn and the expression. k-means groups these into `budget`
+// groups (k-means++ seeding, a fixed seed); each group gives its sharpest
+// frame among the half nearest its centre, so a pose or expression held for
+// a long time gets no more frames than a brief one, and a blurred or
+// mis-detected frame is not what represents its group. Frames without the
+// face fill the budget last, spread in time. The others are dropped as
+// "unselected".
+void SelectByCoverage(int budget, int seed, const std::vector<Camera>& cameras, std::vector<int>* kept,
+                      std::vector<DroppedSample>* dropped, IngestSummary* summary) {
+  const Camera& cam = cameras[0];
+  std::vector<const FrameAnalysis*> frames;
+  for (int k : *kept) frames.push_back(&cam.analysis.at(k));
+  const FaceChoice choice = SelectFaces(frames);
+  // Shapes: centred, unit RMS radius, then turned onto the mean (twice).
+  std::vector<size_t> with_face;
+  std::vector<std::vector<double>> shapes;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const FaceCandidate* face = choice.faces[i];
+    if (!face) continue;
+    std::vector<double> v(136);
+    double cx = 0, cy = 0;
+    for (const cv::Point2f& p : face->landmarks) cx += p.x / 68.0, cy += p.y / 68.0;
+    double radius = 0;
+    for (int j = 0; j < 68; ++j) {
+      v[2 * j] = face->landmarks[j].x - cx;
+      v[2 * j + 1] = face->landmarks[j].y - cy;
+      radius += v[2 * j] * v[2 * j] + v[2 * j + 1] * v[2 * j + 1];
+    }
+    radius = std::sqrt(radius / 68.0);
+    if (!(radius > 0)) continue;
+    for (double& x : v) x /= radius;
+    with_face.push_back(i);
+    shapes.push_back(std::move(v));
+  }
+  std::vector<double> mean(136, 0.0);
+  for (int round = 0; round < 2 && !shapes.empty(); ++round) {
+    std::fill(mean.begin(), mean.end(), 0.0);
+    for (const auto& v : shapes)
+      for (int j = 0; j < 136; ++j) mean[j] += v[j] / shapes.size();
+    for (auto& v : shapes) {
+      double dot = 0, cross = 0;
+      for (int j = 0; j < 68; ++j) {
+        dot += v[2 * j] * mean[2 * j] + v[2 * j + 1] * mean[2 * j + 1];
+        cross += v[2 * j] * mean[2 * j + 1] - v[2 * j + 1] * mean[2 * j];
+      }
+      const double a = std::atan2(cross, dot), c = std::cos(a), s = std::sin(a);
+      for (int j = 0; j < 68; ++j) {
+        const double x = v[2 * j], y = v[2 * j + 1];
+        v[2 * j] = c * x - s * y;
+        v[2 * j + 1] = s * x + c * y;
+      }
+    }
+  }
+  const auto distance2 = [](const std::vector<double>& a, const std::vector<double>& b) {
+    double d = 0;
+    for (size_t j = 0; j < a.size(); ++j) d += (a[j] - b[j]) * (a[j] - b[j]);
+    return d;
+  };
+  std::set<size_t> chosen;  // indices into *kept
+  const size_t groups = std::min<size_t>(size_t(budget), shapes.size());
+  if (groups > 0) {
+    // k-means++ seeding, then Lloyd's iterations.
+    std::mt19937 rng(uint32_t(seed) * 2654435761u + 17u);
+    std::vector<std::vector<double>> centres = {shapes[rng() % shapes.size()]};
+    std::vector<double> nearest(shapes.size(), std::numeric_limits<double>::max());
+    while (centres.size() < groups) {
+      double total = 0;
+      for (size_t i = 0; i < shapes.size(); ++i) {
+        nearest[i] = std::min(nearest[i], distance2(shapes[i], centres.back()));
+        total += nearest[i];
+      }
+      double pick = std::uniform_real_distribution<double>(0, total)(rng);
+      size_t i = 0;
+      while (i + 1 < shapes.size() && (pick -= nearest[i]) > 0) ++i;
+      centres.push_back(shapes[i]);
+    }
+    std::vector<size_t> group(shapes.size(), 0);
+    for (int iteration = 0; iteration < 10; ++iteration) {
+      for (size_t i = 0; i < shapes.size(); ++i) {
+        double best = std::numeric_limits<double>::max();
+        for (size_t g = 0; g < groups; ++g)
+          if (const double d = distance2(shapes[i], centres[g]); d < best) best = d, group[i] = g;
+      }
+      std::vector<std::vector<double>> sums(groups, std::vector<double>(136, 0.0));
+      std::vector<int> counts(groups, 0);
+      for (size_t i = 0; i < shapes.size(); ++i) {
+        ++counts[group[i]];
+        for (int j = 0; j < 136; ++j) sums[group[i]][j] += shapes[i][j];
+      }
+      for (size_t g = 0; g < groups; ++g)
+        if (counts[g] > 0)
+          for (int j = 0; j < 136; ++j) centres[g][j] = sums[g][j] / counts[g];
+    }
+    // Each group's sharpest frame among its half nearest the centre.
+    std::vector<std::vector<std::pair<double, size_t>>> members(groups);
+    for (size_t i = 0; i < shapes.size(); ++i) members[group[i]].push_back({distance2(shapes[i], centres[group[i]]), i});
+    for (auto& m : members) {
+      if (m.empty()) continue;
+      std::sort(m.begin(), m.end());
+      size_t best = m[0].second;
+      for (size_t r = 0; r < (m.size() + 1) / 2; ++r)
+        if (frames[with_face[m[r].second]]->sharpness > frames[with_face[best]]->sharpness) best = m[r].second;
+      chosen.insert(with_face[best]);
+    }
+  }
+  // Frames without the face, spread in time, when the faces leave room.
+  std::vector<size_t> faceless;
+  for (size_t i = 0; i < frames.size(); ++i)
+    if (!choice.faces[i]) faceless.push_back(i);
+  const size_t room = size_t(budget) > chosen.size() ? size_t(budget) - chosen.size() : 0;
+  for (size_t r = 0; r < std::min(room, faceless.size()); ++r)
+    chosen.insert(faceless[r * faceless.size() / std::min(room, faceless.size())]);
+  std::vector<int> selected;
+  for (size_t i = 0; i < kept->size(); ++i) {
+    if (chosen.count(i)) {
+      selected.push_back((*kept)[i]);
+      continue;
+    }
+    DroppedSample d{(*kept)[i], {}, "unselected", "not among the frames chosen for coverage (--select)"};
+    for (const auto& c : cameras) {
+      const auto it = c.analysis.find((*kept)[i]);
+      if (it != c.analysis.end()) d.source_frames[c.name] = it->second.source_index;
+    }
+    dropped->push_back(d);
+  }
+  HF_LOG(Info) << "ingest: " << selected.size() << " of " << kept->size()
+               << " frames selected for their coverage of head poses and expressions (--select " << budget << ", "
+               << groups << " groups of the face's landmark shapes)";
+  summary->dropped_unselected = int(kept->size() - selected.size());
+  summary->kept = int(selected.size());
+  *kept = std::move(selected);
+}
+
 // Faces per camera over the kept frames; lost frames borrow the nearest face for cropping.
 Status PlanFaces(const IngestOptions& options, const std::vector<Camera>& cameras, const std::vector<int>& kept,
                  std::vector<CameraPlan>* plans, IngestSummary* summary) {
@@ -836,6 +982,8 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
   std::vector<int> kept;
   std::vector<DroppedSample> dropped;
   HF_RETURN_IF_ERROR(KeepSamples(options, &cameras, &kept, &dropped, summary));
+  if (options.select > 0 && int(kept.size()) > options.select)
+    SelectByCoverage(options.select, options.seed, cameras, &kept, &dropped, summary);
   std::vector<CameraPlan> plans;
   HF_RETURN_IF_ERROR(PlanFaces(options, cameras, kept, &plans, summary));
 

@@ -25,8 +25,14 @@ struct IngestOptions {
   std::vector<std::string> inputs;
   // Frames per second to sample; 0 keeps every source frame.
   double fps = 0.0;
-  // Upper bound on the number of sampled frames; 0 for no bound.
+  // Upper bound on the number of sampled frames (the first ones); 0 for no bound.
   int max_frames = 0;
+  // Keep at most this many frames, chosen from all the sampled ones for
+  // their coverage of head poses and expressions (the sharpest of alike
+  // ones): a long recording's frame budget. 0 keeps every frame. The
+  // default is the draft preset's budget; `headforge run` gives the chosen
+  // training preset's when it is not set.
+  int select = 300;
   // Time range to sample, in seconds from the start; end 0 means to the end.
   double start = 0.0;
   double end = 0.0;
@@ -81,6 +87,7 @@ struct IngestSummary {
   int kept = 0;              // frames written
   int dropped_blur = 0;      // dropped as blurred
   int dropped_missing = 0;   // dropped because a camera had no such frame
+  int dropped_unselected = 0;  // left out by --select
   int face_lost = 0;         // kept frames (over all cameras) without a detected face
   int with_landmarks = 0;    // kept frames (over all cameras) with landmarks
   int cameras = 0;

@@ -260,6 +260,36 @@ TEST(Ingest, ACameraThatNeverSeesTheFaceIsKeptWithTheUsersMasks) {
   EXPECT_EQ(mask.at<uchar>(2, 2), 0);
 }
 
+// A long recording in which one pose is held for most of the time: 100
+// copies of a GRID clip's first frame, then the clip's 75 frames (the man
+// talking). Kept to 40 frames for coverage, at most two come from the held
+// pose (sampling in time would take 23 of them), the rest from the talking,
+// in time order; the others are recorded as unselected.
+TEST(Ingest, ALongRecordingKeepsFramesForWhatTheyShowNotForHowLongTheyLast) {
+  std::vector<cv::Mat> frames = GridFrames("bbaf2n", 75);
+  ASSERT_EQ(frames.size(), 75u);
+  frames.insert(frames.begin(), 100, frames[0].clone());
+  const fs::path out = ScratchDir();
+  IngestOptions options = Defaults({WriteFolder(out / "input", frames).string()});
+  options.select = 40;
+  IngestSummary summary;
+  ASSERT_TRUE(Ingest(options, out / "ws", &summary).ok());
+  IngestedCapture capture;
+  ASSERT_TRUE(ReadIngestedCapture(out / "ws", &capture).ok());
+  ASSERT_EQ(capture.samples.size(), 40u);
+  EXPECT_EQ(summary.kept, 40);
+  EXPECT_EQ(summary.dropped_unselected + summary.dropped_blur + 40, 175);
+  int held = 0;
+  for (size_t i = 0; i < capture.samples.size(); ++i) {
+    held += capture.samples[i] < 100 ? 1 : 0;
+    if (i > 0) EXPECT_LT(capture.samples[i - 1], capture.samples[i]);
+  }
+  EXPECT_LE(held, 2);
+  int unselected = 0;
+  for (const DroppedSample& d : capture.dropped) unselected += d.reason == "unselected" ? 1 : 0;
+  EXPECT_EQ(unselected, summary.dropped_unselected);
+}
+
 TEST(IngestBadInput, MissingFile) {
   ExpectFailure(Ingest(Defaults({"/no/such/video.mp4"}), ScratchDir()), Status::Code::kNotFound,
                 {"/no/such/video.mp4"});

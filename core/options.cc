@@ -315,6 +315,12 @@ Status OptionSet::Parse(const std::vector<std::string>& args) {
 
 bool OptionSet::WasGiven(const std::string& key) const { return given_.count(key) > 0; }
 
+std::optional<std::vector<std::string>> OptionSet::Value(const std::string& key) const {
+  for (const auto& option : options_)
+    if (option->key == key) return option->get();
+  return std::nullopt;
+}
+
 std::string OptionSet::Help(const std::string& usage, const std::string& description) const {
   std::ostringstream out;
   out << "Usage: " << usage << "\n\n" << description << "\n";

@@ -11,6 +11,7 @@
 
 #include <functional>
 #include <memory>
+#include <optional>
 #include <set>
 #include <cstdint>
 #include <string>
@@ -62,6 +63,9 @@ class OptionSet {
   // Whether the last Parse set `key` from the command line or the config
   // file (presets fill only the options nobody gave).
   bool WasGiven(const std::string& key) const;
+  // The current value of `key` as tokens (a stage reading another stage's
+  // option in `headforge run`); nullopt when no option has that key.
+  std::optional<std::vector<std::string>> Value(const std::string& key) const;
   // Keys given in a config file that no option of this command knows.
   const std::vector<std::string>& unknown_config_keys() const { return unknown_config_keys_; }
 

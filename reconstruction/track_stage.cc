@@ -318,6 +318,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   const bool still = options.head_motion == "still" || (options.head_motion == "auto" && cameras.mode != "head-pose" &&
                                                         cameras.WalksRoundTheHead());
   fit.fixed_head = still || (cameras.mode == "head-pose" && !options.refine_head_pose && options.head_motion != "free");
+  fit.samples = capture.samples;
 
   std::vector<TrackingView> views;
   std::vector<std::pair<int, int>> view_source;  // camera index, position in its frames
@@ -408,6 +409,7 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
   TrackOptions fit = options;
   fit.fixed_head = false;
   fit.fit_focal = true;
+  fit.samples = capture.samples;
   HeadPoseRefinement out;
   CameraIntrinsics& in = cameras->cameras[0];
   out.focal_before = in.fx;

@@ -248,8 +248,11 @@ void AddPriorsAndSmoothness(SequenceFit* fit) {
     }
     if (previous >= 0) {
       FrameBlocks& p = fit->frames[size_t(previous)];
-      // Gaps in the observed frames weaken the link in proportion.
-      const double gap = i - previous;
+      // Gaps in the observed frames, or between the samples they came from,
+      // weaken the link in proportion.
+      const bool sampled = options.samples.size() == size_t(fit->num_frames);
+      const double gap = sampled ? std::max(1, options.samples[size_t(i)] - options.samples[size_t(previous)])
+                                 : i - previous;
       if (!options.fixed_head && (options.rotation_smoothness > 0 || options.translation_smoothness > 0)) {
         problem.AddResidualBlock(PoseSmoothnessCost::Create(options.rotation_smoothness / gap,
                                                             options.translation_smoothness / gap),

@@ -45,6 +45,10 @@ struct TrackOptions {
   double rotation_smoothness = 100.0;
   double translation_smoothness = 300.0;
   double expression_smoothness = 3.0;
+  // Per frame, its sample number in the capture (IngestedCapture::samples):
+  // frames chosen far apart in time (ingest's --select) are linked as
+  // weakly as the samples between them say. Empty: frame k is sample k.
+  std::vector<int> samples;
   // Huber scale of the landmark residuals, pixels.
   double robust_scale_px = 2.0;
   // Weight of the jaw contour (landmarks 0-16), whose detector definition

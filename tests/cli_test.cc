@@ -116,6 +116,20 @@ TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
   ASSERT_EQ(changed.code, 0) << changed.err;
   EXPECT_FALSE(Contains(changed.err, "up to date"));
   EXPECT_EQ(CountFiles(ws / "frames" / "cam0"), 5u);
+  // The training preset sets ingest's frame budget (--select) in a run: the
+  // default (draft) 300, standard 2000; a budget given stays.
+  EXPECT_TRUE(Contains(Slurp(ws / "ingest.ini"), "select = 300\n"));
+  const std::vector<std::string> five = {"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace", ws.string(),
+                                         "--until", "ingest", "--max-frames", "5", "--resolution", "128"};
+  std::vector<std::string> standard = five;
+  standard.insert(standard.end(), {"--preset", "standard", "--device", "cpu"});
+  const Result budget = Headforge(standard);
+  ASSERT_EQ(budget.code, 0) << budget.err;
+  EXPECT_FALSE(Contains(budget.err, "ingest: up to date"));
+  EXPECT_TRUE(Contains(Slurp(ws / "ingest.ini"), "select = 2000\n"));
+  standard.insert(standard.end(), {"--select", "40"});
+  ASSERT_EQ(Headforge(standard).code, 0);
+  EXPECT_TRUE(Contains(Slurp(ws / "ingest.ini"), "select = 40\n"));
 }
 
 TEST_F(CliTest, KilledMidIngestResumesToTheSameOutputs) {

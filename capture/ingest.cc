@@ -642,7 +642,7 @@ void SelectByCoverage(int budget, int seed, const std::vector<Camera>& cameras, 
     return d;
   };
   std::set<size_t> chosen;  // indices into *kept
-  const size_t groups = std::min<size_t>(size_t(budget), shapes.size());
+  size_t groups = std::min<size_t>(size_t(budget), shapes.size());
   if (groups > 0) {
     // k-means++ seeding, then Lloyd's iterations.
     std::mt19937 rng(uint32_t(seed) * 2654435761u + 17u);
@@ -654,11 +654,13 @@ void SelectByCoverage(int budget, int seed, const std::vector<Camera>& cameras, 
         nearest[i] = std::min(nearest[i], distance2(shapes[i], centres.back()));
         total += nearest[i];
       }
+      if (!(total > 0)) break;  // every shape is a centre already (a still picture)
       double pick = std::uniform_real_distribution<double>(0, total)(rng);
       size_t i = 0;
       while (i + 1 < shapes.size() && (pick -= nearest[i]) > 0) ++i;
       centres.push_back(shapes[i]);
     }
+    groups = centres.size();
     std::vector<size_t> group(shapes.size(), 0);
     for (int iteration = 0; iteration < 10; ++iteration) {
       for (size_t i = 0; i < shapes.size(); ++i) {

@@ -225,6 +225,7 @@ table { border-collapse: collapse; margin: 8px 0; } td, th { border: 1px solid #
 td.num { text-align: right; white-space: nowrap; }
 .row { display: flex; flex-wrap: wrap; gap: 8px; } figure { margin: 0; } figcaption { font-size: 12px; color: #555; }
 .chart { position: relative; height: 280px; max-width: 1000px; } .note { color: #8a5a00; }
+.chart.half { flex: 1 1 440px; min-width: 0; }
 video { max-width: 100%; }
 </style>
 )";
@@ -242,6 +243,9 @@ const char* const kChartScript = R"(<script>
   if (data.cameras) chart('cameras', { type: 'scatter', data: { datasets: [
       { label: 'camera centres (x, z)', data: data.cameras.points.map(p => ({ x: p.x, y: p.z })) },
       { label: 'head', data: [{ x: 0, y: 0 }], pointRadius: 8 }] }, options: { scales: axes('x (m)', 'z (m)') } });
+  if (data.cameras) chart('cameras_side', { type: 'scatter', data: { datasets: [
+      { label: 'camera centres (z, y)', data: data.cameras.points.map(p => ({ x: p.z, y: p.y })) },
+      { label: 'head', data: [{ x: 0, y: 0 }], pointRadius: 8 }] }, options: { scales: axes('z (m)', 'y (m)') } });
   if (data.tracking) {
     chart('residual', { type: 'line', data: { datasets: [{ label: 'median landmark residual (px)',
         data: data.tracking.residual, pointRadius: 0 }] }, options: { scales: axes('frame', 'pixels') } });
@@ -384,8 +388,10 @@ Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const Rep
   }
   html += StagesSection(workspace);
   html += CaptureSection(capture);
-  html += "<h2>Cameras</h2><p>Each view's camera centre in the head frame (metres; the face looks toward +z), "
-          "seen from above.</p><div class=\"chart\"><canvas id=\"cameras\"></canvas></div>";
+  html += "<h2>Cameras</h2><p>Each view's camera centre in the head frame (metres; +y up, the face looks toward "
+          "+z), seen from above (left) and from the side (right).</p><div class=\"row\"><div class=\"chart "
+          "half\"><canvas id=\"cameras\"></canvas></div><div class=\"chart half\"><canvas "
+          "id=\"cameras_side\"></canvas></div></div>";
   html += "<h2>Tracking</h2><p>The median landmark residual per frame (pixels), and the six blendshapes that "
           "move most.</p><div class=\"chart\"><canvas id=\"residual\"></canvas></div>"
           "<div class=\"chart\"><canvas id=\"curves\"></canvas></div>";

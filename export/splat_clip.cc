@@ -104,7 +104,10 @@ Status WriteSplatClip(const fs::path& workspace, const fs::path& model_dir, cons
         if (!viewer_full) {
           const fs::path copy = options.viewer_dir / FrameFile(frame, "compressed.ply");
           HF_RETURN_IF_ERROR(Convert(options.splat_transform, ply, copy, log));
-          viewer_bytes += int64_t(fs::file_size(copy));
+          std::error_code size_error;
+          const uintmax_t size = fs::file_size(copy, size_error);
+          if (size_error) return Status::IoError("export: splat-transform wrote no " + copy.string());
+          viewer_bytes += int64_t(size);
           if (viewer_bytes > options.viewer_bytes) {
             fs::remove(copy);
             viewer_full = true;

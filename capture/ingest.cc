@@ -642,7 +642,17 @@ void SelectByCoverage(int budget, int seed, const std::vector<Camera>& cameras, 
     return d;
   };
   std::set<size_t> chosen;  // indices into *kept
-  size_t groups = std::min<size_t>(size_t(budget), shapes.size());
+  // A quarter or more of the frames without the face: a camera going round
+  // the head, whose frames COLMAP matches with their neighbours and whose
+  // face says little about what they show. Chosen evenly in time instead.
+  const size_t without_face = frames.size() - with_face.size();
+  const bool round_the_head = 4 * without_face >= frames.size();
+  size_t groups = round_the_head ? 0 : std::min<size_t>(size_t(budget), shapes.size());
+  if (round_the_head) {
+    for (size_t r = 0; r < size_t(budget); ++r) chosen.insert(r * frames.size() / size_t(budget));
+    HF_LOG(Info) << "ingest: " << without_face << " of " << frames.size()
+                 << " frames show no face (a camera going round the head?): frames chosen evenly in time";
+  }
   if (groups > 0) {
     // k-means++ seeding, then Lloyd's iterations.
     std::mt19937 rng(uint32_t(seed) * 2654435761u + 17u);
@@ -710,9 +720,10 @@ void SelectByCoverage(int budget, int seed, const std::vector<Camera>& cameras, 
     }
     dropped->push_back(d);
   }
-  HF_LOG(Info) << "ingest: " << selected.size() << " of " << kept->size()
-               << " frames selected for their coverage of head poses and expressions (--select " << budget << ", "
-               << groups << " groups of the face's landmark shapes)";
+  if (!round_the_head)
+    HF_LOG(Info) << "ingest: " << selected.size() << " of " << kept->size()
+                 << " frames selected for their coverage of head poses and expressions (--select " << budget << ", "
+                 << groups << " groups of the face's landmark shapes)";
   summary->dropped_unselected = int(kept->size() - selected.size());
   summary->kept = int(selected.size());
   *kept = std::move(selected);

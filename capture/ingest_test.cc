@@ -290,6 +290,28 @@ TEST(Ingest, ALongRecordingKeepsFramesForWhatTheyShowNotForHowLongTheyLast) {
   EXPECT_EQ(unselected, summary.dropped_unselected);
 }
 
+// A recording in which the face is missing from half of the frames (a
+// camera going round the head, here black frames between the clip's): kept
+// to 20, the frames are chosen evenly in time, which COLMAP's matching of
+// neighbours needs, not by the face.
+TEST(Ingest, ARecordingHalfWithoutTheFaceIsSelectedEvenlyInTime) {
+  std::vector<cv::Mat> clip = GridFrames("bbaf2n", 40), frames;
+  ASSERT_EQ(clip.size(), 40u);
+  for (const cv::Mat& f : clip) {
+    frames.push_back(f);
+    frames.push_back(cv::Mat::zeros(f.size(), f.type()));
+  }
+  const fs::path out = ScratchDir();
+  IngestOptions options = Defaults({WriteFolder(out / "input", frames).string()});
+  options.select = 20;
+  options.blur_ratio = 0;  // the black frames have no sharpness
+  ASSERT_TRUE(Ingest(options, out / "ws").ok());
+  IngestedCapture capture;
+  ASSERT_TRUE(ReadIngestedCapture(out / "ws", &capture).ok());
+  ASSERT_EQ(capture.samples.size(), 20u);
+  for (size_t i = 0; i < capture.samples.size(); ++i) EXPECT_EQ(capture.samples[i], int(4 * i)) << i;
+}
+
 TEST(IngestBadInput, MissingFile) {
   ExpectFailure(Ingest(Defaults({"/no/such/video.mp4"}), ScratchDir()), Status::Code::kNotFound,
                 {"/no/such/video.mp4"});

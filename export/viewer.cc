@@ -2,6 +2,7 @@
 
 #include <cctype>
 #include <cstdio>
+#include <vector>
 
 #include "export/html_util.h"
 
@@ -153,7 +154,7 @@ canvas { width: 100%; height: 100%; display: block; }
 )";
   html += "<script>" + InlineScriptText(engine) + "</script>\n</head><body data-clip-fps=\"" +
           std::to_string(options.clip_fps) + "\">\n<canvas id=\"view\"></canvas>\n";
-  std::string legend;
+  std::vector<std::string> shown;  // what the page shows, left to right
   const auto inline_file = [&](const fs::path& path, const std::string& attributes, std::string* block) {
     std::string bytes;
     if (path.empty() || !ReadFileToString(path, &bytes).ok()) return false;
@@ -163,36 +164,33 @@ canvas { width: 100%; height: 100%; display: block; }
   std::string block;
   if (inline_file(options.mesh_glb, "id=\"mesh\"", &block)) {
     html += block;
-    legend = "the mesh avatar, playing the tracked sequence";
+    shown.push_back("the mesh avatar, playing the tracked sequence");
   }
   if (options.clip_times.size() != options.clip_files.size())
     return Status::InvalidArgument("export: the viewer's clip has " + std::to_string(options.clip_files.size()) +
                                    " files but " + std::to_string(options.clip_times.size()) + " times");
-  int clip_shown = 0;
   for (size_t i = 0; i < options.clip_files.size(); ++i) {
     char attributes[96];
     std::snprintf(attributes, sizeof(attributes), "id=\"clip%zu\" data-clip-time=\"%.6f\"", i, options.clip_times[i]);
     if (!inline_file(options.clip_files[i], attributes, &block))
       return Status::NotFound("export: the viewer's clip frame " + options.clip_files[i].string() + " is missing");
     html += block;
-    ++clip_shown;
   }
-  if (clip_shown > 0) {
-    legend += std::string(legend.empty() ? "" : "; ") + "the Gaussian avatar playing the baked clip" +
-              (clip_shown < options.clip_frames
-                   ? " (its first " + std::to_string(clip_shown) + " of " + std::to_string(options.clip_frames) +
-                         " frames, the whole clip in clip/)"
-                   : "");
+  const int clip_inlined = int(options.clip_files.size());
+  if (clip_inlined > 0) {
+    shown.push_back("the Gaussian avatar playing the baked clip" +
+                    (clip_inlined < options.clip_frames
+                         ? " (its first " + std::to_string(clip_inlined) + " of " + std::to_string(options.clip_frames) +
+                               " frames, the whole clip in clip/)"
+                         : std::string()));
   } else if (inline_file(options.gaussians_glb, "id=\"gaussians\"", &block)) {
     html += block;
-    legend += std::string(legend.empty() ? "" : "; ") + "the Gaussian avatar";
+    shown.push_back("the Gaussian avatar");
   }
-  if (legend.empty()) return Status::NotFound("export: the viewer has no avatar to show (no mesh or Gaussian GLB)");
-  const bool both = legend.find(';') != std::string::npos;
-  html += "<div id=\"legend\">" +
-          HtmlEscape(both ? "Left: " + legend.substr(0, legend.find(';')) + ". Right:" + legend.substr(legend.find(';') + 1) + "."
-                          : std::string(1, char(std::toupper(legend[0]))) + legend.substr(1) + ".") +
-          " Drag to turn, wheel to zoom.</div>\n";
+  if (shown.empty()) return Status::NotFound("export: the viewer has no avatar to show (no mesh or Gaussian GLB)");
+  const std::string legend = shown.size() == 2 ? "Left: " + shown[0] + ". Right: " + shown[1] + "."
+                                               : std::string(1, char(std::toupper(shown[0][0]))) + shown[0].substr(1) + ".";
+  html += "<div id=\"legend\">" + HtmlEscape(legend) + " Drag to turn, wheel to zoom.</div>\n";
   html += std::string("<script>") + kViewerScript + "</script>\n</body></html>\n";
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   return WriteFileAtomic(out_dir / "index.html", html);

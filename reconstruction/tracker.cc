@@ -225,6 +225,7 @@ void AddPriorsAndSmoothness(SequenceFit* fit) {
   ceres::Problem& problem = fit->problem;
   const int k = options.identity_modes, e = int(fit->fit_basis.num_expressions);
   problem.AddResidualBlock(CoefficientPriorCost::Create(k, options.identity_prior), nullptr, fit->identity.data());
+  const bool sampled = options.samples.size() == size_t(fit->num_frames);
   int previous = -1;
   for (int i = 0; i < fit->num_frames; ++i) {
     FrameBlocks& f = fit->frames[size_t(i)];
@@ -250,7 +251,6 @@ void AddPriorsAndSmoothness(SequenceFit* fit) {
       FrameBlocks& p = fit->frames[size_t(previous)];
       // Gaps in the observed frames, or between the samples they came from,
       // weaken the link in proportion.
-      const bool sampled = options.samples.size() == size_t(fit->num_frames);
       const double gap = sampled ? std::max(1, options.samples[size_t(i)] - options.samples[size_t(previous)])
                                  : i - previous;
       if (!options.fixed_head && (options.rotation_smoothness > 0 || options.translation_smoothness > 0)) {

@@ -57,6 +57,11 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
          "When sequential matching leaves over 10% of the frames unregistered, match every pair and map again, "
          "for up to this many frames (0: never).",
          "exhaustive-fallback");
+  o->Add("calibrate.colmap.keyframe_step", &c->colmap.keyframe_step,
+         "When sequential matching leaves over 10% of the frames unregistered (frames a few degrees apart, e.g. "
+         "every frame of a walk round a head), map one image in this many (then in twice as many) and register "
+         "the rest into that model, before matching every pair (0: never).",
+         "keyframe-step");
   o->Add("calibrate.colmap.revisit_angle_deg", &c->colmap.revisit_angle_deg,
          "One video: after a first model, also match images it shows looking at the same part of the scene from "
          "within this angle (degrees) but further apart in time than --overlap (the camera came back, e.g. "
@@ -331,9 +336,14 @@ Status RunCalibrate(const CalibrateOptions& options, const IngestedCapture& capt
   progress->Finish();
   if (report.sequential_registered >= 0) {
     summary->sequential_registered = report.sequential_registered;
+    summary->keyframe_step = report.keyframe_step;
+    std::string then;
+    if (report.keyframes > 0)
+      then += ", then " + std::to_string(report.keyframes) + " keyframes (one image in " +
+              std::to_string(report.keyframe_step) + ") were mapped and the rest registered";
+    if (report.exhaustive_fallback) then += ", then every pair was matched";
     summary->reason += (summary->reason.empty() ? "" : "; ") + std::string("sequential matching registered ") +
-                       std::to_string(report.sequential_registered) + " of " + std::to_string(report.total) +
-                       ", then every pair was matched";
+                       std::to_string(report.sequential_registered) + " of " + std::to_string(report.total) + then;
   }
   summary->revisit_pairs = report.revisit_pairs;
   if (report.revisit_pairs > 0)

@@ -48,9 +48,11 @@ struct CalibrateSummary {
   double reprojection_source_px = 0.0;  // the same in source-video pixels (head-pose)
   double focal = 0.0;     // head-pose: estimated focal length (frame pixels)
   double focal_log_sigma = 0.0;  // head-pose: its standard deviation in log units (0: given, or not computed)
-  // colmap: registered after sequential matching alone when every pair was
-  // matched after it (ColmapOptions::exhaustive_fallback_max); -1 otherwise.
+  // colmap: registered after sequential matching alone when keyframes were
+  // mapped (ColmapOptions::keyframe_step) or every pair was matched after it
+  // (ColmapOptions::exhaustive_fallback_max); -1 otherwise.
   int sequential_registered = -1;
+  int keyframe_step = 0;  // colmap: keyframes mapped, one image in this many (0: none)
   // colmap: pairs of revisited views matched after the first model (ColmapOptions::revisit_angle_deg).
   int revisit_pairs = 0;
   std::string OneLine() const;

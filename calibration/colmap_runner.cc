@@ -31,6 +31,8 @@ Status ColmapOptions::Check() const {
   if (overlap < 1) return Status::InvalidArgument("sequential overlap must be at least 1");
   if (rig_instants < 1) return Status::InvalidArgument("rig instants must be at least 1");
   if (mapper_attempts < 1) return Status::InvalidArgument("mapper attempts must be at least 1");
+  if (keyframe_step < 0 || keyframe_step == 1)
+    return Status::InvalidArgument("--keyframe-step must be 0 (never) or 2 or more");
   if (exhaustive_fallback_max < 0)
     return Status::InvalidArgument("--exhaustive-fallback must be 0 (never) or more images");
   if (!(revisit_angle_deg >= 0 && revisit_angle_deg < 90))
@@ -312,9 +314,13 @@ class ColmapJob {
   // largest model. Fails only when the last attempt fails and nothing was
   // mapped yet.
   Status Map();
-  // Sequential matching that registers too few images: every pair matched,
-  // and mapped again.
+  // Sequential matching that registers too few images: keyframes mapped and
+  // the rest registered into their model; then, when still too few, every
+  // pair matched, and mapped again.
   Status MapWithFallback();
+  // Every step-th image mapped, the images between registered: the
+  // keyframe fallback's one try.
+  Status MapKeyframes(int step);
   // Loop closure: the views the first model shows the camera coming back to
   // are matched, and the model refined with them.
   Status CloseLoops();
@@ -327,6 +333,11 @@ class ColmapJob {
  private:
   Status Refine(fs::path* refined);
   bool Enough() const { return best_registered_ >= options_.retry_below * total_; }
+  // The images in the sequential matcher's order: by name.
+  std::vector<std::string> SequentialOrder() const;
+  // Of the models under `dir`: the one registering the most images (empty
+  // when none), and their number.
+  static fs::path LargestModel(const fs::path& dir, int* registered);
 
   const ColmapOptions& options_;
   const IngestedCapture& capture_;
@@ -407,14 +418,39 @@ Status ColmapJob::Match(const std::string& matcher) {
                  log_);
 }
 
-Status ColmapJob::Map() {
-  // The incremental mapper depends on its initial pair and on thread timing: a
-  // run that registers too few images is repeated with relaxed initialisation
-  // (the attempts' models are kept side by side), and the largest model wins.
-  const std::vector<std::vector<std::string>> attempts = {
+std::vector<std::string> ColmapJob::SequentialOrder() const {
+  std::vector<std::string> order = image_names_;
+  std::sort(order.begin(), order.end());
+  return order;
+}
+
+fs::path ColmapJob::LargestModel(const fs::path& dir, int* registered) {
+  fs::path largest;
+  *registered = 0;
+  if (!fs::is_directory(dir)) return largest;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    const int n = entry.is_directory() ? CountRegisteredImages(entry.path() / "images.bin") : 0;
+    if (n > *registered) {
+      *registered = n;
+      largest = entry.path();
+    }
+  }
+  return largest;
+}
+
+// The incremental mapper depends on its initial pair and on thread timing: a
+// run that registers too few images is repeated with relaxed initialisation
+// (the attempts' models are kept side by side), and the largest model wins.
+const std::vector<std::vector<std::string>>& MapperAttempts() {
+  static const std::vector<std::vector<std::string>> attempts = {
       {},
       {"--Mapper.init_min_tri_angle", "8", "--Mapper.init_min_num_inliers", "50", "--Mapper.abs_pose_min_num_inliers",
        "15", "--Mapper.min_num_matches", "10"}};
+  return attempts;
+}
+
+Status ColmapJob::Map() {
+  const auto& attempts = MapperAttempts();
   const size_t num_attempts = std::min(attempts.size(), static_cast<size_t>(options_.mapper_attempts));
   for (size_t a = 0; a < num_attempts; ++a) {
     const int run = runs_++;
@@ -427,12 +463,11 @@ Status ColmapJob::Map() {
     mapper.insert(mapper.end(), attempts[a].begin(), attempts[a].end());
     const Status mapped = RunTool(mapper, log_);
     if (!mapped.ok() && a + 1 == num_attempts && best_.empty()) return mapped;
-    for (const auto& entry : fs::directory_iterator(sparse)) {
-      const int registered = entry.is_directory() ? CountRegisteredImages(entry.path() / "images.bin") : 0;
-      if (registered > best_registered_) {
-        best_registered_ = registered;
-        best_ = entry.path();
-      }
+    int registered = 0;
+    const fs::path largest = LargestModel(sparse, &registered);
+    if (registered > best_registered_) {
+      best_registered_ = registered;
+      best_ = largest;
     }
     if (Enough()) break;
   }
@@ -441,12 +476,28 @@ Status ColmapJob::Map() {
 
 Status ColmapJob::MapWithFallback() {
   Status mapped = Map();
-  if (report_->matcher == "sequential" && !Enough() && total_ <= options_.exhaustive_fallback_max) {
-    HF_LOG(Warning) << "calibrate: COLMAP registered " << best_registered_ << " of " << total_
-                    << " images after sequential matching; matching every pair and mapping again (slow for "
-                    << "many frames; where the frames lie only a few degrees apart, as every frame of a walk round "
-                    << "a head does, ingesting 50-100 frames per turn with --fps lets sequential matching succeed)";
+  const bool sequential = report_->matcher == "sequential";
+  constexpr int kMinKeyframes = 16;
+  if (sequential && !Enough() && options_.keyframe_step > 0 && total_ / options_.keyframe_step >= kMinKeyframes) {
     report_->sequential_registered = best_registered_;
+    for (int step = options_.keyframe_step; !Enough() && total_ / step >= kMinKeyframes; step *= 2) {
+      HF_LOG(Warning) << "calibrate: COLMAP registered " << best_registered_ << " of " << total_
+                      << " images after sequential matching; mapping one image in " << step
+                      << " (frames a few degrees apart give the mapper too little parallax) and "
+                      << "registering the rest into that model";
+      if (Status s = MapKeyframes(step); !s.ok()) {
+        HF_LOG(Warning) << "calibrate: mapping one image in " << step << " failed: " << s.message();
+        continue;
+      }
+      mapped = Status::Ok();
+    }
+  }
+  if (sequential && !Enough() && total_ <= options_.exhaustive_fallback_max) {
+    HF_LOG(Warning) << "calibrate: COLMAP registered " << best_registered_ << " of " << total_
+                    << " images after sequential matching" << (report_->keyframes ? " and keyframes" : "")
+                    << "; matching every pair and mapping again (slow for many frames)";
+    if (report_->sequential_registered < 0) report_->sequential_registered = best_registered_;
+    report_->exhaustive_fallback = true;
     HF_RETURN_IF_ERROR(Match("exhaustive"));
     mapped = Map();
   }
@@ -457,8 +508,94 @@ Status ColmapJob::MapWithFallback() {
   return Status::Ok();
 }
 
+Status ColmapJob::MapKeyframes(int step) {
+  const std::vector<std::string> order = SequentialOrder();
+  std::vector<std::string> keyframes;
+  for (size_t i = 0; i < order.size(); i += step) keyframes.push_back(order[i]);
+  // Keyframes nearer than `overlap` images were matched sequentially; the
+  // next `overlap` keyframes beyond them are matched now, as sequential
+  // matching of the keyframes alone would.
+  std::string key_list, pairs;
+  for (size_t a = 0; a < keyframes.size(); ++a) {
+    key_list += keyframes[a] + "\n";
+    for (size_t b = a + 1; b < keyframes.size() && b <= a + options_.overlap; ++b)
+      if (int(b - a) * step > options_.overlap) pairs += keyframes[a] + " " + keyframes[b] + "\n";
+  }
+  const std::string tag = "keyframes_" + std::to_string(step);
+  const fs::path key_path = work_dir_ / (tag + ".txt"), pair_path = work_dir_ / (tag + "_pairs.txt");
+  HF_RETURN_IF_ERROR(WriteFileAtomic(key_path, key_list));
+  if (!pairs.empty()) {
+    HF_RETURN_IF_ERROR(WriteFileAtomic(pair_path, pairs));
+    HF_RETURN_IF_ERROR(RunTool({exe_, "matches_importer", "--database_path", database_.string(), "--match_list_path",
+                                pair_path.string(), "--match_type", "pairs", "--SiftMatching.use_gpu", "0",
+                                "--SiftMatching.num_threads", threads_},
+                               log_));
+  }
+  // The keyframes mapped as Map() maps every image: again with relaxed
+  // initialisation while too few register, the largest model kept.
+  const auto& attempts = MapperAttempts();
+  const size_t num_attempts = std::min(attempts.size(), static_cast<size_t>(options_.mapper_attempts));
+  fs::path model;
+  int mapped_count = 0;
+  for (size_t a = 0; a < num_attempts && mapped_count < options_.retry_below * keyframes.size(); ++a) {
+    const fs::path mapped = work_dir_ / (tag + "_" + std::to_string(a));
+    RemoveAll(mapped);
+    HF_RETURN_IF_ERROR(EnsureDirectory(mapped));
+    HF_LOG(Info) << "calibrate: COLMAP mapper on " << keyframes.size() << " keyframes"
+                 << (a == 0 ? "" : " (again, relaxed initialisation)");
+    std::vector<std::string> mapper = {exe_, "mapper", "--database_path", database_.string(), "--image_path",
+                                       image_path_, "--output_path", mapped.string(), "--image_list_path",
+                                       key_path.string(), "--Mapper.num_threads", threads_};
+    mapper.insert(mapper.end(), attempts[a].begin(), attempts[a].end());
+    if (Status s = RunTool(mapper, log_); !s.ok()) {
+      HF_LOG(Info) << "calibrate: " << s.message();  // often no starting pair: the relaxed attempt follows
+      continue;
+    }
+    int count = 0;
+    const fs::path largest = LargestModel(mapped, &count);
+    if (count > mapped_count) {
+      mapped_count = count;
+      model = largest;
+    }
+  }
+  if (model.empty()) return Status::DataError("the mapper reconstructed nothing from the keyframes");
+  HF_LOG(Info) << "calibrate: COLMAP mapped " << mapped_count << " of " << keyframes.size()
+               << " keyframes; registering the images between them";
+  // Registered into the keyframes' model, then their points triangulated
+  // and the whole bundle adjusted.
+  const fs::path registered_dir = work_dir_ / (tag + "_registered"), triangulated = work_dir_ / (tag + "_triangulated"),
+                 adjusted = work_dir_ / (tag + "_adjusted");
+  for (const fs::path& dir : {registered_dir, triangulated, adjusted}) {
+    RemoveAll(dir);
+    HF_RETURN_IF_ERROR(EnsureDirectory(dir));
+  }
+  HF_RETURN_IF_ERROR(RunTool({exe_, "image_registrator", "--database_path", database_.string(), "--input_path",
+                              model.string(), "--output_path", registered_dir.string(), "--Mapper.num_threads",
+                              threads_},
+                             log_));
+  HF_RETURN_IF_ERROR(RunTool({exe_, "point_triangulator", "--database_path", database_.string(), "--image_path",
+                              image_path_, "--input_path", registered_dir.string(), "--output_path",
+                              triangulated.string(), "--Mapper.num_threads", threads_},
+                             log_));
+  HF_RETURN_IF_ERROR(RunTool({exe_, "bundle_adjuster", "--input_path", triangulated.string(), "--output_path",
+                              adjusted.string()},
+                             log_));
+  RemoveAll(registered_dir);
+  RemoveAll(triangulated);
+  const int registered = CountRegisteredImages(adjusted / "images.bin");
+  HF_LOG(Info) << "calibrate: COLMAP registered " << registered << " of " << total_ << " images round "
+               << mapped_count << " keyframes";
+  if (registered > best_registered_) {
+    best_registered_ = registered;
+    best_ = adjusted;
+    report_->keyframe_step = step;
+    report_->keyframes = mapped_count;
+  }
+  return Status::Ok();
+}
+
 Status ColmapJob::CloseLoops() {
-  if (report_->matcher != "sequential" || report_->sequential_registered >= 0 || options_.revisit_angle_deg <= 0)
+  if (report_->matcher != "sequential" || report_->exhaustive_fallback || options_.revisit_angle_deg <= 0)
     return Status::Ok();
   const fs::path first = work_dir_ / "model_first";
   RemoveAll(first);
@@ -471,8 +608,7 @@ Status ColmapJob::CloseLoops() {
   HF_RETURN_IF_ERROR(ReadColmapCamerasAndImages(first, &model));
   HF_RETURN_IF_ERROR(ReadColmapPoints(first, &points));
   RemoveAll(first);
-  std::vector<std::string> order = image_names_;  // as the sequential matcher orders them: by name
-  std::sort(order.begin(), order.end());
+  const std::vector<std::string> order = SequentialOrder();
   const auto pairs =
       FindRevisitPairs(model, points, order, options_.revisit_angle_deg, options_.overlap, options_.revisit_pairs);
   if (pairs.empty()) return Status::Ok();

@@ -42,6 +42,14 @@ struct ColmapOptions {
   // images, every pair is matched (pairs already matched are kept) and the
   // mapper runs again, for at most this many images (0: never).
   int exhaustive_fallback_max = 300;
+  // Frames only a few degrees apart (every frame of a walk round a head)
+  // give the incremental mapper too little parallax between neighbours, and
+  // it stops after a few images. When sequential matching registers too few
+  // (before matching every pair), every `keyframe_step`-th image is mapped
+  // alone, each matched with its next `overlap` keyframes, the images between
+  // are registered into that model, and the whole is bundle adjusted; then
+  // twice the step, while at least 16 keyframes remain. 0: never.
+  int keyframe_step = 3;
   // A camera that comes back to views it saw before (round the head and on
   // past the start, or a second ring) drifts along the way, since sequential
   // matching never pairs the returning frames with the first. After a first
@@ -67,9 +75,14 @@ struct ColmapReport {
   int points = 0;
   double mean_reprojection_px = 0.0;
   std::string matcher, mask;
-  // When sequential matching registered too few and every pair was matched
-  // after it: the images registered before that; -1 otherwise.
+  // When sequential matching registered too few and keyframes were mapped
+  // or every pair was matched after it: the images registered before that;
+  // -1 otherwise.
   int sequential_registered = -1;
+  // Keyframes mapped after it: every keyframe_step-th image, `keyframes` of
+  // them (0: none); every pair matched after it.
+  int keyframe_step = 0, keyframes = 0;
+  bool exhaustive_fallback = false;
   // Pairs of revisited views matched after the first model (0: none found or off).
   int revisit_pairs = 0;
 };

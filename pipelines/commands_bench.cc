@@ -79,7 +79,11 @@ Status PrepareScene(const fs::path& scene_file, const fs::path& dir, const FaceM
     StderrProgress progress;
     HF_RETURN_IF_ERROR(WriteSimulation(*sim, dir / "capture", text, 0, &progress));
     IngestOptions ingest;
-    for (int c = 0; c < sim->num_cameras(); ++c) ingest.inputs.push_back((dir / "capture" / sim->CameraName(c)).string());
+    // A camera's frames: its image folder, or its video (a scene with video_compression).
+    for (int c = 0; c < sim->num_cameras(); ++c) {
+      const fs::path frames = dir / "capture" / sim->CameraName(c), video = frames.string() + ".mp4";
+      ingest.inputs.push_back((fs::is_directory(frames) || !fs::exists(video) ? frames : video).string());
+    }
     ingest.crop = crop;
     ingest.resolution = scene.camera.intrinsics.width;
     ingest.blur_ratio = 0.0;
@@ -130,7 +134,8 @@ Row RunSetting(const std::string& scene, const Setting& s, const IngestedCapture
   }
   // Registration counts the images COLMAP was given (fixed rigs: one per camera and instant).
   if (summary.sequential_registered >= 0)
-    row.label += " (sequential registered " + std::to_string(summary.sequential_registered) + ", then every pair)";
+    row.label += " (sequential registered " + std::to_string(summary.sequential_registered) +
+                 (summary.keyframe_step > 0 ? ", then keyframes" : ", then every pair") + ")";
   else if (summary.revisit_pairs > 0)
     row.label += " (" + std::to_string(summary.revisit_pairs) + " revisit pairs)";
   row.world.registered = summary.registered;

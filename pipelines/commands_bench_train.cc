@@ -169,6 +169,10 @@ int BenchTrain(const std::vector<std::string>& args) {
   ApplyCommonOptions(common);
   if (json) SetLogLevel(LogLevel::kWarning);
   const fs::path root = out.empty() ? fs::path(common.workspace) / "bench_train" : fs::path(out);
+  // The two models' rungs share names (draft, ladder_500): each model keeps
+  // its own folders, so that a ladder of one does not retrain over the other's.
+  if (train.model == "gan-avatar")
+    for (Job& job : jobs) job.name = "gan_" + job.name;
   if (!json) {
     std::printf("| variant | steps | training time | Gaussians | held-out PSNR / SSIM, head | held-out PSNR / SSIM, frame "
                 "| training views PSNR, head |\n|---|---|---|---|---|---|---|\n");

@@ -8,8 +8,10 @@
 # cameras (`render --truth`).
 #   scripts/walkaround.sh [out] [run options]   (default /tmp/headforge_walkaround; resumes)
 # Options after the folder go to `headforge run`; without any, --fps 8.333
-# (50 frames of the 6-second turn, 7.2 degrees apart: every frame, 2.4
-# degrees apart, leaves COLMAP's sequential mapping without parallax).
+# (50 frames of the 6-second turn, 7.2 degrees apart, which COLMAP maps
+# directly; every frame, 2.4 degrees apart, leaves its sequential mapping
+# without parallax, and calibrate maps one in three and registers the rest:
+# slower, and 150 frames to train on).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${HEADFORGE_BUILD_DIR:-$root/build}"

@@ -7,6 +7,8 @@
 #include <ceres/rotation.h>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "calibration/face_points.h"
 #include "calibration/landmark_embedding.h"
@@ -73,11 +75,78 @@ void AddAlignOptions(OptionSet* o, AlignOptions* a) {
          "Surface fit: the points' noise (mm), against which one standard deviation of an identity coefficient "
          "weighs.",
          "align-surface-noise");
+  o->Add("align.drop_misplaced", &a->drop_misplaced,
+         "Leave out the views whose frames show the head but whose camera calibrate placed with the head behind it "
+         "or well outside its frame (a wrong registration), and say which; more than half of them: fail.",
+         "drop-misplaced");
   o->Add("align.max_residual_mm", &a->max_residual_mm,
          "Fail when the triangulated landmarks miss the face model by more than this median (mm): the cameras do not "
          "see one consistent head.",
          "max-align-residual");
 }
+
+Status FindMisplacedViews(const IngestedCapture& capture, const CameraSet& head_cameras,
+                          std::vector<MisplacedView>* misplaced) {
+  misplaced->clear();
+  for (const IngestedCamera& cam : capture.cameras) {
+    const CameraIntrinsics* lens = head_cameras.FindCamera(cam.name);
+    if (!lens) continue;
+    for (const IngestedFrame& f : cam.frames) {
+      const CameraView* view = head_cameras.FindView(cam.name, f.index);
+      if (!view || !view->registered) continue;
+      // The head frame's origin (the face model's, inside the head) in the camera.
+      const Eigen::Vector3d centre = view->cam_from_world.translation();
+      const double w = lens->width, h = lens->height;
+      const bool behind = centre.z() <= 0;
+      const double u = behind ? 0 : lens->fx * centre.x() / centre.z() + lens->cx;
+      const double v = behind ? 0 : (lens->fy > 0 ? lens->fy : lens->fx) * centre.y() / centre.z() + lens->cy;
+      if (!behind && u > -0.25 * w && u < 1.25 * w && v > -0.25 * h && v < 1.25 * h) continue;
+      const fs::path mask_path = capture.MaskPath(cam.name, f.index);
+      if (capture.workspace.empty() || !fs::exists(mask_path)) continue;
+      const cv::Mat mask = cv::imread(mask_path.string(), cv::IMREAD_GRAYSCALE);
+      if (mask.empty()) return Status::DataError("cannot read the mask " + mask_path.string());
+      if (cv::countNonZero(mask > 127) < 0.01 * mask.total()) continue;
+      misplaced->push_back({cam.name, f.index, behind});
+    }
+  }
+  return Status::Ok();
+}
+
+namespace {
+
+// Leaves out of result->cameras the views FindMisplacedViews finds, and says
+// so in result->message; fails when they are more than half.
+Status DropMisplacedViews(const IngestedCapture& capture, AlignResult* result) {
+  HF_RETURN_IF_ERROR(FindMisplacedViews(capture, result->cameras, &result->misplaced));
+  if (result->misplaced.empty()) return Status::Ok();
+  std::map<std::string, int> per_camera;
+  int behind = 0;
+  for (const MisplacedView& m : result->misplaced) {
+    ++per_camera[m.camera];
+    behind += m.behind;
+  }
+  std::string which;
+  for (const auto& [camera, count] : per_camera)
+    which += (which.empty() ? "" : ", ") + camera + " (" + std::to_string(count) + ")";
+  const int registered = result->cameras.registered();
+  const std::string what = std::to_string(result->misplaced.size()) + " of " + std::to_string(registered) +
+                           " registered views show the head in their frames, but their cameras were placed with it " +
+                           (behind == int(result->misplaced.size()) ? "behind them" : "behind them or outside their frame") +
+                           ": " + which;
+  if (2 * result->misplaced.size() > size_t(registered))
+    return Status::DataError(what + ". The calibration is probably wrong; try calibrate with a rig file (--mode rig), "
+                             "--rig-instants 3, --matcher exhaustive or --max-features 8192");
+  for (const MisplacedView& m : result->misplaced)
+    for (CameraView& v : result->cameras.views)
+      if (v.camera == m.camera && v.frame == m.frame) v.registered = false;
+  HF_LOG(Warning) << "align: " << what << "; they are left out (a rig file, --mode rig, gives a dome's cameras "
+                  << "where they are; --drop-misplaced=false keeps them)";
+  result->message += (result->message.empty() ? "" : ", ") + std::to_string(result->misplaced.size()) +
+                     " misplaced views left out: " + which;
+  return Status::Ok();
+}
+
+}  // namespace
 
 CameraSet ToHeadFrame(const CameraSet& cameras, const Sim3& head_from_world) {
   // x_world = world_from_head(x_head) = R^T (x_head - t) / s. Scaling camera
@@ -649,6 +718,7 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
     return Status::DataError(text);
   }
   best.cameras = ToHeadFrame(cameras, best.head_from_world);
+  if (options.drop_misplaced) HF_RETURN_IF_ERROR(DropMisplacedViews(capture, &best));
   *result = std::move(best);
   return Status::Ok();
 }

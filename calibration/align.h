@@ -47,9 +47,26 @@ struct AlignOptions {
   // World-frame cameras: fail when the triangulated landmarks miss the model by
   // more than this median (mm), a sign of a broken reconstruction.
   double max_residual_mm = 40.0;
+  // World-frame cameras: leave out the views FindMisplacedViews finds (more
+  // than half of them: fail).
+  bool drop_misplaced = true;
   Status Check() const;
 };
 void AddAlignOptions(OptionSet* options, AlignOptions* align);
+
+// A view whose frame shows the head (its head mask covers over 1% of the
+// frame) but whose pose in the head frame puts the head's centre behind the
+// camera, or more than a quarter of the frame outside it: calibrate placed
+// it wrong (COLMAP matching a back camera's room to the wrong side of a
+// dome, say). Views without a mask file, or whose mask is nearly empty, are
+// not judged.
+struct MisplacedView {
+  std::string camera;
+  int frame = 0;
+  bool behind = false;  // the head behind the camera (else outside its frame)
+};
+Status FindMisplacedViews(const IngestedCapture& capture, const CameraSet& head_cameras,
+                          std::vector<MisplacedView>* misplaced);
 
 struct AlignResult {
   Sim3 head_from_world;
@@ -70,6 +87,7 @@ struct AlignResult {
   double surface_median_mm = 0, surface_turn_deg = 0, surface_scale_change = 0;
   std::string surface_note;
   CameraSet cameras;                   // the views re-expressed in the head frame
+  std::vector<MisplacedView> misplaced;  // views left out of `cameras` (AlignOptions::drop_misplaced)
   std::string message;
 };
 

@@ -913,6 +913,65 @@ TEST(Align, ChoosesViewsByWhereTheirCamerasAre) {
   EXPECT_LT(error_deg[1], 0.5);
 }
 
+// Twelve fixed cameras round the head (head frame), each frame's mask a
+// disc where the head is. Two cameras are turned as COLMAP misplaced a
+// dome's back cameras: one looking away from the head (the head behind it),
+// one turned 45 degrees (the head beyond its frame's edge); a third turned
+// away sees no head in its mask and is not judged. Only the first two are
+// found, and align's drop leaves them out.
+TEST(Align, FindsViewsPlacedWithTheHeadBehindThemOrOutsideTheirFrame) {
+  const fs::path dir = Scratch("misplaced");
+  IngestedCapture capture;
+  capture.workspace = dir;
+  CameraSet cameras;
+  cameras.mode = "rig";
+  cameras.frame = "head";
+  Sim3 identity;
+  for (int c = 0; c < 12; ++c) {
+    IngestedCamera cam;
+    cam.name = "cam" + std::to_string(c);
+    cam.width = cam.height = cam.source_width = cam.source_height = 128;
+    CameraIntrinsics lens;
+    lens.name = cam.name;
+    lens.width = lens.height = 128;
+    lens.fx = lens.fy = 176;  // 40 degrees across
+    lens.cx = lens.cy = 63.5;
+    cameras.cameras.push_back(lens);
+    for (int f = 0; f < 2; ++f) {
+      IngestedFrame frame;
+      frame.index = frame.source_frame = f;
+      cam.frames.push_back(frame);
+      CameraView view = ViewFrom(EyeAt(30.0 * c, 5.0, 0.8), identity, f);
+      view.camera = cam.name;
+      const Eigen::Matrix3d turn =
+          Eigen::AngleAxisd((c == 6 || c == 9 ? 180.0 : c == 7 ? 45.0 : 0.0) * M_PI / 180, Eigen::Vector3d::UnitY())
+              .toRotationMatrix();
+      const Eigen::Vector3d eye = -view.cam_from_world.linear().transpose() * view.cam_from_world.translation();
+      view.cam_from_world.linear() = turn * view.cam_from_world.linear();
+      view.cam_from_world.translation() = -view.cam_from_world.linear() * eye;
+      cameras.views.push_back(view);
+      cv::Mat mask(128, 128, CV_8U, cv::Scalar(0));
+      if (c != 9) mask(cv::Rect(34, 34, 60, 60)).setTo(255);
+      fs::create_directories(dir / "masks" / cam.name);
+      ASSERT_TRUE(cv::imwrite(capture.MaskPath(cam.name, f).string(), mask));
+    }
+    capture.cameras.push_back(cam);
+  }
+  std::vector<MisplacedView> misplaced;
+  ASSERT_TRUE(FindMisplacedViews(capture, cameras, &misplaced).ok());
+  ASSERT_EQ(misplaced.size(), 4u);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(misplaced[i].camera, i < 2 ? "cam6" : "cam7");
+    EXPECT_EQ(misplaced[i].frame, i % 2);
+    EXPECT_EQ(misplaced[i].behind, i < 2);
+  }
+  // Without masks there is no evidence: nothing is judged.
+  IngestedCapture unmasked = capture;
+  unmasked.workspace = dir / "none";
+  ASSERT_TRUE(FindMisplacedViews(unmasked, cameras, &misplaced).ok());
+  EXPECT_TRUE(misplaced.empty());
+}
+
 // The shipped embedding is what `headforge embed-landmarks` measures today, and
 // away from the jaw contour (a silhouette, other surface points from every
 // side) it differs from the model's landmark vertices by millimetres.

@@ -142,6 +142,9 @@ int StageCommand(const StageEntry& entry, const std::vector<std::string>& args) 
   OptionSet options;
   CommonOptions common;
   AddCommonOptions(&options, &common, /*with_workspace=*/true);
+  bool force = false;
+  options.Add("force", &force, "Run the stage even when it is up to date (its inputs and options unchanged).", "force",
+              OptionSet::Effect::kRuntime);
   std::unique_ptr<StageJob> job = entry.make ? entry.make() : nullptr;
   if (job) job->AddOptions(&options);
   const int parsed = ParseOrExit(&options, args, entry.usage, Description(entry));
@@ -156,7 +159,7 @@ int StageCommand(const StageEntry& entry, const std::vector<std::string>& args) 
   if (int code = OpenForWriting(common, &workspace); code >= 0) return code;
   StderrProgress progress;
   bool skipped = false;
-  if (Status s = RunStageJob(entry, job.get(), options, workspace.get(), settings, &progress, false, &skipped);
+  if (Status s = RunStageJob(entry, job.get(), options, workspace.get(), settings, &progress, force, &skipped);
       !s.ok())
     return ReportFailure(s);
   return kExitOk;
@@ -190,10 +193,14 @@ int RunCommand(const std::vector<std::string>& args) {
                                                    Joined(StageNames()) + ")"));
   }
   const StageSettings settings = common.Settings();
+  // Every stage's options are checked before the first runs, up to --until:
+  // the stages after it do not run (a GPU preset's device is not asked of a
+  // run that stops before train).
   for (size_t i = 0; i < table.size(); ++i) {
     if (!jobs[i]) continue;
     jobs[i]->Resolve(settings, options);
     if (Status s = jobs[i]->Check(); !s.ok()) return ReportFailure(s);
+    if (table[i].name == until) break;
   }
   ApplyCommonOptions(common);
   std::unique_ptr<Workspace> workspace;

@@ -122,7 +122,9 @@ TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
   const std::vector<std::string> five = {"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace", ws.string(),
                                          "--until", "ingest", "--max-frames", "5", "--resolution", "128"};
   std::vector<std::string> standard = five;
-  standard.insert(standard.end(), {"--preset", "standard", "--device", "cpu"});
+  // Without --device cpu: a run that stops before train is not refused for
+  // the GPU preset's device on a CPU build.
+  standard.insert(standard.end(), {"--preset", "standard"});
   const Result budget = Headforge(standard);
   ASSERT_EQ(budget.code, 0) << budget.err;
   EXPECT_FALSE(Contains(budget.err, "ingest: up to date"));
@@ -130,6 +132,21 @@ TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
   standard.insert(standard.end(), {"--select", "40"});
   ASSERT_EQ(Headforge(standard).code, 0);
   EXPECT_TRUE(Contains(Slurp(ws / "ingest.ini"), "select = 40\n"));
+
+  // A stage run alone is skipped when up to date, and runs again with --force.
+  const std::vector<std::string> ingest = {"ingest", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
+                                           ws.string(), "--max-frames", "5", "--resolution", "128", "--select", "40"};
+  const Result skipped = Headforge(ingest);
+  ASSERT_EQ(skipped.code, 0) << skipped.err;
+  EXPECT_TRUE(Contains(skipped.err, "ingest: up to date")) << skipped.err;
+  std::vector<std::string> forced = ingest;
+  forced.push_back("--force");
+  const auto written = fs::last_write_time(ws / "capture.json");
+  const Result redone = Headforge(forced);
+  ASSERT_EQ(redone.code, 0) << redone.err;
+  EXPECT_FALSE(Contains(redone.err, "up to date")) << redone.err;
+  EXPECT_GT(fs::last_write_time(ws / "capture.json"), written);
+  EXPECT_EQ(CountFiles(ws / "frames" / "cam0"), 5u);
 }
 
 TEST_F(CliTest, KilledMidIngestResumesToTheSameOutputs) {

@@ -272,7 +272,8 @@ const char* const kChartScript = R"(<script>
       data: { datasets: grouped(data.benches.track, 'points', 'seconds', 'rotation_deg') },
       options: { scales: axes('track wall time (s)', 'head rotation error (deg)') } });
   if (data.bench.length) chart('bench', { type: 'scatter', data: { datasets: data.bench.map(r => ({
-      label: r.what || r.variant, data: [{ x: r.seconds / 60, y: r.psnr_masked }], pointRadius: 6 })) },
+      label: (r.model === 'gan-avatar' ? 'gan-avatar: ' : '') + (r.what || r.variant),
+      data: [{ x: r.seconds / 60, y: r.psnr_masked }], pointRadius: 6, pointStyle: r.model === 'gan-avatar' ? 'triangle' : 'circle' })) },
       options: { scales: axes('training time (minutes)', 'held-out PSNR, head (dB)') } });
   window.done = true;
 })();

@@ -705,11 +705,12 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   // millimetres mean the cameras do not see one consistent head, whatever
   // COLMAP's registration count said.
   if (best.median_mm > options.max_residual_mm) {
-    char text[400];
+    char text[640];
     std::snprintf(text, sizeof(text),
                   "the cameras do not agree on the face: landmarks triangulated from them miss the face model by a "
                   "median %.0f mm (limit %.0f mm%s). The reconstruction is probably wrong even where frames "
-                  "registered; try calibrate with --max-features 8192, --matcher exhaustive, fewer --rig-instants, "
+                  "registered; try calibrate with --max-features 8192, --matcher exhaustive, another --rig-instants (3 "
+                  "where one instant was used: a dome's cameras), "
                   "a rig file (--mode rig) or --mode head-pose",
                   best.median_mm, options.max_residual_mm,
                   best.reprojection_median_px > 0

@@ -45,58 +45,20 @@ struct TrackingCamera {
 // `weight`.
 // Parameters: rotation[3], translation[3], identity[K], expression[E],
 // focal_scale[1].
-struct LandmarkReprojectionCost {
-  static constexpr int kStride = 8;
-
+// The Jacobian is written out (tracking_costs.cc): the landmark is linear in
+// the K + E coefficients, so it costs one 2x3 product per basis column, where
+// automatic differentiation in strides re-evaluated the whole basis sum once
+// per stride (most of calibrate's and track's time).
+class LandmarkReprojectionCost : public ceres::CostFunction {
+ public:
   LandmarkReprojectionCost(const LandmarkBasis& basis, int landmark, const TrackingCamera& camera,
-                           const Eigen::Vector2d& pixel, double weight)
-      : base_(basis.base.col(landmark)),
-        identity_(basis.identity[landmark]),
-        expression_(basis.expression[landmark]),
-        camera_(camera),
-        pixel_(pixel),
-        weight_(weight) {}
+                           const Eigen::Vector2d& pixel, double weight);
 
-  template <typename T>
-  bool operator()(T const* const* parameters, T* residual) const {
-    const T* rotation = parameters[0];
-    const T* translation = parameters[1];
-    const T* alpha = parameters[2];
-    const T* beta = parameters[3];
-    const T& focal_scale = parameters[4][0];
-    T x[3];
-    for (int d = 0; d < 3; ++d) {
-      x[d] = T(base_[d]);
-      for (int k = 0; k < identity_.cols(); ++k) x[d] += T(identity_(d, k)) * alpha[k];
-      for (int e = 0; e < expression_.cols(); ++e) x[d] += T(expression_(d, e)) * beta[e];
-    }
-    T moved[3];
-    ceres::AngleAxisRotatePoint(rotation, x, moved);
-    T p[3];
-    for (int r = 0; r < 3; ++r) {
-      p[r] = T(camera_.translation[r]);
-      for (int c = 0; c < 3; ++c) p[r] += T(camera_.rotation(r, c)) * (moved[c] + translation[c]);
-    }
-    p[2] += (focal_scale - T(1)) * T(camera_.translation[2]);
-    // A landmark at or behind the camera has no pixel: reject the step.
-    if (!(p[2] > T(1e-6))) return false;
-    residual[0] = T(weight_) * (focal_scale * T(camera_.fx) * p[0] / p[2] + T(camera_.cx) - T(pixel_.x()));
-    residual[1] = T(weight_) * (focal_scale * T(camera_.fy) * p[1] / p[2] + T(camera_.cy) - T(pixel_.y()));
-    return true;
-  }
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
 
-  static ceres::CostFunction* Create(const LandmarkBasis& basis, int landmark,
-                                     const TrackingCamera& camera, const Eigen::Vector2d& pixel,
-                                     double weight) {
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<LandmarkReprojectionCost, kStride>(
-        new LandmarkReprojectionCost(basis, landmark, camera, pixel, weight));
-    cost->AddParameterBlock(3);
-    cost->AddParameterBlock(3);
-    cost->AddParameterBlock(basis.num_identity);
-    cost->AddParameterBlock(basis.num_expressions);
-    cost->AddParameterBlock(1);
-    cost->SetNumResiduals(2);
-    return cost;
+  static ceres::CostFunction* Create(const LandmarkBasis& basis, int landmark, const TrackingCamera& camera,
+                                     const Eigen::Vector2d& pixel, double weight) {
+    return new LandmarkReprojectionCost(basis, landmark, camera, pixel, weight);
   }
 
  private:

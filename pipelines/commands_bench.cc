@@ -57,8 +57,8 @@ struct Row {
 // both are already there for the same scene file.
 // `identity_seed` > 0 simulates the scene with another random subject.
 Status PrepareScene(const fs::path& scene_file, const fs::path& dir, const FaceModel& model, const std::string& data,
-                    int threads, const std::string& crop, int identity_seed, IngestedCapture* capture,
-                    nlohmann::json* truth) {
+                    int threads, const std::string& crop, int identity_seed, bool simulated_masks,
+                    IngestedCapture* capture, nlohmann::json* truth) {
   std::string text;
   HF_RETURN_IF_ERROR(ReadFileToString(scene_file, &text));
   if (identity_seed > 0) {
@@ -68,7 +68,10 @@ Status PrepareScene(const fs::path& scene_file, const fs::path& dir, const FaceM
     text = std::regex_replace(text, seed_line, "identity_seed = " + std::to_string(identity_seed));
   }
   // Simulation and ingest are redone when the scene, the crop or ingest's outputs change.
-  const std::string stamp = Hasher().Add(text).Add(crop).Add(int64_t(FindStage("ingest")->version)).Hex();
+  Hasher hasher;
+  hasher.Add(text).Add(crop).Add(int64_t(FindStage("ingest")->version));
+  if (simulated_masks) hasher.Add(std::string("simulated masks"));
+  const std::string stamp = hasher.Hex();
   std::string previous;
   if (!ReadFileToString(dir / "stamp", &previous).ok() || previous != stamp) {
     RemoveAll(dir);
@@ -84,6 +87,9 @@ Status PrepareScene(const fs::path& scene_file, const fs::path& dir, const FaceM
       const fs::path frames = dir / "capture" / sim->CameraName(c), video = frames.string() + ".mp4";
       ingest.inputs.push_back((fs::is_directory(frames) || !fs::exists(video) ? frames : video).string());
     }
+    // The simulator's head masks, as a studio's matting gives them (a dome's
+    // cameras behind the head see no face to mask from).
+    if (simulated_masks) ingest.masks = (dir / "capture" / "masks").string();
     ingest.crop = crop;
     ingest.resolution = scene.camera.intrinsics.width;
     ingest.blur_ratio = 0.0;
@@ -254,11 +260,21 @@ int BenchCalibrate(const std::vector<std::string>& args) {
   options.Add("bench.out", &out, "Folder for the simulated scenes, workspaces and COLMAP runs (reused).", "out");
   options.Add("bench.scenes", &scenes, "Scenes to run (from scenes/).", "scenes");
   options.Add("bench.quick", &quick, "Only the baseline setting of each scene.", "quick");
+  bool masks = false;
+  options.Add("bench.masks", &masks,
+              "Ingest with the simulator's head masks (as a studio's matting gives them; dome_360 needs them: its "
+              "cameras behind the head see no face to mask from).",
+              "masks");
+  std::vector<int> instants;
+  options.Add("bench.rig_instants", &instants,
+              "Fixed rigs: run only the baseline setting at each of these numbers of synchronised instants "
+              "(e.g. 1,3) instead of the settings list.",
+              "rig-instants");
   int repeat = 1;
   options.Add("bench.repeat", &repeat,
               "Run each COLMAP setting this many times (COLMAP's results vary from run to run); one row per run.",
               "repeat");
-  const int parsed = ParseOrExit(&options, args, "headforge bench calibrate [--json] [--out DIR] [--quick] [--repeat N]",
+  const int parsed = ParseOrExit(&options, args, "headforge bench calibrate [--json] [--out DIR] [--quick] [--masks] [--rig-instants N,M] [--repeat N]",
                                  "Runs calibrate and align on simulated scenes at several settings and prints, per\n"
                                  "setting: wall time, registered frames, rotation and camera-centre errors after the\n"
                                  "best similarity to the truth, the scale error of align, the focal error, and the\n"
@@ -268,6 +284,8 @@ int BenchCalibrate(const std::vector<std::string>& args) {
                                  "workspace's report shows them.");
   if (parsed >= 0) return parsed;
   if (repeat < 1) return ReportFailure(Status::InvalidArgument("--repeat must be at least 1"));
+  for (int n : instants)
+    if (n < 1) return ReportFailure(Status::InvalidArgument("--rig-instants: " + std::to_string(n) + " is not at least 1"));
   ApplyCommonOptions(common);
   if (json) SetLogLevel(LogLevel::kWarning);
   const StageSettings settings = common.Settings();
@@ -288,7 +306,7 @@ int BenchCalibrate(const std::vector<std::string>& args) {
     nlohmann::json truth;
     const fs::path dir = fs::path(out) / scene;
     const std::string crop = scene == "talking_static" ? "sequence" : "none";
-    if (Status s = PrepareScene(scene_dir / (scene + ".toml"), dir, model, common.data_dir, threads, crop, 0, &capture,
+    if (Status s = PrepareScene(scene_dir / (scene + ".toml"), dir, model, common.data_dir, threads, crop, 0, masks, &capture,
                                 &truth);
         !s.ok())
       return ReportFailure(s.WithContext(scene));
@@ -303,7 +321,7 @@ int BenchCalibrate(const std::vector<std::string>& args) {
     auto prepare_variant = [&](int seed, Variant* v) {
       v->label = scene + " (identity seed " + std::to_string(seed) + ")";
       v->dir = fs::path(out) / (scene + "_identity_" + std::to_string(seed));
-      const Status s = PrepareScene(scene_dir / (scene + ".toml"), v->dir, model, common.data_dir, threads, crop, seed,
+      const Status s = PrepareScene(scene_dir / (scene + ".toml"), v->dir, model, common.data_dir, threads, crop, seed, masks,
                                     &v->capture, &v->truth);
       if (s.ok()) offsets.emplace_back(v->label, MeasureSubjectOffset(model, v->truth));
       return s.WithContext(v->label);
@@ -323,7 +341,11 @@ int BenchCalibrate(const std::vector<std::string>& args) {
     } else {
       const bool rig = capture.cameras.size() > 1;
       std::vector<Setting> settings;
-      if (rig) {
+      if (rig && !instants.empty()) {
+        for (int n : instants)
+          settings.push_back({"4k SIFT, exhaustive, " + std::to_string(n) + (n == 1 ? " instant" : " instants"), 4096,
+                              "exhaustive", 1, n});
+      } else if (rig) {
         settings.push_back({"4k SIFT, exhaustive, 1 instant", 4096, "exhaustive", 1, 1});
         if (!quick) {
           settings.push_back({"1k SIFT", 1024, "exhaustive", 1, 1});
@@ -439,7 +461,7 @@ int BenchTrack(const std::vector<std::string>& args) {
     const fs::path dir = fs::path(out) / ("talking_static_identity_" + std::to_string(seed));
     IngestedCapture capture;
     nlohmann::json truth;
-    if (Status s = PrepareScene(scene_file, dir, model, common.data_dir, threads, "sequence", seed, &capture, &truth);
+    if (Status s = PrepareScene(scene_file, dir, model, common.data_dir, threads, "sequence", seed, false, &capture, &truth);
         !s.ok())
       return ReportFailure(s.WithContext(subject));
     CalibrateOptions calibrate;

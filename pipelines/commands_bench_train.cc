@@ -30,7 +30,15 @@ const Variant kVariants[] = {
     {"full", "stages 1+2", [](TrainOptions*) {}},
     {"canonical", "stages 1+2, canonical deformation", [](TrainOptions* t) { t->mesh_riding = false; }},
     {"mesh-riding", "stages 1+2, mesh riding", [](TrainOptions* t) { t->mesh_riding = true; }},
+    // Stage 3 (GaussianStyle's Table 2b); they need --decoder-steps. Each
+    // scores stage 2's splats beside the decoded image (eval_stage2.json).
+    {"stage3", "stages 1-3", [](TrainOptions*) {}},
+    {"stage3-no-ada", "stages 1-3, no augmentation", [](TrainOptions* t) { t->decoder_ada = false; }},
+    {"stage3-no-discriminator", "stages 1-3, no discriminator", [](TrainOptions* t) { t->adversarial_weight = 0; }},
+    {"stage3-full-tune", "stages 1-3, full-tune (no PTI, generator trained)", [](TrainOptions* t) { t->full_tune = true; }},
 };
+
+bool IsStage3(const std::string& variant) { return variant.rfind("stage3", 0) == 0; }
 
 // One rung of --ladder: "STEPS", "STEPS/GAUSSIANS" (the gaussian-style
 // model's largest count), or a preset's name (the preset with its time
@@ -86,7 +94,9 @@ int BenchTrain(const std::vector<std::string>& args) {
   bool json = false;
   options.Add("bench.variants", &variants,
               "Variants to train: stage1, no-region, full (the options as given), canonical (the paper's deformation "
-              "in canonical space), mesh-riding; the gan-avatar model has full alone (its default).",
+              "in canonical space), mesh-riding (these five train stages 1 and 2 only); stage3, stage3-no-ada, "
+              "stage3-no-discriminator, stage3-full-tune (the paper's Table 2b: they need --decoder-steps, and print "
+              "stage 2's figures beside stage 3's); the gan-avatar model has full alone (its default).",
               "variants");
   std::vector<std::string> ladder;
   options.Add("bench.ladder", &ladder,
@@ -140,10 +150,17 @@ int BenchTrain(const std::vector<std::string>& args) {
     for (const Variant& v : kVariants)
       if (name == v.name) found = &v;
     if (!found)
-      return ReportFailure(Status::InvalidArgument("--variants: no variant '" + name +
-                                                   "' (stage1, no-region, full, canonical, mesh-riding)"));
+      return ReportFailure(Status::InvalidArgument(
+          "--variants: no variant '" + name +
+          "' (stage1, no-region, full, canonical, mesh-riding, stage3, stage3-no-ada, stage3-no-discriminator, "
+          "stage3-full-tune)"));
+    if (IsStage3(name) && train.decoder_steps <= 0)
+      return ReportFailure(Status::InvalidArgument("--variants " + name +
+                                                   ": stage 3 needs --decoder-steps N (and its --prior-steps, "
+                                                   "--pti-steps, --decoder-resolution; docs/avatar.md)"));
     jobs.push_back({found->name, found->what, train});
     found->apply(&jobs.back().options);
+    if (!IsStage3(name)) jobs.back().options.decoder_steps = 0;  // their rows are stages 1 and 2
   }
   for (const std::string& text : ladder) {
     Rung rung;
@@ -199,6 +216,21 @@ int BenchTrain(const std::vector<std::string>& args) {
              {"steps", s.steps}, {"seconds", s.seconds}, {"gaussians", s.gaussians},
              {"psnr_masked", s.psnr_masked}, {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full},
              {"ssim", s.ssim_full}, {"train_psnr_masked", s.train_psnr_masked}};
+      // Sharpness, render time and, with stage 3, stage 2's figures beside the decoded image's.
+      nlohmann::json eval;
+      if (ReadJson(dir / "eval.json", &eval).ok()) {
+        const nlohmann::json& mean = eval.at("mean");
+        row["sd"] = mean.value("sd", 0.0);
+        row["sharpness_truth"] = mean.value("sharpness_truth", 0.0);
+        row["render_ms"] = eval.value("render_ms", 0.0);
+        if (eval.contains("stage2")) {
+          const nlohmann::json& stage2 = eval.at("stage2");
+          row["stage2"] = {{"psnr_masked", stage2.value("psnr_masked", 0.0)},
+                           {"ssim_masked", stage2.value("ssim_masked", 0.0)},
+                           {"sd", stage2.value("sd", 0.0)}};
+          row["stage3_seconds"] = eval.value("stage3_seconds", 0.0);
+        }
+      }
       if (Status status = WriteJsonAtomic(dir / "bench.json", {{"options", key}, {"row", row}}, 1); !status.ok())
         return ReportFailure(status);
     }
@@ -227,6 +259,24 @@ int BenchTrain(const std::vector<std::string>& args) {
                   row["ssim_masked"].get<double>(), row["psnr"].get<double>(), row["ssim"].get<double>(),
                   row["train_psnr_masked"].get<double>());
       std::fflush(stdout);
+    }
+  }
+  // Stage 3 against stage 2 (GaussianStyle's Table 2b): SD is the render's
+  // mean gradient magnitude over the head minus the frame's (negative: blurrier).
+  bool stage3 = false;
+  for (const auto& row : rows) stage3 = stage3 || row.contains("stage2");
+  if (!json && stage3) {
+    std::printf("\nStage 3 (held-out frames, over the head; SD: sharpness minus the frame's):\n\n"
+                "| variant | stage 2: PSNR / SSIM, SD | stage 3: PSNR / SSIM, SD | stage 3's time | render |\n"
+                "|---|---|---|---|---|\n");
+    for (const auto& row : rows) {
+      if (!row.contains("stage2")) continue;
+      const nlohmann::json& s2 = row.at("stage2");
+      const double ms = row.value("render_ms", 0.0);
+      std::printf("| %s | %.2f dB / %.3f, %+.2f | %.2f dB / %.3f, %+.2f | %.1f min | %.1f ms (%.1f frames/s) |\n",
+                  row.at("what").get<std::string>().c_str(), s2.value("psnr_masked", 0.0), s2.value("ssim_masked", 0.0),
+                  s2.value("sd", 0.0), row.value("psnr_masked", 0.0), row.value("ssim_masked", 0.0), row.value("sd", 0.0),
+                  row.value("stage3_seconds", 0.0) / 60, ms, ms > 0 ? 1000.0 / ms : 0.0);
     }
   }
   if (!json && !novel_lines.empty()) {

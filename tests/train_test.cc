@@ -977,6 +977,41 @@ TEST_F(DecoderStage, APackTrainedByHeadforgeTrainGivesTheSameModelAsTheTrainStag
   EXPECT_TRUE(fs::exists(ws / "renders" / "frame_000110.png"));
 }
 
+// `bench train`'s stage-3 variants (the paper's Table 2b): each trains the
+// same stages 1-2 and its own stage 3, and its row sets stage 2's figures
+// beside the decoded image's.
+TEST_F(DecoderStage, TheBenchsStageThreeVariantsScoreStageTwoBesideTheDecodedImage) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("bench_stage3"));
+  std::vector<std::string> args = DecoderArgs(ws);
+  args[0] = "bench";
+  args.insert(args.begin() + 1, "train");
+  args.insert(args.end(), {"--variants", "stage3,stage3-no-discriminator", "--json"});
+  const Result bench = Headforge(args);
+  ASSERT_EQ(bench.code, 0) << bench.err;
+  const nlohmann::json rows = nlohmann::json::parse(bench.out).at("variants");
+  ASSERT_EQ(rows.size(), 2u);
+  nlohmann::json eval;
+  ASSERT_TRUE(ReadJson(reference_ / kModelDir / "eval.json", &eval).ok());
+  for (const nlohmann::json& row : rows) {
+    ASSERT_TRUE(row.contains("stage2")) << row;
+    // Stages 1-2 are the train stage's with these options, to the digit.
+    EXPECT_EQ(row["stage2"]["psnr_masked"], eval["stage2"]["psnr_masked"]) << row["variant"];
+    EXPECT_EQ(row["stage2"]["sd"], eval["stage2"]["sd"]) << row["variant"];
+    EXPECT_GT(row["stage3_seconds"].get<double>(), 0);
+    EXPECT_GT(row["render_ms"].get<double>(), 0);
+  }
+  // The full variant is the train stage's run; without the discriminator, stage 3 differs.
+  EXPECT_EQ(rows[0]["what"], "stages 1-3");
+  EXPECT_EQ(rows[0]["psnr_masked"], eval["mean"]["psnr_masked"]);
+  EXPECT_EQ(rows[0]["sd"], eval["mean"]["sd"]);
+  EXPECT_NE(rows[1]["psnr_masked"], rows[0]["psnr_masked"]);
+  // A stage-3 variant without --decoder-steps is refused before anything trains.
+  const Result refused = Headforge({"bench", "train", "--workspace", ws.string(), "--variants", "stage3-no-ada"});
+  EXPECT_EQ(refused.code, 2);
+  EXPECT_NE(refused.err.find("stage 3 needs --decoder-steps"), std::string::npos) << refused.err;
+}
+
 // --model auto: the model follows from the aligned cameras.
 TEST(ModelChoice, OneFixedCameraGetsGaussianStyleAndAllRoundOrSeveralGetGanAvatar) {
   const fs::path dir = fs::temp_directory_path() / "hf_model_choice";

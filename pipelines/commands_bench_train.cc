@@ -218,7 +218,7 @@ int BenchTrain(const std::vector<std::string>& args) {
              {"ssim", s.ssim_full}, {"train_psnr_masked", s.train_psnr_masked}};
       // Sharpness, render time and, with stage 3, stage 2's figures beside the decoded image's.
       nlohmann::json eval;
-      if (ReadJson(dir / "eval.json", &eval).ok()) {
+      if (ReadJson(dir / "eval.json", &eval).ok() && eval.contains("mean")) {
         const nlohmann::json& mean = eval.at("mean");
         row["sd"] = mean.value("sd", 0.0);
         row["sharpness_truth"] = mean.value("sharpness_truth", 0.0);

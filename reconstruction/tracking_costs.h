@@ -46,9 +46,10 @@ struct TrackingCamera {
 // Parameters: rotation[3], translation[3], identity[K], expression[E],
 // focal_scale[1].
 // The Jacobian is written out (tracking_costs.cc): the landmark is linear in
-// the K + E coefficients, so it costs one 2x3 product per basis column, where
-// automatic differentiation in strides re-evaluated the whole basis sum once
-// per stride (most of calibrate's and track's time).
+// the K + E coefficients, so it costs one 2x3 product per basis column;
+// automatic differentiation would evaluate the whole basis sum again for
+// every few of the ~80 derivatives, and this cost is most of calibrate's and
+// track's time. tracking_costs_test checks it against finite differences.
 class LandmarkReprojectionCost : public ceres::CostFunction {
  public:
   LandmarkReprojectionCost(const LandmarkBasis& basis, int landmark, const TrackingCamera& camera,

@@ -228,7 +228,16 @@ TEST_F(TrainStage, RenderDrawsAnyFrameFromAnyCamera) {
   const Result missing = Headforge({"render", "--workspace", reference_.string(), "--frames", "500", "--out",
                                     out.string()});
   EXPECT_NE(missing.code, 0);
-  EXPECT_NE(missing.err.find("no frame 500 (the frames run 0-124)"), std::string::npos) << missing.err;
+  EXPECT_NE(missing.err.find("'500' names a frame past the last (the frames run 0-124)"), std::string::npos)
+      << missing.err;
+  // A range with a step, as export --frames reads it.
+  const fs::path range = out / "range";
+  const Result ranged = Headforge({"render", "--workspace", reference_.string(), "--frames", "120-124:2", "--out",
+                                   range.string()});
+  ASSERT_EQ(ranged.code, 0) << ranged.err;
+  for (const char* file : {"frame_000120.png", "frame_000122.png", "frame_000124.png"})
+    EXPECT_TRUE(fs::exists(range / file)) << file;
+  EXPECT_FALSE(fs::exists(range / "frame_000121.png"));
 }
 
 TEST_F(TrainStage, HeldOutFramesAreScoredAgainstTheSimulatorsTruth) {

@@ -123,10 +123,10 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
   }
   std::map<int, const AvatarView*> by_frame;
   for (const AvatarView* v : drivers) by_frame.emplace(v->frame, v);
-  std::vector<int> frames = options.frames;
-  if (!options.frame_list.empty() && !by_frame.empty())
+  std::vector<int> frames;
+  if (!options.frames.empty() && !by_frame.empty())
     HF_RETURN_IF_ERROR(
-        ParseFrameList(options.frame_list, by_frame.rbegin()->first + 1, &frames).WithContext("render --frames"));
+        ParseFrameList(options.frames, by_frame.rbegin()->first + 1, &frames).WithContext("render --frames"));
   if (frames.empty())
     for (const auto& [frame, view] : by_frame)
       if (!options.held_out || own.HeldOut(frame)) frames.push_back(frame);

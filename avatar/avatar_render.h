@@ -17,10 +17,9 @@ struct AvatarRenderOptions {
   // where only that was trained); its config.json says which model it holds.
   std::string model;
   std::string drive;            // a workspace whose tracked expressions drive the avatar ("": its own)
-  std::vector<int> frames;      // frames to render (of `drive` when given); empty: all
-  // Frames as text, as ParseFrameList reads them ("110,20", "0-49", "0-124:5",
-  // "all"); when given, they replace `frames`.
-  std::vector<std::string> frame_list;
+  // Frames to render (of `drive` when given), as ParseFrameList reads them
+  // ("110,20", "0-49", "0-124:5", "all"); empty: all.
+  std::vector<std::string> frames;
   double yaw_deg = 0;           // the camera moved round the head, toward the subject's left
   double pitch_deg = 0;         // ... and up
   int resolution = 0;           // the longer side in pixels (0: as trained)

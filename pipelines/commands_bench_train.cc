@@ -22,6 +22,7 @@ struct Variant {
   const char* name;
   const char* what;
   void (*apply)(TrainOptions*);
+  bool stage3 = false;  // trains the decoder (needs --decoder-steps); else stages 1 and 2 only
 };
 
 const Variant kVariants[] = {
@@ -32,13 +33,11 @@ const Variant kVariants[] = {
     {"mesh-riding", "stages 1+2, mesh riding", [](TrainOptions* t) { t->mesh_riding = true; }},
     // Stage 3 (GaussianStyle's Table 2b); they need --decoder-steps. Each
     // scores stage 2's splats beside the decoded image (eval_stage2.json).
-    {"stage3", "stages 1-3", [](TrainOptions*) {}},
-    {"stage3-no-ada", "stages 1-3, no augmentation", [](TrainOptions* t) { t->decoder_ada = false; }},
-    {"stage3-no-discriminator", "stages 1-3, no discriminator", [](TrainOptions* t) { t->adversarial_weight = 0; }},
-    {"stage3-full-tune", "stages 1-3, full-tune (no PTI, generator trained)", [](TrainOptions* t) { t->full_tune = true; }},
+    {"stage3", "stages 1-3", [](TrainOptions*) {}, true},
+    {"stage3-no-ada", "stages 1-3, no augmentation", [](TrainOptions* t) { t->decoder_ada = false; }, true},
+    {"stage3-no-discriminator", "stages 1-3, no discriminator", [](TrainOptions* t) { t->adversarial_weight = 0; }, true},
+    {"stage3-full-tune", "stages 1-3, full-tune (no PTI, generator trained)", [](TrainOptions* t) { t->full_tune = true; }, true},
 };
-
-bool IsStage3(const std::string& variant) { return variant.rfind("stage3", 0) == 0; }
 
 // One rung of --ladder: "STEPS", "STEPS/GAUSSIANS" (the gaussian-style
 // model's largest count), or a preset's name (the preset with its time
@@ -154,13 +153,13 @@ int BenchTrain(const std::vector<std::string>& args) {
           "--variants: no variant '" + name +
           "' (stage1, no-region, full, canonical, mesh-riding, stage3, stage3-no-ada, stage3-no-discriminator, "
           "stage3-full-tune)"));
-    if (IsStage3(name) && train.decoder_steps <= 0)
+    if (found->stage3 && train.decoder_steps <= 0)
       return ReportFailure(Status::InvalidArgument("--variants " + name +
                                                    ": stage 3 needs --decoder-steps N (and its --prior-steps, "
                                                    "--pti-steps, --decoder-resolution; docs/avatar.md)"));
     jobs.push_back({found->name, found->what, train});
     found->apply(&jobs.back().options);
-    if (!IsStage3(name)) jobs.back().options.decoder_steps = 0;  // their rows are stages 1 and 2
+    if (!found->stage3) jobs.back().options.decoder_steps = 0;  // their rows are stages 1 and 2
   }
   for (const std::string& text : ladder) {
     Rung rung;

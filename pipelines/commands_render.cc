@@ -14,7 +14,7 @@ int RenderCommand(const std::vector<std::string>& args) {
   AvatarRenderOptions render;
   std::string out, truth;
   options.Add("render.out", &out, "Output folder (default: WORKSPACE/renders).", "out", OptionSet::Effect::kRuntime);
-  options.Add("render.frames", &render.frame_list,
+  options.Add("render.frames", &render.frames,
               "Frames to render: 0,10,20, a range 0-49, every 5th 0-124:5, or all (default: all).", "frames");
   options.Add("render.yaw", &render.yaw_deg, "Degrees the camera moves round the head toward the subject's left.",
               "yaw");

@@ -5,6 +5,9 @@
 // `headforge bench track`: tracking accuracy over many subjects. Simulates
 // talking_static with several random faces, calibrates head-pose cameras and
 // tracks each with the plain landmark points and with the identity columns.
+// `headforge bench truth-workspace`: a copy of a tracked workspace of a
+// simulated capture with the simulator's cameras, expressions and identity in
+// place of the tracked ones, to train on: what registration costs the avatar.
 #include <chrono>
 #include <cstdio>
 #include <nlohmann/json.hpp>
@@ -529,15 +532,90 @@ int BenchTrack(const std::vector<std::string>& args) {
 
 }  // namespace
 
+int BenchTruthWorkspace(const std::vector<std::string>& args) {
+  OptionSet options;
+  CommonOptions common;
+  AddCommonOptions(&options, &common, /*with_workspace=*/true);
+  std::string truth_dir, out;
+  std::vector<std::string> parts = {"cameras", "expression", "identity"};
+  options.Add("bench.truth", &truth_dir, "The simulated capture the workspace was ingested from (its ground_truth.json).",
+              "truth");
+  options.Add("bench.out", &out, "The new workspace (made, or replaced when an earlier truth-workspace made it).", "out");
+  options.Add("bench.replace", &parts,
+              "What the truth replaces: cameras (intrinsics and every view's pose), expression, identity.", "replace");
+  const int parsed = ParseOrExit(
+      &options, args, "headforge bench truth-workspace --workspace WS --truth SIM --out DIR [--replace cameras,expression,identity]",
+      "Copies a tracked workspace of a simulated capture (frames, masks, landmarks) to DIR with\n"
+      "the simulator's truth in place of what calibrate and track estimated: train or bench\n"
+      "train on DIR to see what the registration error costs the avatar. The simulator's own\n"
+      "masks: ingest with --masks SIM/masks. Prints how far the tracked values were from the truth.");
+  if (parsed >= 0) return parsed;
+  if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
+  if (truth_dir.empty()) return ReportFailure(Status::InvalidArgument("no --truth: give the simulated capture's folder"));
+  if (out.empty()) return ReportFailure(Status::InvalidArgument("no --out: give the new workspace's folder"));
+  ApplyCommonOptions(common);
+  parts = SplitCommaList(parts);
+  const fs::path ws(common.workspace), to(out);
+  const fs::path marker = to / "truth_workspace.json";
+  std::error_code ec;
+  if (fs::equivalent(ws, to, ec)) return ReportFailure(Status::InvalidArgument("--out is the workspace itself"));
+  if (fs::exists(to) && !fs::is_empty(to, ec) && !fs::exists(marker))
+    return ReportFailure(Status::InvalidArgument(
+        "--out " + out + " holds files bench truth-workspace did not write; name a new folder"));
+  FaceModel model;
+  if (Status s = FaceModel::Load(common.Settings().face_model, &model); !s.ok()) return ReportFailure(s);
+  IngestedCapture capture;
+  CameraSet cameras;
+  TrackingFile tracking;
+  if (Status s = ReadTrackedWorkspace(ws, model, &capture, &cameras, &tracking); !s.ok()) return ReportFailure(s);
+  nlohmann::json truth;
+  if (Status s = ReadJson(fs::path(truth_dir) / "ground_truth.json", &truth); !s.ok())
+    return ReportFailure(s.WithContext("--truth " + truth_dir + " (a headforge simulate output)"));
+  TrackingErrors before;
+  const Status scored = EvaluateTracking(tracking, cameras, capture, truth, kScoredBlendshapes, &before);
+  const CameraSet tracked_cameras = cameras;
+  const std::set<std::string> part_set(parts.begin(), parts.end());
+  if (Status s = TruthAsTracked(capture, truth, part_set, &cameras, &tracking); !s.ok()) return ReportFailure(s);
+  Status s = RemoveAll(to);
+  if (s.ok()) s = EnsureDirectory(to);
+  for (const char* name : {"capture.json", "landmarks.json", "frames", "masks"}) {
+    if (!s.ok()) break;
+    fs::copy(ws / name, to / name, fs::copy_options::recursive, ec);
+    if (ec) s = Status::IoError("cannot copy " + (ws / name).string() + " to " + to.string() + ": " + ec.message());
+  }
+  if (s.ok()) s = cameras.Write(to / "cameras_head.json");
+  if (s.ok()) s = WriteTracking(tracking, to / "tracking.json");
+  if (s.ok()) s = WriteJsonAtomic(marker, {{"workspace", fs::absolute(ws).string()},
+                                           {"truth", fs::absolute(truth_dir).string()},
+                                           {"replaced", parts}}, 1);
+  if (!s.ok()) return ReportFailure(s.WithContext("bench truth-workspace"));
+  std::string replaced;
+  for (const std::string& p : parts) replaced += (replaced.empty() ? "" : ", ") + p;
+  std::printf("%s: the workspace with the truth's %s\n", out.c_str(), replaced.c_str());
+  if (scored.ok()) {
+    std::printf("the tracked values against the truth: head rotation %.2f deg (median), jawOpen MAE %.3f",
+                before.rotation_deg, before.mae["jawOpen"]);
+    for (const CameraIntrinsics& c : tracked_cameras.cameras)
+      if (const CameraIntrinsics* t = cameras.FindCamera(c.name); t && t->fx > 0)
+        std::printf(", %s focal %.1f px against %.1f px (%+.1f%%)", c.name.c_str(), c.fx, t->fx, 100 * (c.fx / t->fx - 1));
+    std::printf("\n");
+  }
+  return kExitOk;
+}
+
 int BenchCommand(const std::vector<std::string>& args) {
   if (!args.empty() && args[0] == "calibrate") return BenchCalibrate(std::vector<std::string>(args.begin() + 1, args.end()));
   if (!args.empty() && args[0] == "track") return BenchTrack(std::vector<std::string>(args.begin() + 1, args.end()));
   if (!args.empty() && args[0] == "train") return BenchTrain(std::vector<std::string>(args.begin() + 1, args.end()));
+  if (!args.empty() && args[0] == "truth-workspace")
+    return BenchTruthWorkspace(std::vector<std::string>(args.begin() + 1, args.end()));
   std::fprintf(stderr,
-               "Usage: headforge bench calibrate|track|train [options]\n"
+               "Usage: headforge bench calibrate|track|train|truth-workspace [options]\n"
                "  calibrate   camera accuracy against time on simulated scenes\n"
                "  track       tracking accuracy over many simulated subjects\n"
                "  train       the avatar's ablation on a tracked workspace\n"
+               "  truth-workspace  a simulated capture's workspace with the true cameras and\n"
+               "              tracking, to train on (what registration costs the avatar)\n"
                "(rendering and kernel speed: build/bench/headforge_bench)\n");
   return args.empty() || args[0] == "--help" ? (args.empty() ? kExitUsage : kExitOk) : kExitUsage;
 }

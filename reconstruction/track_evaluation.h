@@ -3,6 +3,7 @@
 #pragma once
 
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -36,5 +37,16 @@ struct TrackingErrors {
 Status EvaluateTracking(const TrackingFile& tracking, const CameraSet& cameras, const IngestedCapture& capture,
                         const nlohmann::json& truth, const std::vector<std::string>& blendshapes,
                         TrackingErrors* errors);
+
+// The simulator's truth in a tracked workspace's terms, for the parts named:
+// "cameras" (each camera's intrinsics in the ingested frames' pixels, and
+// every view's pose at its instant, all views registered), "expression"
+// (each frame's blendshape weights), "identity" (the subject's shape). The
+// parts not named keep the tracked values. The head frame becomes the
+// simulator's, which is the face model's own, as head-pose cameras and the
+// tracked identity assume. An avatar trained on the result has the
+// registration error taken out: what tracking costs it.
+Status TruthAsTracked(const IngestedCapture& capture, const nlohmann::json& truth,
+                      const std::set<std::string>& parts, CameraSet* cameras, TrackingFile* tracking);
 
 }  // namespace headforge

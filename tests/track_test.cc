@@ -4,8 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <numeric>
 
+#include "capture/capture_io.h"
+#include "core/face_model.h"
 #include "core/json_io.h"
 #include "reconstruction/track_evaluation.h"
 #include "tests/run_headforge.h"
@@ -196,6 +199,85 @@ TEST(SimulatedTrack, TalkingStatic) {
   EXPECT_LT(s.motion_deg, 1.5);
   // One camera: the jaw contour keeps its single-view weight.
   EXPECT_DOUBLE_EQ(s.contour_weight, 0.5);
+}
+
+// `bench truth-workspace` on the tracked talking_static: the simulator's
+// cameras, head motion, expressions and identity in a tracked workspace's
+// form. Checked against the simulator's own landmark projections, which the
+// conversion does not read: the true mesh's landmark vertices, drawn through
+// the new cameras, land where the simulator drew them (mapped into the
+// ingested crop).
+TEST(TruthWorkspace, DrawsTheTrueMeshWhereTheSimulatorDid) {
+  const fs::path sim = SharedSimulation("talking_static", 125);
+  const fs::path ws = TrackedTalkingStatic();
+  const fs::path out = Scratch("truth_workspace");
+  const Result r = Headforge({"bench", "truth-workspace", "--workspace", ws.string(), "--truth", sim.string(), "--out",
+                              out.string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::printf("%s", r.out.c_str());
+  EXPECT_NE(r.out.find("focal"), std::string::npos) << "it says how far the tracked focal length was";
+  FaceModel model;
+  ASSERT_TRUE(FaceModel::Load((fs::path(HEADFORGE_TEST_SHARED_DATA) / "ict_facekit" / "ict_face_model.h5").string(),
+                              &model).ok());
+  IngestedCapture capture;
+  CameraSet cameras;
+  TrackingFile tracking;
+  ASSERT_TRUE(ReadTrackedWorkspace(out, model, &capture, &cameras, &tracking).ok());
+  const nlohmann::json truth = Json(sim / "ground_truth.json");
+  TrackingErrors e;
+  ASSERT_TRUE(EvaluateTracking(tracking, cameras, capture, truth, {"jawOpen", "eyeBlink_L"}, &e).ok());
+  EXPECT_EQ(e.views, 125);
+  EXPECT_LT(e.rotation_deg, 1e-4);
+  EXPECT_LT(e.mae.at("jawOpen"), 1e-5);
+  EXPECT_LT(e.mae.at("eyeBlink_L"), 1e-5);
+
+  const IngestedCamera& cam = capture.cameras.at(0);
+  const CameraIntrinsics& lens = *cameras.FindCamera(cam.name);
+  const Eigen::VectorXf alpha = tracking.identity.cast<float>();
+  double worst = 0;
+  int drawn = 0;
+  for (int f = 0; f < capture.num_frames(); f += 31) {
+    const TrackedFrame& tracked = tracking.frames.at(size_t(f));
+    Eigen::Matrix3Xf vertices = model.Identity(alpha);
+    model.AddExpression(tracked.expression.cast<float>(), &vertices);
+    const Eigen::Isometry3d cam_from_head = cameras.FindView(cam.name, f)->cam_from_world * tracked.head_motion;
+    const auto& drawn_by_sim = truth["frames"][cam.frames.at(size_t(f)).source_frame]["views"][cam.name]["landmarks"];
+    for (int i = 0; i < 68; ++i) {
+      const Eigen::Vector3d p = cam_from_head * vertices.col(model.landmarks_ibug68()[size_t(i)]).cast<double>();
+      const Eigen::Vector2d ours(lens.fx * p.x() / p.z() + lens.cx, lens.fy * p.y() / p.z() + lens.cy);
+      const Eigen::Vector2d theirs((drawn_by_sim[i][0].get<double>() + 0.5 - cam.crop_x0) * cam.crop_scale - 0.5,
+                                   (drawn_by_sim[i][1].get<double>() + 0.5 - cam.crop_y0) * cam.crop_scale - 0.5);
+      worst = std::max(worst, (ours - theirs).norm());
+      ++drawn;
+    }
+  }
+  EXPECT_EQ(drawn, 5 * 68);
+  // The truth file rounds pixels to 1e-4 and poses to its own precision.
+  EXPECT_LT(worst, 0.01) << "frame pixels";
+
+  // One part alone: the tracked cameras stay.
+  const fs::path only = Scratch("truth_expression_only");
+  ASSERT_EQ(Headforge({"bench", "truth-workspace", "--workspace", ws.string(), "--truth", sim.string(), "--out",
+                       only.string(), "--replace", "expression"}).code, 0);
+  CameraSet kept, tracked_cameras;
+  ASSERT_TRUE(CameraSet::Read(only / "cameras_head.json", &kept).ok());
+  ASSERT_TRUE(CameraSet::Read(ws / "cameras_head.json", &tracked_cameras).ok());
+  EXPECT_EQ(kept.cameras.at(0).fx, tracked_cameras.cameras.at(0).fx);
+  EXPECT_TRUE(kept.views.at(7).cam_from_world.isApprox(tracked_cameras.views.at(7).cam_from_world));
+
+  // It will not write over a folder it did not make, nor name a part it has not.
+  const fs::path other = Scratch("truth_other");
+  fs::create_directories(other);
+  { std::ofstream(other / "notes.txt") << "mine"; }
+  const Result refused = Headforge({"bench", "truth-workspace", "--workspace", ws.string(), "--truth", sim.string(),
+                                    "--out", other.string()});
+  EXPECT_NE(refused.code, 0);
+  EXPECT_NE(refused.err.find("did not write"), std::string::npos) << refused.err;
+  EXPECT_TRUE(fs::exists(other / "notes.txt"));
+  const Result unknown = Headforge({"bench", "truth-workspace", "--workspace", ws.string(), "--truth", sim.string(),
+                                    "--out", only.string(), "--replace", "lighting"});
+  EXPECT_NE(unknown.code, 0);
+  EXPECT_NE(unknown.err.find("no part 'lighting'"), std::string::npos) << unknown.err;
 }
 
 // Eight fixed cameras on a 120-degree arc, the whole scene (2 s), through the

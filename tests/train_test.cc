@@ -116,24 +116,30 @@ TEST_F(TrainStage, TheLossFallsAndTheHeldOutFramesAreScored) {
   EXPECT_LT(psnr, 60.0);
 }
 
+// Two short runs (20 steps each) with the same seed give the same model, and
+// another seed another. Whole runs with the same seed give the same model
+// too: RunChainsTrainAfterTrack... trains the reference's options again
+// through `headforge run`, and KilledMidTraining... resumes one.
 TEST_F(TrainStage, TheSameSeedGivesTheSameModel) {
   ASSERT_EQ(first_.code, 0) << first_.err;
-  const fs::path again = CopyOf(TrackedTalkingStatic(), Scratch("again"));
-  const Result second = Headforge(TrainArgs(again));
+  const fs::path a = CopyOf(TrackedTalkingStatic(), Scratch("again"));
+  const fs::path b = CopyOf(TrackedTalkingStatic(), Scratch("again_b"));
+  auto short_args = [](const fs::path& ws) {
+    std::vector<std::string> args = TrainArgs(ws);
+    *(std::find(args.begin(), args.end(), "--steps") + 1) = "20";
+    return args;
+  };
+  const Result first = Headforge(short_args(a));
+  ASSERT_EQ(first.code, 0) << first.err;
+  const Result second = Headforge(short_args(b));
   ASSERT_EQ(second.code, 0) << second.err;
-  EXPECT_EQ(FileHash(again / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
-
-  // Another seed gives another model: two short runs that differ in the
-  // seed alone (20 steps each, cheaper than a third whole run).
-  std::vector<std::string> args = TrainArgs(again);
-  *(std::find(args.begin(), args.end(), "--steps") + 1) = "20";
-  const Result short_run = Headforge(args);
-  ASSERT_EQ(short_run.code, 0) << short_run.err;
-  const std::string seed_default = FileHash(again / kModelDir / "model.pt");
+  const std::string seed_default = FileHash(a / kModelDir / "model.pt");
+  EXPECT_EQ(FileHash(b / kModelDir / "model.pt"), seed_default);
+  std::vector<std::string> args = short_args(b);
   args.insert(args.end(), {"--train-seed", "5"});
   const Result other = Headforge(args);
   ASSERT_EQ(other.code, 0) << other.err;
-  EXPECT_NE(FileHash(again / kModelDir / "model.pt"), seed_default);
+  EXPECT_NE(FileHash(b / kModelDir / "model.pt"), seed_default);
 }
 
 TEST_F(TrainStage, KilledMidTrainingResumesToTheSameModel) {
@@ -191,6 +197,8 @@ TEST_F(TrainStage, RunChainsTrainAfterTrackAndSkipsItWhenNothingChanged) {
   EXPECT_TRUE(fs::exists(ws / kModelDir / "model.pt"));
   // --model auto chose the gaussian-style model for the one fixed camera, and said so.
   EXPECT_NE(first.err.find("train: gaussian-style (--model auto: one camera"), std::string::npos) << first.err;
+  // The reference's options and seed, trained again: the same model.
+  EXPECT_EQ(FileHash(ws / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
   const Result status = Headforge({"status", ws.string()});
   EXPECT_NE(status.out.find("train      done"), std::string::npos) << status.out;
   EXPECT_NE(status.out.find("auto: one camera"), std::string::npos) << status.out;

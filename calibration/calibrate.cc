@@ -102,7 +102,8 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
          "Head-pose mode: Huber scale of landmark residuals (px).", "robust-px");
   o->Add("calibrate.head_pose.refine", &c->head_pose.refine,
          "Head-pose mode: face-model refines the focal length and poses by fitting the face model's identity and "
-         "expressions too (unless --focal or --fov is given); off keeps the fit to the mean face's landmarks.",
+         "expressions too (with --focal or --fov, the poses alone at that focal length); off keeps the fit to the mean "
+         "face's landmarks.",
          "head-pose-refine");
   o->Add("calibrate.head_pose.refine_rounds", &c->head_pose.refine_rounds,
          "Head-pose mode: face-model fits at most, each started from the cameras the last one left, until the "

@@ -35,6 +35,7 @@ const std::vector<StageEntry>& StageTable() {
     t[1].reads = {"capture.json", "landmarks.json", "frames/", "masks/"};
     t[1].writes = {"cameras.json", "colmap/ (when COLMAP ran)"};
     t[1].uses_face_model = true;
+    t[1].version = 2;  // 2: head-pose poses refined with the face model at a focal length the user gave
     t[1].make = MakeCalibrateJob;
 
     t[2].name = "align";

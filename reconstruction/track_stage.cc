@@ -394,7 +394,7 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
 
 Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capture, const TrackOptions& options,
                              const std::string& landmark_embedding, int max_rounds, double min_change,
-                             double prior_focal, CameraSet* cameras, HeadPoseRefinement* result) {
+                             double prior_focal, bool fit_focal, CameraSet* cameras, HeadPoseRefinement* result) {
   if (cameras->mode != "head-pose" || cameras->frame != "head")
     return Status::InvalidArgument("the face-model refinement applies to head-pose cameras");
   if (capture.cameras.size() != 1 || cameras->cameras.size() != 1)
@@ -408,7 +408,7 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
   HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, LoadLandmarkEmbedding(model, embedding), options.identity_modes, &basis));
   TrackOptions fit = options;
   fit.fixed_head = false;
-  fit.fit_focal = true;
+  fit.fit_focal = fit_focal;
   fit.samples = capture.samples;
   HeadPoseRefinement out;
   CameraIntrinsics& in = cameras->cameras[0];
@@ -419,7 +419,7 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
     HF_RETURN_IF_ERROR(BuildTrackingViews(capture, *cameras, &views, &view_source));
     fit.focal_prior_scale = prior_focal > 0 ? prior_focal / in.fx : 0;
     // The uncertainty of the last round's estimate; which round is last shows only after it.
-    fit.focal_uncertainty = true;
+    fit.focal_uncertainty = fit_focal;
     TrackResult tracked;
     HF_RETURN_IF_ERROR(TrackSequence(basis, views, capture.num_frames(), fit, &tracked));
     out.focal_log_sigma = tracked.focal_log_sigma;
@@ -452,18 +452,33 @@ Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCaptu
                           int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary,
                           bool* applied) {
   if (applied) *applied = false;
-  if (summary->mode != "head-pose" || calibrate.head_pose.refine != "face-model" ||
-      calibrate.head_pose.FocalGiven())
-    return Status::Ok();
+  if (summary->mode != "head-pose" || calibrate.head_pose.refine != "face-model") return Status::Ok();
+  // A focal length the user gave stays; the poses are refined at it (fitted
+  // to the mean face's landmarks alone they reproject them about twice as
+  // far off: docs/benchmarks.md, what registration costs the avatar).
+  const bool fit_focal = !calibrate.head_pose.FocalGiven();
   TrackOptions fit;
   fit.threads = threads > 0 ? threads : HardwareThreads();
   fit.focal_prior_sigma = calibrate.head_pose.prior_sigma;
-  const double prior_focal = HeadPosePriorFocal(calibrate.head_pose, capture);
+  const double prior_focal = fit_focal ? HeadPosePriorFocal(calibrate.head_pose, capture) : 0.0;
   progress->Start("calibrate: refining with the face model", 0);
   HeadPoseRefinement refined;
   HF_RETURN_IF_ERROR(RefineHeadPoseCameras(model, capture, fit, calibrate.landmark_embedding,
-                                           calibrate.head_pose.refine_rounds, 0.01, prior_focal, cameras, &refined));
+                                           fit_focal ? calibrate.head_pose.refine_rounds : 1, 0.01, prior_focal,
+                                           fit_focal, cameras, &refined));
   progress->Finish();
+  if (!fit_focal) {
+    HF_LOG(Info) << "calibrate: the face model's identity and expressions refine the poses at the given focal length "
+                 << refined.focal_after << " px (landmark residual " << refined.median_residual_px << " px, "
+                 << refined.seconds << " s)";
+    summary->reprojection_px = refined.median_residual_px;
+    if (!capture.cameras.empty() && capture.cameras[0].crop_scale > 0)
+      summary->reprojection_source_px = refined.median_residual_px / capture.cameras[0].crop_scale;
+    summary->reason += std::string(summary->reason.empty() ? "" : "; ") +
+                       "poses refined with the face model at the given focal length";
+    if (applied) *applied = true;
+    return Status::Ok();
+  }
   if (!refined.settled)
     HF_LOG(Warning) << "calibrate: the focal length was still moving after " << refined.rounds
                     << " rounds of the face-model refinement (--head-pose-refine-rounds)";

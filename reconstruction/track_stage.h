@@ -91,15 +91,17 @@ struct HeadPoseRefinement {
 // `max_rounds` have run. Where the head barely turns the valley has no
 // floor; `prior_focal` (pixels; 0: none) holds the focal length near an
 // ordinary lens's there, with options.focal_prior_sigma (TrackOptions).
+// `fit_focal` false holds the focal length as the cameras have it (one
+// given by the user): the poses alone move.
 Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capture, const TrackOptions& options,
                              const std::string& landmark_embedding, int max_rounds, double min_change,
-                             double prior_focal, CameraSet* cameras, HeadPoseRefinement* result);
+                             double prior_focal, bool fit_focal, CameraSet* cameras, HeadPoseRefinement* result);
 
 // The calibrate stage's last step for head-pose cameras (calibrate's result
 // when it chose head-pose): RefineHeadPoseCameras as `calibrate.head_pose.refine`
 // asks, its focal length and residual reported in `summary`. Leaves other
-// cameras, and a focal length the user gave, alone; `applied` (optional) says
-// whether it changed the cameras.
+// cameras alone, and a focal length the user gave (the poses are refined at
+// it); `applied` (optional) says whether it changed the cameras.
 Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCapture& capture, const FaceModel& model,
                           int threads, Progress* progress, CameraSet* cameras, CalibrateSummary* summary,
                           bool* applied = nullptr);

@@ -467,38 +467,35 @@ Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCaptu
                                            fit_focal ? calibrate.head_pose.refine_rounds : 1, 0.01, prior_focal,
                                            fit_focal, cameras, &refined));
   progress->Finish();
+  std::string how;
   if (!fit_focal) {
     HF_LOG(Info) << "calibrate: the face model's identity and expressions refine the poses at the given focal length "
                  << refined.focal_after << " px (landmark residual " << refined.median_residual_px << " px, "
                  << refined.seconds << " s)";
-    summary->reprojection_px = refined.median_residual_px;
-    if (!capture.cameras.empty() && capture.cameras[0].crop_scale > 0)
-      summary->reprojection_source_px = refined.median_residual_px / capture.cameras[0].crop_scale;
-    summary->reason += std::string(summary->reason.empty() ? "" : "; ") +
-                       "poses refined with the face model at the given focal length";
-    if (applied) *applied = true;
-    return Status::Ok();
+    how = "poses refined with the face model at the given focal length";
+  } else {
+    if (!refined.settled)
+      HF_LOG(Warning) << "calibrate: the focal length was still moving after " << refined.rounds
+                      << " rounds of the face-model refinement (--head-pose-refine-rounds)";
+    HF_LOG(Info) << "calibrate: the face model's identity and expressions move the focal length from "
+                 << refined.focal_before << " to " << refined.focal_after << " px"
+                 << FocalUncertaintyText(refined.focal_log_sigma) << " in " << refined.rounds
+                 << " round(s) (landmark residual " << refined.median_residual_px << " px, " << refined.seconds << " s)";
+    summary->focal = refined.focal_after;
+    summary->focal_log_sigma = refined.focal_log_sigma;
+    // A standard deviation of 15 % or more: the video does not fix the lens.
+    if (refined.focal_log_sigma > 0.14)
+      HF_LOG(Warning) << "calibrate: this video leaves the focal length poorly determined (" << refined.focal_after
+                      << " px" << FocalUncertaintyText(refined.focal_log_sigma)
+                      << "; the head barely turns or moves toward the camera): if you know the lens, give --fov DEG "
+                         "(the video's horizontal field of view) or --focal PX";
+    how = "refined with the face model from focal " +
+          std::to_string(static_cast<int>(std::lround(refined.focal_before))) + " px";
   }
-  if (!refined.settled)
-    HF_LOG(Warning) << "calibrate: the focal length was still moving after " << refined.rounds
-                    << " rounds of the face-model refinement (--head-pose-refine-rounds)";
-  HF_LOG(Info) << "calibrate: the face model's identity and expressions move the focal length from "
-               << refined.focal_before << " to " << refined.focal_after << " px"
-               << FocalUncertaintyText(refined.focal_log_sigma) << " in " << refined.rounds
-               << " round(s) (landmark residual " << refined.median_residual_px << " px, " << refined.seconds << " s)";
-  summary->focal = refined.focal_after;
-  summary->focal_log_sigma = refined.focal_log_sigma;
-  // A standard deviation of 15 % or more: the video does not fix the lens.
-  if (refined.focal_log_sigma > 0.14)
-    HF_LOG(Warning) << "calibrate: this video leaves the focal length poorly determined (" << refined.focal_after << " px"
-                    << FocalUncertaintyText(refined.focal_log_sigma)
-                    << "; the head barely turns or moves toward the camera): if you know the lens, give --fov DEG "
-                       "(the video's horizontal field of view) or --focal PX";
   summary->reprojection_px = refined.median_residual_px;
   if (!capture.cameras.empty() && capture.cameras[0].crop_scale > 0)
     summary->reprojection_source_px = refined.median_residual_px / capture.cameras[0].crop_scale;
-  summary->reason += std::string(summary->reason.empty() ? "" : "; ") + "refined with the face model from focal " +
-                     std::to_string(static_cast<int>(std::lround(refined.focal_before))) + " px";
+  summary->reason += std::string(summary->reason.empty() ? "" : "; ") + how;
   if (applied) *applied = true;
   return Status::Ok();
 }

@@ -77,6 +77,9 @@ Status LoadDrawableAvatar(const fs::path& workspace, fs::path model_dir, const s
     a->loading.holdout = a->gan.holdout;
     a->loading.holdout_order = a->gan.holdout_order;
     a->loading.holdout_cameras = a->gan.holdout_cameras;
+    a->loading.mask = a->gan.mask;
+    a->loading.mask_hair = a->gan.mask_hair;
+    a->loading.mask_skin = a->gan.mask_skin;
     HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, a->model, a->loading, &a->data).WithContext("render"));
     a->background = a->gan.background;
     a->draw = [a](const torch::Tensor& condition, const SplatCamera& camera) { return a->gan.Draw(condition, camera); };

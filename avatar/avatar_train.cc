@@ -119,6 +119,24 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.holdout_cameras", &t->holdout_cameras,
          "Cameras held out whole (every frame of theirs scored, none trained on), comma-separated.",
          "holdout-cameras");
+  o->Add("train.mask", &t->mask,
+         "The head masks trained and scored on: ingest (the workspace's masks), mesh (the workspace's masks cut to "
+         "the tracked mesh's silhouette, grown by --mask-hair over the scalp and --mask-skin elsewhere: background "
+         "of the skin's colour beside the head is left out) or auto (mesh for gaussian-style, ingest for "
+         "gan-avatar).",
+         "mask");
+  o->Add("train.mask_hair", &t->mask_hair,
+         "--mask mesh: how far (metres) the mask may reach beyond the tracked scalp, for hair; raise it for big hair.",
+         "mask-hair");
+  o->Add("train.mask_skin", &t->mask_skin,
+         "--mask mesh: how far (metres) the mask may reach beyond the rest of the tracked mesh (face, ears, neck), "
+         "for the tracking's error.",
+         "mask-skin");
+  o->Add("train.pose_lr", &t->pose_lr,
+         "gaussian-style: Adam's step of a rigid correction of each training view's tracked head pose (radians, "
+         "metres), learnt with the avatar where the tracked poses are a little off; 0 keeps them. Held-out views "
+         "keep their tracked poses.",
+         "pose-lr");
   o->Add("train.init_gaussians", &t->init_gaussians, "Gaussians sampled on the tracked mesh to start with.",
          "init-gaussians");
   o->Add("train.max_gaussians", &t->max_gaussians, "Densification adds no more beyond this count.", "max-gaussians");
@@ -310,6 +328,9 @@ Status LoadTrainingData(const TrainOptions& options, const fs::path& workspace, 
   loading.holdout = options.holdout;
   loading.holdout_order = options.holdout_order;
   loading.holdout_cameras = options.holdout_cameras;
+  loading.mask = options.MaskFor(options.model);
+  loading.mask_hair = options.mask_hair;
+  loading.mask_skin = options.mask_skin;
   if (options.model == "gaussian-style" && options.decoder_steps > 0 && options.adversarial_weight > 0)
     loading.uv_map_side = options.decoder_resolution > 0 ? options.decoder_resolution : options.resolution;
   HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, data).WithContext("train"));

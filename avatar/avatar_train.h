@@ -44,6 +44,20 @@ struct TrainOptions {
   double holdout = 0.2;         // the fraction of the frames never trained on
   std::string holdout_order = "auto";  // which: last, interleaved or auto (DatasetOptions)
   std::vector<std::string> holdout_cameras;  // cameras never trained on, scored with the held-out frames
+  // The head masks trained and scored on (DatasetOptions::mask): ingest,
+  // mesh, or auto (mesh for gaussian-style, which trains on tracked frames;
+  // ingest for gan-avatar, whose views may see sides the tracker cannot).
+  std::string mask = "auto";
+  double mask_hair = 0.03;  // "mesh": metres the mask may reach beyond the scalp
+  double mask_skin = 0.016;  // "mesh": ... and beyond the rest of the tracked mesh
+  // gaussian-style: Adam's step for a rigid correction of each training
+  // view's tracked head pose (radians and metres), learnt with the avatar;
+  // 0 keeps the tracked poses. Held-out views keep theirs.
+  double pose_lr = 0;
+  // The mask `model` trains with under these options: ingest or mesh.
+  std::string MaskFor(const std::string& model_name) const {
+    return mask != "auto" ? mask : model_name == "gaussian-style" ? "mesh" : "ingest";
+  }
   int init_gaussians = 20000;   // sampled on the tracked mesh
   int64_t max_gaussians = 40000;
   int densify_from = 300, densify_until = 3000, densify_every = 100;

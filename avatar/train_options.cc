@@ -26,9 +26,24 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(TrainOptions, model, preset, dev
     adversarial_weight, perceptual_weight, decoder_ada, full_tune, decoder_init, log_every, eval_every,
     preview_every, checkpoint_every, seed)
 
-nlohmann::json ToJson(const TrainOptions& options) { return options; }
+// The mask's two options are set apart: the macro above takes at most 64 names.
+nlohmann::json ToJson(const TrainOptions& options) {
+  nlohmann::json j = options;
+  j["mask"] = options.mask;
+  j["mask_hair"] = options.mask_hair;
+  j["mask_skin"] = options.mask_skin;
+  j["pose_lr"] = options.pose_lr;
+  return j;
+}
 
-TrainOptions TrainOptionsFromJson(const nlohmann::json& j) { return j.get<TrainOptions>(); }
+TrainOptions TrainOptionsFromJson(const nlohmann::json& j) {
+  TrainOptions options = j.get<TrainOptions>();
+  options.mask = j.value("mask", options.mask);
+  options.mask_hair = j.value("mask_hair", options.mask_hair);
+  options.mask_skin = j.value("mask_skin", options.mask_skin);
+  options.pose_lr = j.value("pose_lr", options.pose_lr);
+  return options;
+}
 
 Status TrainOptions::Check() const {
   torch::Device parsed = torch::kCPU;
@@ -48,6 +63,11 @@ Status TrainOptions::Check() const {
   if (holdout_order != "auto" && holdout_order != "last" && holdout_order != "interleaved")
     return Status::InvalidArgument("train: --holdout-order must be auto, last or interleaved, not '" + holdout_order +
                                    "'");
+  if (mask != "auto" && mask != "ingest" && mask != "mesh")
+    return Status::InvalidArgument("train: --mask must be auto, ingest or mesh, not '" + mask + "'");
+  if (!(mask_hair >= 0 && mask_hair <= 0.3) || !(mask_skin >= 0 && mask_skin <= 0.3))
+    return Status::InvalidArgument("train: --mask-hair and --mask-skin must be in [0, 0.3] metres");
+  if (!(pose_lr >= 0)) return Status::InvalidArgument("train: --pose-lr must be zero or positive");
   if (init_gaussians < 1 || max_gaussians < init_gaussians)
     return Status::InvalidArgument("train: --init-gaussians must be positive and at most --max-gaussians");
   if (densify_every < 1) return Status::InvalidArgument("train: --densify-every must be at least 1");

@@ -31,6 +31,9 @@ const Variant kVariants[] = {
     {"full", "stages 1+2", [](TrainOptions*) {}},
     {"canonical", "stages 1+2, canonical deformation", [](TrainOptions* t) { t->mesh_riding = false; }},
     {"mesh-riding", "stages 1+2, mesh riding", [](TrainOptions* t) { t->mesh_riding = true; }},
+    // Scored over its own masks: set beside the others only through the
+    // simulator's truth (--truth).
+    {"mask-ingest", "stages 1+2, the workspace's masks", [](TrainOptions* t) { t->mask = "ingest"; }},
     // Stage 3 (GaussianStyle's Table 2b); they need --decoder-steps. Each
     // scores stage 2's splats beside the decoded image (eval_stage2.json).
     {"stage3", "stages 1-3", [](TrainOptions*) {}, true},
@@ -93,7 +96,8 @@ int BenchTrain(const std::vector<std::string>& args) {
   bool json = false;
   options.Add("bench.variants", &variants,
               "Variants to train: stage1, no-region, full (the options as given), canonical (the paper's deformation "
-              "in canonical space), mesh-riding (these five train stages 1 and 2 only); stage3, stage3-no-ada, "
+              "in canonical space), mesh-riding, mask-ingest (the workspace's masks as they are; held out over those, so "
+              "compare it with the others through --truth) (these six train stages 1 and 2 only); stage3, stage3-no-ada, "
               "stage3-no-discriminator, stage3-full-tune (the paper's Table 2b: they need --decoder-steps, and print "
               "stage 2's figures beside stage 3's); the gan-avatar model has full alone (its default).",
               "variants");

@@ -34,6 +34,9 @@ Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avata
       avatar->holdout_order = config.at("training").value("holdout_order", avatar->holdout_order);
       avatar->holdout_cameras =
           config.at("training").value("holdout_cameras", std::vector<std::string>());
+      avatar->mask = config.at("training").value("mask", avatar->mask);
+      avatar->mask_hair = config.at("training").value("mask_hair", avatar->mask_hair);
+      avatar->mask_skin = config.at("training").value("mask_skin", avatar->mask_skin);
     }
   } catch (const nlohmann::json::exception& e) {
     return Status::DataError(dir.string() + "/config.json: " + e.what());

@@ -28,6 +28,8 @@ struct GanAvatar {
   double holdout = 0.2;
   std::string holdout_order = "last";
   std::vector<std::string> holdout_cameras;
+  std::string mask = "ingest";  // the masks it trained on (DatasetOptions::mask)
+  double mask_hair = 0.03, mask_skin = 0.016;
 
   // The image [3, H, W] (on the CPU, in [0, 1]) for `expressions` [E] (the
   // mean latent when undefined or without a mapping) from `camera`, a camera

@@ -580,6 +580,8 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
       {"training", {{"steps", state_.step}, {"batch", options_.batch}, {"seconds", state_.seconds},
                     {"seed", options_.seed}, {"preset", options_.preset}, {"holdout", options_.holdout},
                     {"holdout_order", options_.holdout_order}, {"holdout_cameras", options_.holdout_cameras},
+                    {"mask", options_.MaskFor("gan-avatar")}, {"mask_hair", options_.mask_hair},
+                    {"mask_skin", options_.mask_skin},
                     {"generator_from", options_.generator_from}}},
       {"options", ToJson(options_)}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "config.json", config, 1));

@@ -185,6 +185,9 @@ nlohmann::json ConfigJson(const GaussianStyleAvatar& avatar, const TrainOptions&
           {"resolution", options.resolution},
           {"holdout", options.holdout},
           {"holdout_order", options.holdout_order},
+          {"mask", options.MaskFor("gaussian-style")},
+          {"mask_hair", options.mask_hair},
+          {"mask_skin", options.mask_skin},
           {"width", data.width},
           {"height", data.height},
           {"gaussians", avatar.gaussians.params.size()},
@@ -232,6 +235,10 @@ Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar
       // Models trained before the order existed held out the last frames.
       options->holdout_order = config.value("holdout_order", std::string("last"));
       options->mesh_riding = out.model->options().mesh_riding;
+      // Models trained before the mask was chosen trained on the workspace's.
+      options->mask = config.value("mask", std::string("ingest"));
+      options->mask_hair = config.value("mask_hair", options->mask_hair);
+      options->mask_skin = config.value("mask_skin", options->mask_skin);
     }
   } catch (const std::exception& e) {
     return Status::DataError((dir / "config.json").string() + " is damaged (" + e.what() + "); run headforge train again");

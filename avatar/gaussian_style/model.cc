@@ -105,4 +105,27 @@ std::vector<torch::Tensor> GaussianStyleImpl::DeformationParameters() {
   return out;
 }
 
+PosedGaussians CorrectPose(const PosedGaussians& posed, const torch::Tensor& correction) {
+  const torch::Tensor axis_angle = correction.slice(0, 0, 3), shift = correction.slice(0, 3, 6);
+  // The norm's gradient at zero is undefined: a tiny offset keeps it finite.
+  const torch::Tensor angle = (axis_angle.square().sum() + 1e-12).sqrt();
+  const torch::Tensor axis = axis_angle / angle;
+  const torch::Tensor half = angle / 2, s = torch::sin(half);
+  const torch::Tensor w = torch::cos(half), x = s * axis[0], y = s * axis[1], z = s * axis[2];
+  // The rotation matrix of the unit quaternion (w, x, y, z).
+  const torch::Tensor rotation = torch::stack({1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+                                               2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                                               2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)})
+                                   .view({3, 3});
+  PosedGaussians out = posed;
+  out.means = torch::matmul(posed.means, rotation.t()) + shift;
+  // The Hamilton product (w, x, y, z) * q for every Gaussian's rotation q.
+  const torch::Tensor q = posed.quats;
+  const torch::Tensor qw = q.select(1, 0), qx = q.select(1, 1), qy = q.select(1, 2), qz = q.select(1, 3);
+  out.quats = torch::stack({w * qw - x * qx - y * qy - z * qz, w * qx + x * qw + y * qz - z * qy,
+                            w * qy - x * qz + y * qw + z * qx, w * qz + x * qy - y * qx + z * qw},
+                           1);
+  return out;
+}
+
 }  // namespace headforge

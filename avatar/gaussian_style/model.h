@@ -41,6 +41,11 @@ struct PosedGaussians {
   torch::Tensor features;                  // [N, F]: RGB in [0, 1], then the other channels raw
 };
 
+// `posed` moved rigidly by `correction` [6]: an axis-angle rotation
+// (radians) about the head frame's origin, then a translation (metres);
+// differentiable in both. A training view's head-pose correction.
+PosedGaussians CorrectPose(const PosedGaussians& posed, const torch::Tensor& correction);
+
 // The Gaussians' parameters (rows; densification edits them): positions,
 // rotations and scales canonical, or local to their triangle with mesh
 // riding; `colour_logits` holds the F-channel features.

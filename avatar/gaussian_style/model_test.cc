@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
+#include <Eigen/Geometry>
+
 #include "avatar/gaussian_style/model.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/metrics/image_metrics.h"
@@ -138,6 +140,60 @@ TEST(GaussianStyleHardCases, AnEmptyMaskIsScoredOverTheWholeFrameOnly) {
   const ViewScores mean = MeanScores({empty, head});
   EXPECT_DOUBLE_EQ(mean.psnr_masked, head.psnr_masked);  // the empty mask is not averaged in
   EXPECT_NEAR(mean.psnr_full, (empty.psnr_full + head.psnr_full) / 2, 1e-12);
+}
+
+// A head-pose correction moves the Gaussians as Eigen's rotation and
+// translation move points, turns their rotations with it, and its gradient
+// matches central differences (float64).
+TEST(CorrectPose, MovesTheGaussiansRigidlyAndItsGradientMatchesDifferences) {
+  torch::manual_seed(3);
+  const auto f64 = torch::TensorOptions().dtype(torch::kFloat64);
+  PosedGaussians posed;
+  posed.means = torch::randn({5, 3}, f64) * 0.1;
+  posed.quats = torch::randn({5, 4}, f64);
+  posed.log_scales = torch::randn({5, 3}, f64);
+  posed.opacities = torch::rand({5}, f64);
+  posed.features = torch::rand({5, 3}, f64);
+  const torch::Tensor correction = torch::tensor({0.05, -0.02, 0.03, 0.004, -0.002, 0.001}, f64);
+  const PosedGaussians moved = CorrectPose(posed, correction);
+  const Eigen::Vector3d omega(0.05, -0.02, 0.03), shift(0.004, -0.002, 0.001);
+  const Eigen::AngleAxisd turn(omega.norm(), omega.normalized());
+  for (int64_t i = 0; i < 5; ++i) {
+    const Eigen::Vector3d p(posed.means[i][0].item<double>(), posed.means[i][1].item<double>(),
+                            posed.means[i][2].item<double>());
+    const Eigen::Vector3d expected = turn * p + shift;
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(moved.means[i][k].item<double>(), expected[k], 1e-12) << i;
+    // The Gaussian's axes turn with it: R(q') = R(omega) R(q).
+    const Eigen::Quaterniond q(posed.quats[i][0].item<double>(), posed.quats[i][1].item<double>(),
+                               posed.quats[i][2].item<double>(), posed.quats[i][3].item<double>());
+    const Eigen::Quaterniond q2(moved.quats[i][0].item<double>(), moved.quats[i][1].item<double>(),
+                                moved.quats[i][2].item<double>(), moved.quats[i][3].item<double>());
+    EXPECT_NEAR(q2.norm(), q.norm(), 1e-12);
+    const Eigen::Matrix3d expected_axes = turn.toRotationMatrix() * q.normalized().toRotationMatrix();
+    EXPECT_LT((q2.normalized().toRotationMatrix() - expected_axes).norm(), 1e-12) << i;
+  }
+  EXPECT_TRUE(torch::equal(moved.log_scales, posed.log_scales));
+
+  // The gradient of a scalar of the result, at the correction and at zero
+  // (where the angle's norm has no derivative of its own).
+  const torch::Tensor weights_m = torch::randn({5, 3}, f64), weights_q = torch::randn({5, 4}, f64);
+  const auto loss = [&](const torch::Tensor& c) {
+    const PosedGaussians m = CorrectPose(posed, c);
+    return ((m.means * weights_m).sum() + (m.quats * weights_q).sum());
+  };
+  for (const torch::Tensor& at : {correction, torch::zeros({6}, f64)}) {
+    const torch::Tensor c = at.clone().requires_grad_(true);
+    loss(c).backward();
+    const torch::Tensor grad = c.grad();
+    for (int64_t k = 0; k < 6; ++k) {
+      const double h = 1e-6;
+      torch::Tensor plus = at.clone(), minus = at.clone();
+      plus[k] += h;
+      minus[k] -= h;
+      const double numeric = (loss(plus).item<double>() - loss(minus).item<double>()) / (2 * h);
+      EXPECT_NEAR(grad[k].item<double>(), numeric, 1e-6 * std::max(1.0, std::abs(numeric))) << k;
+    }
+  }
 }
 
 }  // namespace

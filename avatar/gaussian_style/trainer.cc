@@ -95,6 +95,8 @@ class Trainer {
   std::vector<torch::Tensor> images_, masks_;  // the training views' on the device
   std::vector<int64_t> usable_;  // the training views whose tracking is reliable
   double lr_means_ = 0;  // the means' first learning rate; it decays to 1% over the steps
+  // [training views, 6]: each one's head-pose correction (--pose-lr), zero at first.
+  torch::Tensor pose_corrections_;
 };
 
 Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
@@ -126,6 +128,11 @@ Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   adam_.Add(&p.colour_logits, options_.lr_features, true);
   network_ = avatar_.model->parameters();
   for (torch::Tensor& t : network_) adam_.Add(&t, options_.lr_network, false);
+  if (options_.pose_lr > 0) {
+    pose_corrections_ = torch::zeros({int64_t(data_.train.size()), 6}, torch::TensorOptions().device(device_));
+    pose_corrections_.requires_grad_(true);
+    adam_.Add(&pose_corrections_, options_.pose_lr, false);
+  }
   DefaultDensifyOptions densify;
   densify.start = options_.densify_from;
   densify.stop = options_.densify_until;
@@ -170,7 +177,8 @@ double Trainer::Step(int step) {
   int64_t latent = view.frame;
   if (stage2 && options_.latent_dropout > 0 && torch::rand({1}, gen_).item<double>() < options_.latent_dropout)
     latent = 0;
-  const PosedGaussians posed = avatar_.Pose(data_, view.condition, latent, stage2);
+  PosedGaussians posed = avatar_.Pose(data_, view.condition, latent, stage2);
+  if (pose_corrections_.defined()) posed = CorrectPose(posed, pose_corrections_[index]);
   const SplatRenderResult out = RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities,
                                                 posed.features.slice(1, 0, 3), background, view.view);
   out.means2d.retain_grad();
@@ -237,6 +245,7 @@ Status Trainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
   const auto rows = p.All();
   for (size_t i = 0; i < rows.size(); ++i) c.Put(std::string("gaussians.") + kRowNames[i], *rows[i]);
   c.Put("gaussians.binding", avatar_.gaussians.binding);
+  if (pose_corrections_.defined()) c.Put("pose_corrections", pose_corrections_);
   c.PutModule("model.", *avatar_.model);
   adam_.Save("adam.", &c);
   densify_->SaveState("densify.", &c);
@@ -271,6 +280,13 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   if (c.Get("gaussians.binding", &avatar_.gaussians.binding))
     avatar_.gaussians.binding = avatar_.gaussians.binding.to(device_);
   if (!c.GetModule("model.", avatar_.model.get())) return damaged;
+  if (pose_corrections_.defined()) {
+    torch::Tensor corrections;
+    if (!c.Get("pose_corrections", &corrections) || !corrections.sizes().equals(pose_corrections_.sizes()))
+      return damaged;
+    torch::NoGradGuard no_grad;
+    pose_corrections_.copy_(corrections);
+  }
   if (!adam_.Load("adam.", c)) return damaged;
   densify_->LoadState("densify.", c);
   gen_.set_state(generator);
@@ -300,14 +316,21 @@ Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, Stats
     const bool last = step == options_.steps || out_of_time;
     if (step % options_.log_every == 0 || last) {
       const double n = double(std::max<int64_t>(state_.loss_count, 1));
-      stats->Append(nlohmann::json{{"step", step},
-                                   {"stage", deform_now(step) ? 2 : 1},
-                                   {"loss", state_.loss_sum / n},
-                                   {"l1", state_.l1_sum / n},
-                                   {"region_l1", state_.region_sum / n},
-                                   {"gaussians", avatar_.gaussians.params.size()},
-                                   {"seconds", elapsed()}}
-                        .dump());
+      nlohmann::json line = {{"step", step},
+                             {"stage", deform_now(step) ? 2 : 1},
+                             {"loss", state_.loss_sum / n},
+                             {"l1", state_.l1_sum / n},
+                             {"region_l1", state_.region_sum / n},
+                             {"gaussians", avatar_.gaussians.params.size()},
+                             {"seconds", elapsed()}};
+      if (pose_corrections_.defined()) {
+        // The corrections' median size: degrees of rotation, millimetres of translation.
+        torch::NoGradGuard no_grad;
+        const torch::Tensor c = pose_corrections_.detach().cpu();
+        line["pose_rotation_deg"] = c.slice(1, 0, 3).norm(2, 1).median().item<double>() * 180 / M_PI;
+        line["pose_translation_mm"] = c.slice(1, 3, 6).norm(2, 1).median().item<double>() * 1000;
+      }
+      stats->Append(line.dump());
       state_.loss_sum = state_.l1_sum = state_.region_sum = 0;
       state_.loss_count = 0;
     }

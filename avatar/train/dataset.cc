@@ -95,7 +95,50 @@ torch::Tensor RenderUvMap(const FaceModel& model, const torch::Tensor& vertices,
   return map;
 }
 
+// Where the mesh of `vertices` covers `camera`'s image: CV_8U, 255 on it.
+cv::Mat MeshCoverage(const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& triangles, const SplatCamera& camera) {
+  Mesh mesh;
+  mesh.vertices = vertices;
+  mesh.triangles = triangles;
+  mesh.materials.emplace_back();
+  PinholeCamera pinhole;
+  pinhole.fx = camera.fx;
+  pinhole.fy = camera.fy;
+  pinhole.cx = camera.cx;
+  pinhole.cy = camera.cy;
+  pinhole.width = camera.width;
+  pinhole.height = camera.height;
+  pinhole.cam_from_world = CameraPose(camera);
+  RenderOptions render;
+  render.supersample = 1;
+  render.threads = 1;
+  RenderOutput out;
+  RenderMeshes({&mesh}, pinhole, render, &out);
+  return out.triangle >= 0;
+}
+
 }  // namespace
+
+cv::Mat MeshCutMask(const cv::Mat& mask, const torch::Tensor& vertices, const torch::Tensor& rest,
+                    const torch::Tensor& triangles, const SplatCamera& camera, double hair, double skin) {
+  const torch::Tensor v = vertices.to(torch::kFloat32).contiguous(), r = rest.to(torch::kFloat32).contiguous();
+  const torch::Tensor t = triangles.to(torch::kInt32).contiguous();
+  const Eigen::Matrix3Xf posed = Eigen::Map<const Eigen::Matrix3Xf>(v.data_ptr<float>(), 3, v.size(0));
+  const Eigen::Map<const Eigen::Matrix3Xf> shape(r.data_ptr<float>(), 3, r.size(0));
+  const Eigen::Matrix3Xi tris = Eigen::Map<const Eigen::Matrix3Xi>(t.data_ptr<int>(), 3, t.size(0));
+  // Hair grows over the scalp: from 55% of the rest shape's height (the
+  // brows) to its full allowance at 70%, in the head frame (+y up).
+  const float low = shape.row(1).minCoeff(), high = shape.row(1).maxCoeff();
+  const Eigen::Matrix3Xf normals = VertexNormals(posed, tris);
+  Eigen::Matrix3Xf grown = posed;
+  for (Eigen::Index i = 0; i < posed.cols(); ++i) {
+    const float height = (shape(1, i) - low) / std::max(high - low, 1e-6f);
+    const float scalp = std::clamp((height - 0.55f) / 0.15f, 0.f, 1.f);
+    const float reach = float(skin) + scalp * float(std::max(0.0, hair - skin));
+    grown.col(i) += reach * normals.col(i);
+  }
+  return cv::min(mask, MeshCoverage(grown, tris, camera));
+}
 
 Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, const DatasetOptions& options,
                          AvatarDataset* dataset) {
@@ -104,6 +147,8 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   TrackingFile tracking;
   HF_RETURN_IF_ERROR(ReadTrackedWorkspace(workspace, model, &capture, &cameras, &tracking));
   const int frames = capture.num_frames();
+  if (options.mask != "ingest" && options.mask != "mesh")
+    return Status::InvalidArgument("--mask must be ingest or mesh, not '" + options.mask + "'");
   if (options.resolution < 16) return Status::InvalidArgument("the training resolution must be at least 16 pixels");
   AvatarDataset out;
   out.num_frames = frames;
@@ -161,8 +206,8 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       view.time_s = f.time_s;
       view.camera = cam.name;
       view.unreliable = tracked.interpolated || tracked.low_confidence;
+      cv::Mat image, mask;
       if (options.images) {
-        cv::Mat image, mask;
         HF_RETURN_IF_ERROR(ReadView(capture, cam, *lens, f.index, size, &image, &mask));
         view.image = ImageToTensor(image);
         view.mask = MaskToTensor(mask);
@@ -184,6 +229,12 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       const Eigen::VectorXf expression = tracked.expression.cast<float>();
       view.condition = torch::cat({torch::from_blob(const_cast<float*>(expression.data()), {expression.size()}).clone(),
                                    PoseCondition(rotation, translation)});
+      if (options.images && options.mask == "mesh") {
+        const int64_t e = int64_t(out.expression_names.size());
+        view.mask = MaskToTensor(MeshCutMask(mask, out.Vertices(view.condition.slice(0, 0, e)), out.identity_vertices,
+                                             out.triangles, view.view, options.mask_hair,
+                                             options.mask_skin));
+      }
       if (f.landmarks) RegionBoxes(*f.landmarks, *lens, scale, &view);
       const bool training = !out.HeldOut(f.index) && !held_camera;
       if (training && options.uv_map_side > 0) {

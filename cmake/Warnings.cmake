@@ -13,7 +13,7 @@ endif()
 # integration (the real binary or several stages), colmap (runs COLMAP),
 # train (trains a model), gpu (needs an NVIDIA GPU).
 function(headforge_add_test name)
-  cmake_parse_arguments(ARG "WHOLE" "" "SOURCES;LIBS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "WHOLE" "" "SOURCES;LIBS;LABELS;ARGS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main headforge_warnings)
   target_compile_definitions(${name} PRIVATE
@@ -30,7 +30,7 @@ function(headforge_add_test name)
   # -L and -LE take regular expressions, so -L colmap and -LE train still pick.
   string(REPLACE ";" "-" label "${ARG_LABELS}")
   if(ARG_WHOLE)
-    add_test(NAME ${name} COMMAND ${name})
+    add_test(NAME ${name} COMMAND ${name} ${ARG_ARGS})
     set_tests_properties(${name} PROPERTIES LABELS "${label}" ENVIRONMENT "OMP_NUM_THREADS=1")
   else()
     gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${label}" ENVIRONMENT "OMP_NUM_THREADS=1")

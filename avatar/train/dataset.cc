@@ -70,18 +70,10 @@ torch::Tensor RenderUvMap(const FaceModel& model, const torch::Tensor& vertices,
     mesh.uvs = unit(Eigen::Map<const Eigen::Matrix3Xf>(neutral.data_ptr<float>(), 3, neutral.size(0)).topRows(2));
   }
   mesh.materials.emplace_back();
-  PinholeCamera pinhole;
-  pinhole.fx = canvas.camera.fx;
-  pinhole.fy = canvas.camera.fy;
-  pinhole.cx = canvas.camera.cx;
-  pinhole.cy = canvas.camera.cy;
-  pinhole.width = canvas.camera.width;
-  pinhole.height = canvas.camera.height;
-  pinhole.cam_from_world = CameraPose(canvas.camera);
   RenderOptions render;
   render.supersample = 1;
   RenderOutput out;
-  RenderMeshes({&mesh}, pinhole, render, &out);
+  RenderMeshes({&mesh}, ToPinholeCamera(canvas.camera), render, &out);
   torch::Tensor map = torch::zeros({3, side, side}, torch::kUInt8);
   auto a = map.accessor<uint8_t, 3>();
   for (int y = 0; y < side; ++y)
@@ -101,19 +93,11 @@ cv::Mat MeshCoverage(const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& t
   mesh.vertices = vertices;
   mesh.triangles = triangles;
   mesh.materials.emplace_back();
-  PinholeCamera pinhole;
-  pinhole.fx = camera.fx;
-  pinhole.fy = camera.fy;
-  pinhole.cx = camera.cx;
-  pinhole.cy = camera.cy;
-  pinhole.width = camera.width;
-  pinhole.height = camera.height;
-  pinhole.cam_from_world = CameraPose(camera);
   RenderOptions render;
   render.supersample = 1;
   render.threads = 1;
   RenderOutput out;
-  RenderMeshes({&mesh}, pinhole, render, &out);
+  RenderMeshes({&mesh}, ToPinholeCamera(camera), render, &out);
   return out.triangle >= 0;
 }
 

@@ -49,4 +49,16 @@ SplatCamera ToSplatCamera(const PinholeCamera& camera) {
   return out;
 }
 
+PinholeCamera ToPinholeCamera(const SplatCamera& camera) {
+  PinholeCamera out;
+  out.cam_from_world = CameraPose(camera);
+  out.fx = camera.fx;
+  out.fy = camera.fy;
+  out.cx = camera.cx;
+  out.cy = camera.cy;
+  out.width = camera.width;
+  out.height = camera.height;
+  return out;
+}
+
 }  // namespace headforge

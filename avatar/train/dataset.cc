@@ -213,19 +213,18 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       const Eigen::VectorXf expression = tracked.expression.cast<float>();
       view.condition = torch::cat({torch::from_blob(const_cast<float*>(expression.data()), {expression.size()}).clone(),
                                    PoseCondition(rotation, translation)});
-      if (options.images && options.mask == "mesh") {
-        const int64_t e = int64_t(out.expression_names.size());
-        view.mask = MaskToTensor(MeshCutMask(mask, out.Vertices(view.condition.slice(0, 0, e)), out.identity_vertices,
-                                             out.triangles, view.view, options.mask_hair,
-                                             options.mask_skin));
-      }
-      if (f.landmarks) RegionBoxes(*f.landmarks, *lens, scale, &view);
       const bool training = !out.HeldOut(f.index) && !held_camera;
-      if (training && options.uv_map_side > 0) {
-        const int64_t e = int64_t(out.expression_names.size());
-        view.uv_map = RenderUvMap(model, out.Vertices(view.condition.slice(0, 0, e)), out.identity_vertices,
-                                  view.view, options.uv_map_side);
-      }
+      const bool cut_mask = options.images && options.mask == "mesh";
+      const bool uv_map = training && options.uv_map_side > 0;
+      // The frame's tracked mesh, for the mask's cut and the UV map.
+      torch::Tensor vertices;
+      if (cut_mask || uv_map)
+        vertices = out.Vertices(view.condition.slice(0, 0, int64_t(out.expression_names.size())));
+      if (cut_mask)
+        view.mask = MaskToTensor(MeshCutMask(mask, vertices, out.identity_vertices, out.triangles, view.view,
+                                             options.mask_hair, options.mask_skin));
+      if (f.landmarks) RegionBoxes(*f.landmarks, *lens, scale, &view);
+      if (uv_map) view.uv_map = RenderUvMap(model, vertices, out.identity_vertices, view.view, options.uv_map_side);
       (training ? out.train : out.test).push_back(std::move(view));
       out.width = size.width;
       out.height = size.height;

@@ -40,7 +40,8 @@ void PrintHelp() {
       "  --max-minutes M   replaces the pack's training time limit (0: none)\n"
       "  --set F=V         replaces any recorded option, by its field name (the\n"
       "                    train options with _ for -: decoder_steps=0, steps=20000)\n"
-      "  --threads N       CPU threads for tensor work (default: all)\n"
+      "  --threads N       CPU threads for tensor work (default 0: $HEADFORGE_THREADS\n"
+      "                    when set, else all)\n"
       "  --log-level L     debug, info (default), warning, error, silent\n");
 }
 
@@ -106,7 +107,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "headforge-train: --log-level must be debug, info, warning, error or silent\n");
     return kExitUsage;
   }
-  ConfigureTorchThreads(threads > 0 ? threads : HardwareThreads());
+  ConfigureTorchThreads(threads > 0 ? threads : DefaultThreads());
   InterruptScope interrupts;
   StderrProgress progress;
   TrainSummary summary;

@@ -300,7 +300,7 @@ class ColmapJob {
             ColmapReport* report)
       : options_(options), capture_(capture), work_dir_(work_dir), log_(work_dir / "colmap.log"),
         database_(work_dir / "database.db"), image_path_((capture.workspace / "frames").string()),
-        exe_(options.executable), threads_(std::to_string(options.threads > 0 ? options.threads : HardwareThreads())),
+        exe_(options.executable), threads_(std::to_string(options.threads > 0 ? options.threads : DefaultThreads())),
         report_(report) {}
 
   // The frames COLMAP sees, named "<camera>/<index>.png", listed in

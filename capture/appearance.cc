@@ -137,7 +137,7 @@ HeadAppearance MakeHeadAppearance(const FaceModel& model, const Eigen::Matrix3Xf
   const auto hits = RasteriseUv(model, skin_tris, skin_size, 0.0f, 2.0f);
   cv::Mat skin(skin_size, CV_32FC3, cv::Scalar::all(0)), parts(skin_size, CV_8U, cv::Scalar(kPartFace));
   cv::Mat filled(skin_size, CV_8U, cv::Scalar(0));
-  ParallelFor(skin_size.height, HardwareThreads(), [&](int y, int) {
+  ParallelFor(skin_size.height, DefaultThreads(), [&](int y, int) {
     for (int x = 0; x < skin_size.width; ++x) {
       const TexelHit& h = hits[static_cast<size_t>(y) * skin_size.width + x];
       if (h.triangle < 0) continue;

@@ -345,7 +345,7 @@ void RenderMeshes(const std::vector<const Mesh*>& meshes, const PinholeCamera& c
   HF_CHECK(options.supersample >= 1);
   for (const Mesh* m : meshes) HF_CHECK(!m->materials.empty());
   const int s = options.supersample;
-  const int threads = options.threads > 0 ? options.threads : HardwareThreads();
+  const int threads = options.threads > 0 ? options.threads : DefaultThreads();
   const int w = camera.width, h = camera.height, sw = w * s, sh = h * s;
   std::vector<ScreenTriangle> tris;
   SetUpTriangles(meshes, camera, s, sw, sh, options.near, &tris);

@@ -3,6 +3,7 @@
 #include <dlfcn.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <atomic>
 #include <exception>
 #include <mutex>
@@ -12,6 +13,15 @@
 namespace headforge {
 
 int HardwareThreads() { return std::max(1u, std::thread::hardware_concurrency()); }
+
+int DefaultThreads() {
+  if (const char* env = std::getenv("HEADFORGE_THREADS")) {
+    char* end = nullptr;
+    const long n = std::strtol(env, &end, 10);
+    if (end != env && *end == '\0' && n > 0) return static_cast<int>(std::min<long>(n, 1024));
+  }
+  return HardwareThreads();
+}
 
 void ParallelFor(int count, int threads, const std::function<void(int, int)>& fn) {
   threads = std::max(1, std::min(threads, count));

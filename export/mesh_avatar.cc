@@ -145,7 +145,7 @@ void BakeOne(const BakeView& view, const Atlas& atlas, const std::vector<TexelHi
   const Eigen::Matrix3d r = view.camera.cam_from_world.linear();
   const Eigen::Vector3d t = view.camera.cam_from_world.translation(), centre = view.camera.Centre();
   const int width = atlas.size.width;
-  ParallelFor(atlas.size.height, HardwareThreads(), [&](int y, int) {
+  ParallelFor(atlas.size.height, DefaultThreads(), [&](int y, int) {
     for (int x = 0; x < width; ++x) {
       const TexelHit& hit = hits[size_t(y) * size_t(width) + size_t(x)];
       if (hit.triangle < 0) continue;

@@ -61,7 +61,7 @@ StageSettings CommonOptions::Settings() const {
   settings.data_dir = data_dir;
   settings.face_model =
       face_model.empty() ? (fs::path(data_dir) / "ict_facekit" / "ict_face_model.h5").string() : face_model;
-  settings.threads = threads > 0 ? threads : HardwareThreads();
+  settings.threads = threads > 0 ? threads : DefaultThreads();
   settings.workspace = workspace;
   return settings;
 }
@@ -71,7 +71,7 @@ void AddCommonOptions(OptionSet* o, CommonOptions* common, bool with_workspace) 
   if (with_workspace)
     o->Add("workspace", &common->workspace,
            "Workspace folder holding every stage's outputs and workspace.json.", "", kRuntime);
-  o->Add("threads", &common->threads, "Worker threads; 0 uses every hardware thread.", "",
+  o->Add("threads", &common->threads, "Worker threads; 0 uses $HEADFORGE_THREADS when set, else every hardware thread.", "",
          kRuntime);
   common->data_dir = DefaultDataDir();
   o->Add("data", &common->data_dir,
@@ -85,7 +85,7 @@ void AddCommonOptions(OptionSet* o, CommonOptions* common, bool with_workspace) 
 }
 
 void ApplyCommonOptions(const CommonOptions& common) {
-  const int threads = common.threads > 0 ? common.threads : HardwareThreads();
+  const int threads = common.threads > 0 ? common.threads : DefaultThreads();
   cv::setNumThreads(threads);
   ConfigureTorchThreads(threads);
   if (common.log_level == "debug") SetLogLevel(LogLevel::kDebug);

@@ -458,7 +458,7 @@ Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCaptu
   // far off: docs/benchmarks.md, what registration costs the avatar).
   const bool fit_focal = !calibrate.head_pose.FocalGiven();
   TrackOptions fit;
-  fit.threads = threads > 0 ? threads : HardwareThreads();
+  fit.threads = threads > 0 ? threads : DefaultThreads();
   fit.focal_prior_sigma = calibrate.head_pose.prior_sigma;
   const double prior_focal = fit_focal ? HeadPosePriorFocal(calibrate.head_pose, capture) : 0.0;
   progress->Start("calibrate: refining with the face model", 0);

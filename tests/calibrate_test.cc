@@ -972,29 +972,14 @@ TEST(Align, FindsViewsPlacedWithTheHeadBehindThemOrOutsideTheirFrame) {
   EXPECT_TRUE(misplaced.empty());
 }
 
-// The shipped embedding is what `headforge embed-landmarks` measures today, and
-// away from the jaw contour (a silhouette, other surface points from every
-// side) it differs from the model's landmark vertices by millimetres.
-TEST(LandmarkEmbedding, ShippedFileMatchesAFreshMeasurement) {
-  std::vector<Eigen::Vector3d> shipped, fresh;
-  ASSERT_TRUE(ReadLandmarkEmbedding(DefaultLandmarkEmbedding(), &shipped).ok());
-  FaceDetectorOptions detector;
-  detector.ultraface_dir = (kData / "models" / "ultraface").string();
-  ASSERT_TRUE(MeasureLandmarkEmbedding(Model(), detector, DefaultLandmarkModel(), 2, &fresh).ok());
-  ASSERT_EQ(fresh.size(), 68u);
-  for (int i = 0; i < 68; ++i) {
-    EXPECT_LT((fresh[i] - shipped[i]).norm(), 0.0005) << "landmark " << i;
-    const Eigen::Vector3d vertex = Model().neutral().col(Model().landmarks_ibug68()[i]).cast<double>();
-    if (i > 16) {
-      EXPECT_LT((fresh[i] - vertex).norm(), 0.015) << "landmark " << i;
-    }
-  }
-}
-
 // The shipped view grid (data/ict_dlib68_landmark_embedding_views.json) is
-// what `headforge embed-landmarks --views` measures today. Seen from 40 deg
-// either side, the jaw contour runs along each side's silhouette, tens of
-// millimetres apart, while most inner points move by millimetres.
+// what `headforge embed-landmarks --views` measures today, and so is the
+// plain embedding (data/ict_dlib68_landmark_embedding.json: the grid's
+// points over every direction, measured on the way), which away from the jaw
+// contour (a silhouette, other surface points from every side) differs from
+// the model's landmark vertices by millimetres. Seen from 40 deg either side,
+// the jaw contour runs along each side's silhouette, tens of millimetres
+// apart, while most inner points move by millimetres.
 TEST(LandmarkEmbedding, ShippedViewGridMatchesAFreshMeasurement) {
   LandmarkEmbedding shipped, fresh;
   ASSERT_TRUE(ReadLandmarkEmbedding(ViewLandmarkEmbedding(), &shipped).ok());
@@ -1010,6 +995,16 @@ TEST(LandmarkEmbedding, ShippedViewGridMatchesAFreshMeasurement) {
     for (int i = 0; i < 68; ++i) worst = std::max(worst, (fresh.nodes[n][i] - shipped.nodes[n][i]).norm());
   for (int i = 0; i < 68; ++i) worst = std::max(worst, (fresh.points[i] - shipped.points[i]).norm());
   EXPECT_LT(worst, 0.0005);
+  std::vector<Eigen::Vector3d> plain;
+  ASSERT_TRUE(ReadLandmarkEmbedding(DefaultLandmarkEmbedding(), &plain).ok());
+  ASSERT_EQ(plain.size(), 68u);
+  for (int i = 0; i < 68; ++i) {
+    EXPECT_LT((fresh.points[i] - plain[i]).norm(), 0.0005) << "landmark " << i;
+    const Eigen::Vector3d vertex = Model().neutral().col(Model().landmarks_ibug68()[i]).cast<double>();
+    if (i > 16) {
+      EXPECT_LT((fresh.points[i] - vertex).norm(), 0.015) << "landmark " << i;
+    }
+  }
 
   auto node = [&](double yaw) {
     const Eigen::Vector3d toward(std::sin(yaw * M_PI / 180), 0, std::cos(yaw * M_PI / 180));

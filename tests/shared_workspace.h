@@ -12,10 +12,12 @@
 #include <sys/file.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <functional>
 #include <map>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/fs.h"
@@ -51,6 +53,12 @@ inline bool MakeOnce(const fs::path& dir, const std::function<Result(const fs::p
   return ok;
 }
 
+// The thread count a fixture is made with, named on its command line: the
+// solvers' results depend on it in the last digits, so a fixture made by a
+// test that runs headforge on one thread (HEADFORGE_THREADS=1) must equal
+// the one a test running it on every thread would have made.
+inline std::string FixtureThreads() { return std::to_string(std::max(1u, std::thread::hardware_concurrency())); }
+
 inline fs::path SharedDir(const std::string& name, const std::vector<std::string>& args) {
   Hasher h;
   EXPECT_TRUE(h.AddFileStamp(HEADFORGE_BINARY).ok());
@@ -62,7 +70,7 @@ inline fs::path SharedDir(const std::string& name, const std::vector<std::string
 inline fs::path SharedSimulation(const std::string& scene, int frames) {
   const std::vector<std::string> args = {
       "simulate", "--scene", (fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / (scene + ".toml")).string(),
-      "--frames", std::to_string(frames)};
+      "--frames", std::to_string(frames), "--threads", FixtureThreads()};
   const fs::path dir = SharedDir(scene + "_" + std::to_string(frames), args);
   std::string error;
   const bool ok = MakeOnce(dir, [&](const fs::path& out) {
@@ -89,6 +97,7 @@ inline fs::path SharedRun(const std::string& name, const std::vector<std::string
   std::vector<std::string> args = {"run", "--until", "track", "--video"};
   args.insert(args.end(), inputs.begin(), inputs.end());
   args.insert(args.end(), options.begin(), options.end());
+  args.insert(args.end(), {"--threads", FixtureThreads()});
   const fs::path dir = SharedDir(name, args);
   std::string error;
   const bool ok = MakeOnce(dir, [&](const fs::path& ws) {

@@ -38,7 +38,7 @@ std::vector<std::string> TrainArgs(const fs::path& ws) {
   return {"train", "--workspace", ws.string(), "--model", "gan-avatar", "--resolution", "32",
           "--render-resolution", "16", "--samples", "8", "--fine-samples", "8", "--batch", "2",
           "--triplane-resolution", "16", "--steps", "60", "--log-every", "5", "--checkpoint-every", "5",
-          "--r1-every", "2", "--eval-every", "0", "--preview-every", "30", "--max-minutes", "0", "--threads", "2",
+          "--r1-every", "2", "--eval-every", "0", "--preview-every", "30", "--max-minutes", "0", "--threads", "1",
           "--mapping-samples", "24", "--mapping-steps", "10", "--reconstruction-steps", "20"};
 }
 
@@ -100,6 +100,10 @@ TEST_F(GanAvatarTrain, TrainsAndWritesItsModel) {
   EXPECT_NE(eval["latent"].get<std::string>().find("expression mapping"), std::string::npos) << eval["latent"];
   EXPECT_EQ(eval["mapping"]["renders"], 24);
   EXPECT_EQ(eval["mapping"]["tracked"], 24);
+  // From the one camera, zoomed in only where the head's box fills less of
+  // its frame than ingest's crop gives (SplatCameraFraming).
+  EXPECT_EQ(eval["mapping"]["camera"], "cam0");
+  EXPECT_GE(eval["mapping"]["zoom"].get<double>(), 1.0);
   EXPECT_TRUE(std::isfinite(eval["mean_latent"]["psnr_masked"].get<double>()));
   EXPECT_TRUE(config["expression_mapping"]["trained"].get<bool>());
   EXPECT_EQ(config["expression_mapping"]["expressions"].size(), 53u);
@@ -164,7 +168,7 @@ TEST_F(GanAvatarTrain, APackTrainsTheGanAndTheWorkspaceAddsTheMapping) {
   ASSERT_EQ(packed.code, 0) << packed.err;
   const fs::path out = ws / "trained_elsewhere";
   const Result trained =
-      Headforge({(ws / "gan.pack").string(), "--out", out.string(), "--threads", "2"}, HEADFORGE_TRAIN_BINARY);
+      Headforge({(ws / "gan.pack").string(), "--out", out.string(), "--threads", "1"}, HEADFORGE_TRAIN_BINARY);
   ASSERT_EQ(trained.code, 0) << trained.err;
   EXPECT_NE(trained.err.find("--generator-from"), std::string::npos) << trained.err;
   nlohmann::json config, eval, expected_eval;

@@ -19,7 +19,6 @@
 #include "avatar/nn/augment.h"
 #include "avatar/nn/discriminator.h"
 #include "avatar/nn/functional.h"
-#include "avatar/splat/camera_framing.h"
 #include "avatar/train/adam.h"
 #include "avatar/train/checkpoint.h"
 #include "avatar/train/device.h"
@@ -45,10 +44,6 @@ constexpr double kBoxPadding = 0.04;
 constexpr double kWAverageRate = 0.01;
 // Adam's step for the warm-up's per-frame latents.
 constexpr double kCodeLearningRate = 1e-2;
-// The expression mapping's renders frame the head's box at least this
-// fraction of the image (as ingest's crop frames a face): the tracker reads
-// a head that fills a third of a dome camera's whole frame poorly.
-constexpr double kMappingFrameFill = 1.0;
 
 struct GanState {
   int step = 0;
@@ -110,8 +105,6 @@ class GanTrainer {
   std::string warning_;                   // a collapse warning to log at the end of the step
   torch::Tensor frame_codes_;             // [frames, z_dim]: the warm-up's latent per frame
   double mapping_loss_ = 0;               // the mapping's last loss
-  std::string mapping_camera_;            // the view its renders are drawn from, and that view's zoom
-  double mapping_zoom_ = 1;
   RenderExpressions samples_;
   torch::Tensor reals_, conditions_;      // [N, 3, H, W] over the background; [N, 16]
   int render_w_ = 0, render_h_ = 0;
@@ -470,14 +463,7 @@ Status GanTrainer::TrainMapping(const RenderTracker& track_renders, StatsLog* st
   }
   const auto start = std::chrono::steady_clock::now();
   for (torch::Tensor& p : g_params_) p.requires_grad_(false);  // the generator is frozen
-  const AvatarView& frontal = FrontalView();
-  const SplatCamera camera = FramedOn(RenderCamera(frontal), arch_.box.min, arch_.box.max, kMappingFrameFill);
-  mapping_camera_ = frontal.camera;
-  mapping_zoom_ = camera.fx / RenderCamera(frontal).fx;
-  char zoom[64] = "";
-  if (mapping_zoom_ > 1) std::snprintf(zoom, sizeof zoom, ", zoomed x%.2f to frame the head", mapping_zoom_);
-  HF_LOG(Info) << "train: gan-avatar: the expression mapping learns from renders of " << frontal.camera << "'s view"
-               << zoom;
+  const SplatCamera camera = RenderCamera(FrontalView());
   // Its own random stream: the same renders whether the GAN was trained here
   // or imported (--generator-from).
   at::Generator random = at::detail::createCPUGenerator(uint64_t(options_.seed) + 13);
@@ -573,8 +559,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
       {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
       {"mapping", {{"renders", samples_.rendered}, {"tracked", samples_.w.defined() ? samples_.w.size(0) : 0},
                    {"flagged", samples_.flagged}, {"median_residual_px", samples_.median_residual_px},
-                   {"loss", options_.mapping_loss}, {"last_loss", mapping_loss_},
-                   {"camera", mapping_camera_}, {"zoom", mapping_zoom_}}},
+                   {"loss", options_.mapping_loss}, {"last_loss", mapping_loss_}}},
       {"views", views}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "eval.json", eval, 1));
   // The model: the generator's weights and the mean latent; config.json its architecture.

@@ -1,5 +1,4 @@
 // The rasterizer against its plain-tensor reference and finite differences.
-#include "avatar/splat/camera_framing.h"
 #include "avatar/splat/splat_test_util.h"
 
 namespace headforge::splat_test {
@@ -161,47 +160,6 @@ TEST(SplatOps, BadInputsGiveClearErrors) {
   } catch (const c10::Error& e) {
     EXPECT_NE(std::string(e.what()).find("background must be [C]"), std::string::npos);
   }
-}
-
-// FramedOn: the box's corners, projected by the framed camera, span the
-// asked fraction of the image and are centred; a camera already framed, or
-// one with the box partly behind it, is kept.
-TEST(SplatCameraFraming, TheBoxFillsTheAskedFractionCentred) {
-  SplatCamera camera;
-  camera.width = 64, camera.height = 48;
-  camera.fx = camera.fy = 100, camera.cx = 31.5, camera.cy = 23.5;
-  camera.cam_from_world = {1, 0, 0, 0.1, 0, 1, 0, -0.05, 0, 0, 1, 0.2};  // the box seen off centre
-  const std::array<double, 3> lo = {-0.1, -0.12, 1.8}, hi = {0.1, 0.12, 2.0};
-  auto bounds = [&](const SplatCamera& c) {
-    std::array<double, 4> b = {1e9, -1e9, 1e9, -1e9};
-    for (int k = 0; k < 8; ++k) {
-      const double x = (k & 1 ? hi[0] : lo[0]) + 0.1, y = (k & 2 ? hi[1] : lo[1]) - 0.05, z = (k & 4 ? hi[2] : lo[2]) + 0.2;
-      const double u = c.fx * x / z + c.cx, v = c.fy * y / z + c.cy;
-      b = {std::min(b[0], u), std::max(b[1], u), std::min(b[2], v), std::max(b[3], v)};
-    }
-    return b;
-  };
-  const auto before = bounds(camera);
-  ASSERT_LT(before[3] - before[2], 0.5 * camera.height);  // a small box to frame
-  const SplatCamera framed = FramedOn(camera, lo, hi, 0.8);
-  const auto after = bounds(framed);
-  // The box is taller than wide in this image: its height spans 80%.
-  EXPECT_NEAR((after[3] - after[2]) / framed.height, 0.8, 1e-9);
-  EXPECT_LT((after[1] - after[0]) / framed.width, 0.8);
-  EXPECT_NEAR(0.5 * (after[0] + after[1]), 31.5, 1e-9);
-  EXPECT_NEAR(0.5 * (after[2] + after[3]), 23.5, 1e-9);
-  EXPECT_NEAR(framed.fx / camera.fx, framed.fy / camera.fy, 1e-12);
-  EXPECT_EQ(framed.width, camera.width);
-  EXPECT_EQ(framed.cam_from_world, camera.cam_from_world);
-
-  // Already spanning that much: kept, never zoomed out.
-  const SplatCamera again = FramedOn(framed, lo, hi, 0.5);
-  EXPECT_EQ(again.fx, framed.fx);
-  EXPECT_EQ(again.cx, framed.cx);
-  // A corner behind the camera: kept.
-  SplatCamera behind = camera;
-  behind.cam_from_world[11] = -1.9;
-  EXPECT_EQ(FramedOn(behind, lo, hi, 0.8).fx, camera.fx);
 }
 
 }  // namespace

@@ -2,8 +2,6 @@
 
 #include <torch/torch.h>
 
-#include <thread>
-
 #include "avatar/gan_avatar/render_expressions.h"
 #include "avatar/gan_avatar/trainer.h"
 #include "avatar/gaussian_style/trainer.h"
@@ -396,7 +394,7 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
     sampling.samples = resolved.mapping_samples;
     sampling.landmark_model = resolved.landmark_model;
     sampling.background = background;
-    sampling.threads = std::max(1, int(std::thread::hardware_concurrency()));
+    sampling.threads = TensorThreads();
     return EstimateRenderExpressions(generator, camera, width, height, model, tracking, sampling, random, p, out);
   };
   return TrainGanAvatar(resolved, data, track_renders, out_dir, progress, summary);

@@ -24,6 +24,8 @@ void UseTensorThreads() {
   at::set_num_threads(tensor_threads);
 }
 
+int TensorThreads() { return tensor_threads; }
+
 std::string TorchDescription() {
   std::string text = TORCH_VERSION;
   if (torch::cuda::is_available()) {

@@ -14,6 +14,8 @@ void ConfigureTorchThreads(int threads);
 // Gives LibTorch and the BLAS the recorded count, for the models' large
 // products: training, rendering and splat-fit call it as their tensor work begins.
 void UseTensorThreads();
+// The recorded count (--threads, resolved): for CPU work beside the tensors'.
+int TensorThreads();
 // "1.13.0 (CPU)" or "2.4.0 (CUDA, 1 device(s))".
 std::string TorchDescription();
 

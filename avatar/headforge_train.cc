@@ -108,6 +108,7 @@ int main(int argc, char** argv) {
     return kExitUsage;
   }
   ConfigureTorchThreads(threads > 0 ? threads : DefaultThreads());
+  KeepFreedTensorMemory();
   InterruptScope interrupts;
   StderrProgress progress;
   TrainSummary summary;

@@ -2,7 +2,10 @@
 
 #include <torch/torch.h>
 
+#include <malloc.h>
+
 #include <algorithm>
+#include <cstdlib>
 
 #include "core/parallel.h"
 
@@ -17,6 +20,15 @@ void ConfigureTorchThreads(int threads) {
   // OpenBLAS (OpenMP) sets OpenMP's count, which is LibTorch's, to its own.
   SetBlasThreads(1);
   at::set_num_threads(1);
+}
+
+void KeepFreedTensorMemory() {
+  // HEADFORGE_MALLOC=system keeps glibc's defaults, to measure the difference.
+  if (const char* m = std::getenv("HEADFORGE_MALLOC"); m && std::string(m) == "system") return;
+  // The largest threshold glibc takes (32 MiB on 64-bit); blocks above it
+  // still come from and return to the system.
+  mallopt(M_MMAP_THRESHOLD, 32 * 1024 * 1024);
+  mallopt(M_TRIM_THRESHOLD, 1 << 30);
 }
 
 void UseTensorThreads() {

@@ -88,6 +88,7 @@ void ApplyCommonOptions(const CommonOptions& common) {
   const int threads = common.threads > 0 ? common.threads : DefaultThreads();
   cv::setNumThreads(threads);
   ConfigureTorchThreads(threads);
+  KeepFreedTensorMemory();
   if (common.log_level == "debug") SetLogLevel(LogLevel::kDebug);
   if (common.log_level == "info") SetLogLevel(LogLevel::kInfo);
   if (common.log_level == "warning") SetLogLevel(LogLevel::kWarning);

@@ -18,6 +18,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "avatar/avatar_train.h"
+#include "avatar/gaussian_style/trainer.h"
 #include "avatar/model_folder.h"
 #include "avatar/train/dataset.h"
 #include "core/camera_set.h"
@@ -202,6 +203,59 @@ TEST_F(TrainStage, KilledMidTrainingResumesToTheSameModel) {
   ASSERT_EQ(stats.size(), expected.size());
   for (size_t i = 0; i < stats.size(); ++i) EXPECT_EQ(stats[i]["loss"], expected[i]["loss"]) << i;
   EXPECT_FALSE(fs::exists(ws / kModelDir / "checkpoint.pt"));
+}
+
+// --pose-lr: each training view's head-pose correction is trained, kept
+// through a kill -9 (the resumed run ends where an uninterrupted one does),
+// saved with the model and applied where the training views are scored.
+TEST_F(TrainStage, PoseCorrectionsResumeAfterAKillAndScoreTheTrainingViews) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const auto args = [](const fs::path& ws) {
+    std::vector<std::string> a = TrainArgs(ws);
+    *(std::find(a.begin(), a.end(), "--steps") + 1) = "60";
+    a.insert(a.end(), {"--pose-lr", "1e-3"});
+    return a;
+  };
+  const fs::path whole = CopyOf(TrackedTalkingStatic(), Scratch("pose_whole"));
+  const Result straight = Headforge(args(whole));
+  ASSERT_EQ(straight.code, 0) << straight.err;
+  const std::vector<nlohmann::json> stats = StatsLines(whole / kModelDir / "stats.jsonl");
+  ASSERT_FALSE(stats.empty());
+  EXPECT_GT(stats.back().value("pose_rotation_deg", 0.0), 0.0) << stats.back();
+
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("pose_killed"));
+  const fs::path log = fs::temp_directory_path() / "hf_train_pose_killed.log";
+  const pid_t pid = Spawn(args(ws), log, log);
+  const fs::path staging = ws / ".staging" / "train" / kModelDir;
+  int status = 0;
+  const bool killed = SignalWhen(pid, SIGKILL, [&] {
+    return fs::exists(staging / "checkpoint.pt") && CountLines(staging / "stats.jsonl") >= 3;
+  }, std::chrono::seconds(300), &status);
+  ASSERT_TRUE(killed) << "training finished before it could be killed:\n" << Slurp(log);
+  const Result resumed = Headforge(args(ws));
+  ASSERT_EQ(resumed.code, 0) << resumed.err;
+  EXPECT_NE(resumed.err.find("resuming from the checkpoint at step"), std::string::npos) << resumed.err;
+  EXPECT_EQ(FileHash(ws / kModelDir / "model.pt"), FileHash(whole / kModelDir / "model.pt"));
+
+  // The saved corrections, and the training views' score drawn with them.
+  GaussianStyleAvatar avatar;
+  TrainOptions trained;
+  FaceModel model;
+  DatasetOptions loading;
+  AvatarDataset data;
+  ASSERT_TRUE(LoadTrained(ws, ws / kModelDir, DefaultDataDir() + "/ict_facekit/ict_face_model.h5", torch::kCPU, 0, &loading, &avatar, &trained, &model, &data).ok());
+  ASSERT_TRUE(avatar.pose_corrections.defined());
+  ASSERT_EQ(avatar.pose_corrections.size(0), int64_t(data.train.size()));
+  EXPECT_GT(avatar.pose_corrections.abs().max().item<double>(), 0.0);
+  nlohmann::json eval;
+  ASSERT_TRUE(ReadJson(ws / kModelDir / "eval.json", &eval).ok());
+  const double scored = eval["training_views"]["psnr_masked"];
+  const double with = MeanScores(EvaluateAvatar(avatar, data, 10, {}, true)).psnr_masked;
+  avatar.pose_corrections = torch::Tensor();
+  const double without = MeanScores(EvaluateAvatar(avatar, data, 10, {}, true)).psnr_masked;
+  std::printf("training views %.4f dB with the corrections, %.4f dB without\n", with, without);
+  EXPECT_NEAR(scored, with, 1e-6);
+  EXPECT_NE(with, without);
 }
 
 TEST_F(TrainStage, RunChainsTrainAfterTrackAndSkipsItWhenNothingChanged) {

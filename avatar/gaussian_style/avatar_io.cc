@@ -171,6 +171,7 @@ std::vector<std::pair<std::string, torch::Tensor>> NamedTensors(const GaussianSt
   for (const auto& item : avatar.model->named_parameters()) out.emplace_back("model." + item.key(), item.value());
   if (avatar.decoder)
     for (const auto& item : avatar.decoder->named_parameters()) out.emplace_back("decoder." + item.key(), item.value());
+  if (avatar.pose_corrections.defined()) out.emplace_back("pose_corrections", avatar.pose_corrections);
   return out;
 }
 
@@ -263,6 +264,7 @@ Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar
       return Status::DataError(weights.string() + " holds no Gaussians; run headforge train again");
   for (torch::Tensor* t : params) *t = t->to(device);
   if (get("gaussians.binding", &out.gaussians.binding)) out.gaussians.binding = out.gaussians.binding.to(device);
+  if (get("pose_corrections", &out.pose_corrections)) out.pose_corrections = out.pose_corrections.to(device);
   *avatar = std::move(out);
   return Status::Ok();
 }

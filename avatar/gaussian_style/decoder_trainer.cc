@@ -317,8 +317,10 @@ double DecoderTrainer::FuseStep(int step) {
   const int64_t views = int64_t(usable_.size());
   const int64_t slot = (step - tune_end_ - 1) % views;
   if (slot == 0) order_ = torch::randperm(views, gen_);
-  const AvatarView& view = data_.train[size_t(usable_[size_t(order_[slot].item<int64_t>())])];
-  const PosedGaussians posed = avatar_->Pose(data_, view.condition, view.frame, avatar_->deform);
+  const int64_t index = usable_[size_t(order_[slot].item<int64_t>())];
+  const AvatarView& view = data_.train[size_t(index)];
+  PosedGaussians posed = avatar_->Pose(data_, view.condition, view.frame, avatar_->deform);
+  if (avatar_->pose_corrections.defined()) posed = CorrectPose(posed, avatar_->pose_corrections[index]);
   const SquareCanvas canvas = MakeSquareCanvas(view.view, side_);
   torch::Tensor background = torch::zeros({posed.features.size(1)}, posed.features.options());
   background.slice(0, 0, 3).fill_(kDecoderBackground);

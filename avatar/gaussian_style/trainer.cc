@@ -363,6 +363,7 @@ Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, Stats
 }
 
 Status Trainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
+  if (pose_corrections_.defined()) avatar_.pose_corrections = pose_corrections_.detach().clone();
   HF_RETURN_IF_ERROR(FinishAvatar(avatar_, options_, data_, out_dir, nlohmann::json::object(), summary));
   summary->steps = state_.step;
   summary->seconds = state_.seconds;
@@ -383,7 +384,9 @@ std::vector<ViewScores> EvaluateAvatar(GaussianStyleAvatar& avatar, const Avatar
     // Inference takes frame 0's latent: a held-out frame has none of its own.
     // Training views are scored as trained, with their own.
     const auto start = std::chrono::steady_clock::now();
-    const PosedGaussians posed = avatar.Pose(data, view.condition, training_views ? view.frame : 0, avatar.deform);
+    PosedGaussians posed = avatar.Pose(data, view.condition, training_views ? view.frame : 0, avatar.deform);
+    if (training_views && avatar.pose_corrections.defined())
+      posed = CorrectPose(posed, avatar.pose_corrections[int64_t(i)]);
     const torch::Tensor render = avatar.Draw(posed, view.view, background).clamp(0, 1).cpu();
     const double ms = 1000 * SecondsSince(start);
     ViewScores s = ScoreRender(render, view.image, view.mask, background.cpu());

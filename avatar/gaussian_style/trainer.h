@@ -26,6 +26,10 @@ struct GaussianStyleAvatar {
   TriangleFrames neutral;  // the mesh without expression (mesh riding)
   bool deform = true;      // trained with stage 2
   StyleDecoder decoder{nullptr};  // trained with stage 3: the image is the decoder's
+  // [training views, 6]: each training view's head-pose correction
+  // (--pose-lr), applied wherever a training view is drawn as it was
+  // trained (stage 3, the training views' scores); undefined without.
+  torch::Tensor pose_corrections;
 
   // The Gaussians for `condition` [E + 9] with frame latent `latent`; with
   // mesh riding they ride the mesh of the condition's expressions.

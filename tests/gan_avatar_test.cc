@@ -123,15 +123,8 @@ TEST_F(GanAvatarTrain, KilledMidTrainingResumesToTheSameModel) {
   ASSERT_EQ(first_.code, 0) << first_.err;
   const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("killed"));
   const fs::path log = Scratch("killed.log");
-  const pid_t pid = Spawn(TrainArgs(ws), log, log);
-  const fs::path staging = ws / ".staging" / "train" / kModelDir;
   // Killed without warning once a checkpoint past step 15 exists.
-  int status = 0;
-  const bool killed = SignalWhen(pid, SIGKILL, [&] {
-    return fs::exists(staging / "checkpoint.pt") && CountLines(staging / "stats.jsonl") >= 3;
-  }, std::chrono::seconds(300), &status);
-  ASSERT_TRUE(killed) << "training finished before it could be killed:\n" << Slurp(log);
-  ASSERT_TRUE(WIFSIGNALED(status));
+  ASSERT_TRUE(KillTrainingMidway(TrainArgs(ws), ws / ".staging" / "train" / kModelDir, 3, log));
   EXPECT_FALSE(fs::exists(ws / kModelDir / "model.pt"));
 
   const Result resumed = Headforge(TrainArgs(ws));

@@ -115,4 +115,21 @@ inline size_t CountLines(const fs::path& path) {
   return size_t(std::count(text.begin(), text.end(), '\n'));
 }
 
+// Starts a training run (`args`, its output into `log`) and kills it with
+// SIGKILL once its staged model folder `staging` holds `checkpoint` and
+// `stats_lines` lines of stats.jsonl; a failure, with the log, when the run
+// ended by itself first.
+inline ::testing::AssertionResult KillTrainingMidway(const std::vector<std::string>& args, const fs::path& staging,
+                                                     size_t stats_lines, const fs::path& log,
+                                                     const std::string& checkpoint = "checkpoint.pt") {
+  const pid_t pid = Spawn(args, log, log);
+  int status = 0;
+  const bool killed = SignalWhen(pid, SIGKILL, [&] {
+    return fs::exists(staging / checkpoint) && CountLines(staging / "stats.jsonl") >= stats_lines;
+  }, std::chrono::seconds(300), &status);
+  if (!killed) return ::testing::AssertionFailure() << "training finished before it could be killed:\n" << Slurp(log);
+  if (!WIFSIGNALED(status)) return ::testing::AssertionFailure() << "the run ended otherwise:\n" << Slurp(log);
+  return ::testing::AssertionSuccess();
+}
+
 }  // namespace headforge

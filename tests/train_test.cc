@@ -166,16 +166,10 @@ TEST_F(TrainStage, KilledMidTrainingResumesToTheSameModel) {
   ASSERT_EQ(first_.code, 0) << first_.err;
   const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("killed"));
   const fs::path log = fs::temp_directory_path() / "hf_train_killed.log";
-  const pid_t pid = Spawn(TrainArgs(ws), log, log);
   const fs::path staging = ws / ".staging" / "train" / kModelDir;
   // Kill it without warning once a checkpoint past step 100 exists (stats.jsonl
   // has a line every 10 steps).
-  int status = 0;
-  const bool killed = SignalWhen(pid, SIGKILL, [&] {
-    return fs::exists(staging / "checkpoint.pt") && CountLines(staging / "stats.jsonl") >= 11;
-  }, std::chrono::seconds(300), &status);
-  ASSERT_TRUE(killed) << "training finished before it could be killed:\n" << Slurp(log);
-  ASSERT_TRUE(WIFSIGNALED(status));
+  ASSERT_TRUE(KillTrainingMidway(TrainArgs(ws), staging, 11, log));
   EXPECT_FALSE(fs::exists(ws / kModelDir / "model.pt"));
 
   // Resumed on a disk that fills at the next checkpoint (a file-size limit
@@ -225,13 +219,7 @@ TEST_F(TrainStage, PoseCorrectionsResumeAfterAKillAndScoreTheTrainingViews) {
 
   const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("pose_killed"));
   const fs::path log = fs::temp_directory_path() / "hf_train_pose_killed.log";
-  const pid_t pid = Spawn(args(ws), log, log);
-  const fs::path staging = ws / ".staging" / "train" / kModelDir;
-  int status = 0;
-  const bool killed = SignalWhen(pid, SIGKILL, [&] {
-    return fs::exists(staging / "checkpoint.pt") && CountLines(staging / "stats.jsonl") >= 3;
-  }, std::chrono::seconds(300), &status);
-  ASSERT_TRUE(killed) << "training finished before it could be killed:\n" << Slurp(log);
+  ASSERT_TRUE(KillTrainingMidway(args(ws), ws / ".staging" / "train" / kModelDir, 3, log));
   const Result resumed = Headforge(args(ws));
   ASSERT_EQ(resumed.code, 0) << resumed.err;
   EXPECT_NE(resumed.err.find("resuming from the checkpoint at step"), std::string::npos) << resumed.err;
@@ -1008,15 +996,9 @@ TEST_F(DecoderStage, KilledInStageThreeResumesThereToTheSameModel) {
   ASSERT_EQ(first_.code, 0) << first_.err;
   const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("decoder_killed"));
   const fs::path log = fs::temp_directory_path() / "hf_train_decoder_killed.log";
-  const pid_t pid = Spawn(DecoderArgs(ws), log, log);
   const fs::path staging = ws / ".staging" / "train" / kModelDir;
   // Stage 1-2 log 10 lines; kill once stage 3 has logged three (step 30, PTI).
-  int status = 0;
-  const bool killed = SignalWhen(pid, SIGKILL, [&] {
-    return fs::exists(staging / "decoder_checkpoint.pt") && CountLines(staging / "stats.jsonl") >= 13;
-  }, std::chrono::seconds(300), &status);
-  ASSERT_TRUE(killed) << "training finished before it could be killed:\n" << Slurp(log);
-  ASSERT_TRUE(WIFSIGNALED(status));
+  ASSERT_TRUE(KillTrainingMidway(DecoderArgs(ws), staging, 13, log, "decoder_checkpoint.pt"));
   // Stage 3's checkpoint replaced stages 1-2's.
   EXPECT_FALSE(fs::exists(staging / "checkpoint.pt"));
 

@@ -89,6 +89,11 @@ Status ExportAvatarWeights(const fs::path& workspace, const fs::path& model_dir,
       {"gaussians.features", "[N, F] features; the first three are RGB before the sigmoid"},
       {"gaussians.binding", "[N] int64 triangle of the face model each Gaussian rides (mesh riding only)"},
       {"model.*", "the networks' parameters, named by their module path"}};
+  if (avatar.decoder) config["tensors"]["decoder.*"] = "stage 3's decoder (encoder, projections, generator), by module path";
+  if (avatar.pose_corrections.defined())
+    config["tensors"]["pose_corrections"] =
+        "[training views, 6] each training view's head-pose correction (--pose-lr): rotation vector, translation in "
+        "metres";
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   HF_RETURN_IF_ERROR(SaveAvatarSafetensors(avatar, config, out_dir));
   if (files) {

@@ -12,12 +12,14 @@ namespace headforge {
 // several times slower threaded.
 void ConfigureTorchThreads(int threads);
 // Keeps the memory that freed tensors leave in the process for the next
-// ones, where glibc's malloc would unmap every block over its threshold and
-// trim the heap's top: a training step allocates and frees the same large
-// blocks many times, and faulting their pages back in each time took two
-// thirds of a CPU step (docs/benchmarks.md). Resident memory stays near the
-// peak. The CLI and headforge-train call it once at start;
-// $HEADFORGE_MALLOC=system leaves glibc's defaults (to compare).
+// ones: every block comes from the heap, and the heap keeps up to 1 GiB
+// freed, where glibc's malloc would map and unmap each block over its
+// threshold afresh and trim the heap's top. A training step allocates and
+// frees the same large blocks many times, and faulting their pages back in
+// each time took up to two thirds of a CPU step (docs/benchmarks.md).
+// Resident memory stays near the peak. The CLI and headforge-train call it
+// once at start; $HEADFORGE_MALLOC=system leaves glibc's defaults and
+// =threshold maps blocks over 32 MiB afresh (both to compare).
 void KeepFreedTensorMemory();
 // Gives LibTorch and the BLAS the recorded count, for the models' large
 // products: training, rendering and splat-fit call it as their tensor work begins.

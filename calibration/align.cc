@@ -180,6 +180,7 @@ struct ViewPose {
   bool frontal_by_pnp = false;       // PnP's own yaw is within the limit (world frame only)
   double weight = 1.0;               // in the mean of the views' rotations
   std::vector<Observation> landmarks;  // its 68 landmarks (undistorted) with its projection
+  std::string camera;                 // for the log
 };
 
 // The views' landmarks grouped by landmark, as triangulation wants them.
@@ -398,6 +399,7 @@ std::map<int, std::vector<ViewPose>> CollectViewPoses(const AlignOptions& option
       for (int i = 0; i < 68; ++i)
         undistorted.push_back(in->Undistort(Eigen::Vector2d((*f.landmarks)[i].x, (*f.landmarks)[i].y)));
       ViewPose v;
+      v.camera = cam.name;
       v.cam_from_world = view->cam_from_world;
       const Eigen::Matrix<double, 3, 4> p = in->K() * view->cam_from_world.matrix().topRows<3>();
       for (int i = 0; i < 68; ++i) v.landmarks.push_back({p, undistorted[i]});
@@ -583,6 +585,19 @@ bool AlignGroup(const AlignOptions& options, const std::vector<Eigen::Vector3d>&
     ChooseViewsByGeometry(options, model_points, views, per_frame, &from_views, per_landmark, &lf, &views_used);
   if (use_views) FitScaleWithRotationHeld(options, from_views, &lf);
   if (!lf.sim.ok) return false;
+  // Per view: the head's turn its own landmarks give (PnP) against where its
+  // camera stands under the rotation found: detectors read turned faces as
+  // nearly frontal (docs/benchmarks.md, the dome).
+  for (const ViewPose& v : views) {
+    const Eigen::Vector3d eye = v.cam_from_head.inverse().translation();
+    const Eigen::Vector3d seen =
+        lf.sim.tgt_from_src.rotation * (v.cam_from_world.inverse().translation() - lf.src.rowwise().mean());
+    auto yaw = [](const Eigen::Vector3d& d) { return std::atan2(d.x(), d.z()) * 180 / M_PI; };
+    auto elevation = [](const Eigen::Vector3d& d) { return std::atan2(d.y(), std::hypot(d.x(), d.z())) * 180 / M_PI; };
+    HF_LOG(Debug) << "align: frame " << frame << " " << v.camera << ": PnP yaw " << yaw(eye) << " elevation "
+                  << elevation(eye) << (v.frontal_by_pnp ? " (frontal)" : "") << "; its camera at yaw " << yaw(seen)
+                  << " elevation " << elevation(seen);
+  }
   *r = AlignResult();
   r->head_from_world = lf.sim.tgt_from_src;
   r->quality = lf.sim.quality;

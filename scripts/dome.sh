@@ -9,6 +9,8 @@
 # the right side), then scores the held-out cameras' views against the
 # simulator's frames and masks (`render --truth`).
 #   scripts/dome.sh [out] [run options]   (default /tmp/headforge_dome; resumes)
+# DOME_SCENE picks the scene file in scenes/ (dome_360, or dome_360_lit: the
+# same dome under one light).
 # Options after the folder go to `headforge run`; without any, --fps 12.5
 # (25 instants of the 2-second scene).
 set -euo pipefail
@@ -19,7 +21,9 @@ out="${1:-/tmp/headforge_dome}"
 shift || true
 [ $# -gt 0 ] || set -- --fps 12.5
 mkdir -p "$out"
-[ -f "$out/sim/ground_truth.json" ] || "$bin" simulate --scene "$root/scenes/dome_360.toml" --out "$out/sim"
+scene="${DOME_SCENE:-dome_360}"
+[ -f "$root/scenes/$scene.toml" ] || { echo "dome.sh: no scene scenes/$scene.toml" >&2; exit 2; }
+[ -f "$out/sim/ground_truth.json" ] || "$bin" simulate --scene "$root/scenes/$scene.toml" --out "$out/sim"
 # The rig's calibration, as a studio has it (a rig file: docs/calibration.md),
 # from the simulator's cameras. COLMAP on one synchronised instant of the
 # dome places some back cameras in front of the face (docs/benchmarks.md).

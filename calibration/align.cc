@@ -588,15 +588,18 @@ bool AlignGroup(const AlignOptions& options, const std::vector<Eigen::Vector3d>&
   // Per view: the head's turn its own landmarks give (PnP) against where its
   // camera stands under the rotation found: detectors read turned faces as
   // nearly frontal (docs/benchmarks.md, the dome).
-  for (const ViewPose& v : views) {
-    const Eigen::Vector3d eye = v.cam_from_head.inverse().translation();
-    const Eigen::Vector3d seen =
-        lf.sim.tgt_from_src.rotation * (v.cam_from_world.inverse().translation() - lf.src.rowwise().mean());
+  if (GetLogLevel() <= LogLevel::kDebug) {
     auto yaw = [](const Eigen::Vector3d& d) { return std::atan2(d.x(), d.z()) * 180 / M_PI; };
     auto elevation = [](const Eigen::Vector3d& d) { return std::atan2(d.y(), std::hypot(d.x(), d.z())) * 180 / M_PI; };
-    HF_LOG(Debug) << "align: frame " << frame << " " << v.camera << ": PnP yaw " << yaw(eye) << " elevation "
-                  << elevation(eye) << (v.frontal_by_pnp ? " (frontal)" : "") << "; its camera at yaw " << yaw(seen)
-                  << " elevation " << elevation(seen);
+    const Eigen::Vector3d face_centre = lf.src.rowwise().mean();
+    for (const ViewPose& v : views) {
+      const Eigen::Vector3d eye = v.cam_from_head.inverse().translation();
+      const Eigen::Vector3d seen =
+          lf.sim.tgt_from_src.rotation * (v.cam_from_world.inverse().translation() - face_centre);
+      HF_LOG(Debug) << "align: frame " << frame << " " << v.camera << ": PnP yaw " << yaw(eye) << " elevation "
+                    << elevation(eye) << (v.frontal_by_pnp ? " (frontal)" : "") << "; its camera at yaw " << yaw(seen)
+                    << " elevation " << elevation(seen);
+    }
   }
   *r = AlignResult();
   r->head_from_world = lf.sim.tgt_from_src;

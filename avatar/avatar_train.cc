@@ -193,6 +193,10 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
          "gan-avatar: image (the render of the mapped w against the sampled render, generator frozen) or latent "
          "(the mapped w against the sampled w).",
          "mapping-loss");
+  o->Add("train.mapping_latents", &t->mapping_latents,
+         "gan-avatar: the latents the mapping's renders come from: random (z ~ N(0, I), the paper's) or frames (the "
+         "reconstruction warm-up's latent of each training frame, then blends of two frames').",
+         "mapping-latents");
   o->Add("train.landmark_model", &t->landmark_model,
          "gan-avatar: dlib's 68-point landmark model, which reads the renders' landmarks (default: Debian's "
          "libdlib-data).",
@@ -361,6 +365,7 @@ Status AdoptRecordedOptions(const TrainOptions& options, TrainOptions* resolved)
   resolved->mapping_samples = options.mapping_samples;
   resolved->mapping_steps = options.mapping_steps;
   resolved->mapping_loss = options.mapping_loss;
+  resolved->mapping_latents = options.mapping_latents;
   resolved->landmark_model = options.landmark_model;
   resolved->log_every = options.log_every;
   resolved->checkpoint_every = options.checkpoint_every;
@@ -387,17 +392,14 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
   if (resolved.landmark_model.empty()) resolved.landmark_model = DefaultLandmarkModel();
   TrackingFile tracking;
   HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", &tracking));
-  const RenderTracker track_renders = [&](GanGenerator& generator, const SplatCamera& camera, int width, int height,
-                                          double background, at::Generator& random, Progress* p,
-                                          RenderExpressions* out) {
-    RenderExpressionOptions sampling;
-    sampling.samples = resolved.mapping_samples;
-    sampling.landmark_model = resolved.landmark_model;
-    sampling.background = background;
-    sampling.threads = TensorThreads();
-    return EstimateRenderExpressions(generator, camera, width, height, model, tracking, sampling, random, p, out);
+  const ImageTracker track_images = [&](const torch::Tensor& images, const std::vector<SplatCamera>& cameras,
+                                        Progress* p, RenderExpressions* out) {
+    RenderExpressionOptions reading;
+    reading.landmark_model = resolved.landmark_model;
+    reading.threads = TensorThreads();
+    return EstimateImageExpressions(images, cameras, model, tracking, reading, p, out);
   };
-  return TrainGanAvatar(resolved, data, track_renders, out_dir, progress, summary);
+  return TrainGanAvatar(resolved, data, track_images, out_dir, progress, summary);
 }
 
 Status WriteTrainPack(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,

@@ -90,6 +90,10 @@ struct TrainOptions {
   int mapping_samples = 256;
   int mapping_steps = 300;
   std::string mapping_loss = "image";
+  // Which latents the mapping's renders come from: "random" (z ~ N(0, I),
+  // the paper's) or "frames" (the reconstruction warm-up's latents of the
+  // training frames, then blends of two).
+  std::string mapping_latents = "random";
   std::string landmark_model;
   // gan-avatar: a folder where the GAN was trained already (headforge-train's
   // output for this workspace's pack, on a GPU machine): its generator is

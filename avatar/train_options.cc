@@ -33,6 +33,7 @@ nlohmann::json ToJson(const TrainOptions& options) {
   j["mask_hair"] = options.mask_hair;
   j["mask_skin"] = options.mask_skin;
   j["pose_lr"] = options.pose_lr;
+  j["mapping_latents"] = options.mapping_latents;
   return j;
 }
 
@@ -42,6 +43,7 @@ TrainOptions TrainOptionsFromJson(const nlohmann::json& j) {
   options.mask_hair = j.value("mask_hair", options.mask_hair);
   options.mask_skin = j.value("mask_skin", options.mask_skin);
   options.pose_lr = j.value("pose_lr", options.pose_lr);
+  options.mapping_latents = j.value("mapping_latents", options.mapping_latents);
   return options;
 }
 
@@ -91,6 +93,9 @@ Status TrainOptions::Check() const {
     if (!(ada_target > 0 && ada_target < 1)) return Status::InvalidArgument("train: --ada-target must be in (0, 1)");
     if (mapping_loss != "image" && mapping_loss != "latent")
       return Status::InvalidArgument("train: --mapping-loss must be image or latent, not '" + mapping_loss + "'");
+    if (mapping_latents != "random" && mapping_latents != "frames")
+      return Status::InvalidArgument("train: --mapping-latents must be random or frames, not '" +
+                                     mapping_latents + "'");
     if (mapping_samples < 1 || mapping_steps < 0)
       return Status::InvalidArgument("train: --mapping-samples must be at least 1 and --mapping-steps at least 0");
     if (coarse_samples < 1 || fine_samples < 0)

@@ -76,7 +76,7 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
   if (!options.generator_from.empty())
     return Status::InvalidArgument("--set generator_from: a pack trains the GAN itself; --generator-from is headforge "
                                    "train's, on the workspace");
-  HF_RETURN_IF_ERROR(TrainGanAvatar(options, data, /*track_renders=*/{}, out_dir, progress, summary));
+  HF_RETURN_IF_ERROR(TrainGanAvatar(options, data, /*track_images=*/{}, out_dir, progress, summary));
   if (options.mapping_steps > 0)
     HF_LOG(Info) << "train: the GAN is trained; on the workspace's machine, headforge train --workspace WS --model "
                     "gan-avatar --generator-from " << out_dir.string()

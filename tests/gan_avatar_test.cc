@@ -100,7 +100,18 @@ TEST_F(GanAvatarTrain, TrainsAndWritesItsModel) {
   EXPECT_NE(eval["latent"].get<std::string>().find("expression mapping"), std::string::npos) << eval["latent"];
   EXPECT_EQ(eval["mapping"]["renders"], 24);
   EXPECT_EQ(eval["mapping"]["tracked"], 24);
+  EXPECT_EQ(eval["mapping"]["latents"], "random");  // the default, the paper's
   EXPECT_TRUE(std::isfinite(eval["mean_latent"]["psnr_masked"].get<double>()));
+  // Then 24 of the capture's frames (as many as the mapping's renders) drive
+  // it, their renders read back beside the mean latent's and the frames'.
+  const nlohmann::json agreement = eval["expression_agreement"];
+  EXPECT_EQ(agreement["of"], 24) << agreement;
+  EXPECT_GE(agreement["frames"].get<int>(), 2) << agreement;
+  for (const char* key : {"error", "mean_latent_error", "frames_error"})
+    EXPECT_TRUE(std::isfinite(agreement[key].get<double>())) << key << agreement;
+  EXPECT_EQ(agreement["blendshapes"].size(), std::min(5, agreement["readable_blendshapes"].get<int>())) << agreement;
+  for (const auto& b : agreement["blendshapes"]) EXPECT_GE(b["frames_correlation"].get<double>(), 0.5) << b;
+  EXPECT_NE(first_.err.find("read back within"), std::string::npos) << first_.err;
   EXPECT_TRUE(config["expression_mapping"]["trained"].get<bool>());
   EXPECT_EQ(config["expression_mapping"]["expressions"].size(), 53u);
   EXPECT_NE(first_.err.find("train: gan-avatar"), std::string::npos) << first_.err;
@@ -213,6 +224,24 @@ TEST_F(GanAvatarTrain, TheLatentLossAblationMapsToo) {
   ASSERT_TRUE(ReadJson(reference_ / kModelDir / "eval.json", &b).ok());
   EXPECT_EQ(a["mean_latent"]["psnr_masked"], b["mean_latent"]["psnr_masked"]);
   EXPECT_EQ(a["mapping"]["loss"], "latent");
+
+  // The mapping alone again, from the warm-up's latents of the training
+  // frames (the model keeps them): 24 of the 100 training frames are rendered.
+  const fs::path frames = CopyOf(TrackedTalkingStatic(), Scratch("frame_latents"));
+  args = TrainArgs(frames);
+  args.insert(args.end(), {"--generator-from", (reference_ / kModelDir).string(), "--mapping-latents", "frames"});
+  const Result f = Headforge(args);
+  ASSERT_EQ(f.code, 0) << f.err;
+  EXPECT_NE(f.err.find("latents of 24 of the 100 training frames"), std::string::npos) << f.err;
+  nlohmann::json c;
+  ASSERT_TRUE(ReadJson(frames / kModelDir / "eval.json", &c).ok());
+  EXPECT_EQ(c["mapping"]["latents"], "frames");
+  EXPECT_EQ(c["mapping"]["tracked"], 24);
+  EXPECT_EQ(c["mean_latent"]["psnr_masked"], b["mean_latent"]["psnr_masked"]);  // the same GAN
+  args.back() = "sideways";
+  const Result wrong = Headforge(args);
+  EXPECT_EQ(wrong.code, 2);  // the command line
+  EXPECT_NE(wrong.err.find("--mapping-latents must be random or frames"), std::string::npos) << wrong.err;
 }
 
 TEST_F(GanAvatarTrain, RenderDrawsItFromTurnedCamerasAndDrivenByAnotherCapture) {

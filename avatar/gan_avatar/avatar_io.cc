@@ -52,6 +52,10 @@ Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avata
     if (!weights.GetModule("mapping.", avatar->mapping.get())) return damaged;
     avatar->mapping->to(device);
   }
+  if (weights.Get("frame_codes", &avatar->frame_codes) && weights.Get("trained_frames", &avatar->trained_frames))
+    avatar->frame_codes = avatar->frame_codes.to(device);
+  else
+    avatar->frame_codes = avatar->trained_frames = torch::Tensor();
   avatar->generator->to(device);
   avatar->w_average = avatar->w_average.to(device);
   return Status::Ok();
@@ -68,7 +72,10 @@ Status ExportGanAvatarWeights(const fs::path& model_dir, const nlohmann::json& e
       {"generator.*", "the 3D GAN's generator (mapping z -> w, plane synthesis, decoder MLP, super-resolution), "
                       "named by module path"},
       {"w_average", "[w_dim] the running mean of w: the avatar's latent without an expression"},
-      {"mapping.*", "the expression mapping, expression weights -> w (when trained)"}};
+      {"mapping.*", "the expression mapping, expression weights -> w (when trained)"},
+      {"frame_codes", "[frames, z_dim] the reconstruction warm-up's latent z of each frame (models since they were "
+                      "kept)"},
+      {"trained_frames", "the frames (rows of frame_codes) the warm-up trained; the others' rows are untrained"}};
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   HF_RETURN_IF_ERROR(weights.SaveSafetensors(out_dir / "weights.safetensors", {{"format", "pt"}, {"model", "gan-avatar"}}));
   return WriteJsonAtomic(out_dir / "config.json", config, 2);

@@ -21,6 +21,9 @@ struct GanAvatar {
   GanGenerator generator{nullptr};
   ExpressionMapping mapping{nullptr};  // null when training mapped no expressions
   torch::Tensor w_average;             // [w_dim]
+  // The reconstruction warm-up's latent z of each frame [frames, z_dim] and
+  // the frames it trained (undefined in models written before they were kept).
+  torch::Tensor frame_codes, trained_frames;
   int render_width = 0, render_height = 0, out_width = 0, out_height = 0;
   double background = 0.5;
   int64_t expressions = 0;

@@ -2,10 +2,15 @@
 // head's box show the background and pass no gradient; rays that meet it
 // reach every network), the discriminator's camera conditioning against its
 // projection formula, adaptive augmentation keeping stacked channels
-// registered, ADA's controller, the camera condition.
+// registered, ADA's controller, the camera condition, and the comparison of
+// driving expressions with those read back from renders.
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
+#include <cmath>
+#include <vector>
+
+#include "avatar/gan_avatar/expression_mapping.h"
 #include "avatar/gan_avatar/model.h"
 #include "avatar/nn/augment.h"
 #include "avatar/nn/discriminator.h"
@@ -225,6 +230,57 @@ TEST(GanCamera, TheConditionDoesNotDependOnTheResolution) {
   const torch::Tensor full = CameraCondition(c), quarter = CameraCondition(c.Downscaled(4));
   ASSERT_EQ(full.numel(), 16);
   EXPECT_TRUE(torch::allclose(full, quarter, 0, 1e-6));
+}
+
+// CompareExpressions against plain loops over the same numbers: the distance
+// to the driving weights, the baseline's, the ordering by spread and the
+// Pearson correlation; a constant column correlates 0, an exact copy 1 and
+// a mirrored one -1.
+TEST(ExpressionAgreement, MatchesAPlainComputation) {
+  const int n = 7, e = 4;
+  std::vector<double> d(n * e), t(n * e), b = {0.1, 0.0, 0.3, 0.2};
+  for (int i = 0; i < n; ++i) {
+    d[i * e + 0] = 0.1 * i;                     // spread 0.2
+    d[i * e + 1] = 0.5;                         // constant
+    d[i * e + 2] = 0.05 * ((i * 3) % 5);        // spread about 0.07
+    d[i * e + 3] = 0.02 * i;                    // spread 0.04
+    t[i * e + 0] = 0.1 * i;                     // read back exactly
+    t[i * e + 1] = 0.4 + 0.01 * i;              // varies where the driver does not
+    t[i * e + 2] = 0.3 - 0.05 * ((i * 3) % 5);  // mirrored
+    t[i * e + 3] = 0.07;                        // constant
+  }
+  const auto tensor = [](const std::vector<double>& v, std::vector<int64_t> shape) {
+    return torch::tensor(v, torch::kFloat64).reshape(shape);
+  };
+  const ExpressionAgreement a =
+      CompareExpressions(tensor(d, {n, e}), tensor(t, {n, e}), tensor(b, {e}), {"a", "b", "c", "d"}, 3);
+  double error = 0, baseline = 0;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < e; ++j) {
+      error += std::abs(t[i * e + j] - d[i * e + j]);
+      baseline += std::abs(b[size_t(j)] - d[i * e + j]);
+    }
+  EXPECT_EQ(a.frames, n);
+  EXPECT_NEAR(a.error, error / (n * e), 1e-12);
+  EXPECT_NEAR(a.baseline_error, baseline / (n * e), 1e-12);
+  ASSERT_EQ(a.blendshapes.size(), 3u);
+  EXPECT_EQ(a.blendshapes[0].name, "a");
+  EXPECT_EQ(a.blendshapes[1].name, "c");
+  EXPECT_EQ(a.blendshapes[2].name, "d");
+  EXPECT_NEAR(a.blendshapes[0].driving_std, 0.2, 1e-12);
+  EXPECT_NEAR(a.blendshapes[0].correlation, 1.0, 1e-12);
+  EXPECT_NEAR(a.blendshapes[0].error, 0.0, 1e-12);
+  EXPECT_NEAR(a.blendshapes[1].correlation, -1.0, 1e-12);
+  EXPECT_NEAR(a.blendshapes[2].correlation, 0.0, 1e-12);  // read back as a constant
+  double c_error = 0, c_baseline = 0;
+  for (int i = 0; i < n; ++i) {
+    c_error += std::abs(t[i * e + 2] - d[i * e + 2]);
+    c_baseline += std::abs(b[2] - d[i * e + 2]);
+  }
+  EXPECT_NEAR(a.blendshapes[1].error, c_error / n, 1e-12);
+  EXPECT_NEAR(a.blendshapes[1].baseline_error, c_baseline / n, 1e-12);
+  // Nothing to compare: no frames.
+  EXPECT_EQ(CompareExpressions(torch::zeros({0, e}), torch::zeros({0, e}), torch::zeros({e}), {}).frames, 0);
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -38,6 +39,10 @@ namespace F = torch::nn::functional;
 // The background of the real images (outside their masks) and of the
 // renders (where the volume is transparent); also the evaluation's.
 constexpr double kBackground = 0.5;
+constexpr int64_t kRenderBatch = 8;  // renders drawn at once outside training
+// A blendshape the frames read back with this correlation to their tracked
+// weights is one the landmark reading sees at the model's resolution.
+constexpr double kReadableCorrelation = 0.5;
 // Padding of the head's box round the tracked mesh, metres (hair).
 constexpr double kBoxPadding = 0.04;
 // The running mean of w follows the batches' with this weight.
@@ -63,7 +68,18 @@ class GanTrainer {
   // of this one's; Train then trains no GAN.
   Status ImportGenerator(const fs::path& dir);
   Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
-  Status TrainMapping(const RenderTracker& track_renders, StatsLog* stats, Progress* progress);
+  Status TrainMapping(const ImageTracker& track_images, StatsLog* stats, Progress* progress);
+  // Whether the mapping's renders show the expressions that drive them: the
+  // reliably tracked frames of the camera the mapping learnt from (training
+  // and held out alike: the mapping learnt from the GAN's renders, never from
+  // a frame) drive it with their tracked expressions, the renders are read
+  // back by the landmark model and tracker, beside one render of the mean
+  // latent (a mapping that ignored its input) and the frames themselves at
+  // the model's resolution (what the reading can show at that size).
+  Status CheckMappedExpressions(const ImageTracker& track_images, Progress* progress);
+  // The latents z the mapping's renders come from ([mapping_samples,
+  // z_dim]), or undefined for random ones (drawn batch by batch from `random`).
+  torch::Tensor MappingCodes(at::Generator& random) const;
   Status Finish(const fs::path& out_dir, TrainSummary* summary);
   int step() const { return state_.step; }
 
@@ -90,6 +106,9 @@ class GanTrainer {
   Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
   SplatCamera RenderCamera(const AvatarView& view) const { return view.view.Downscaled(double(data_.width) / render_w_); }
   torch::Tensor RenderMean(const std::vector<SplatCamera>& cameras);
+  // Renders of the latents `w` ([M, w_dim]) from `camera` at the output
+  // size, a batch at a time: [M, 3, H, W] on the CPU, in [0, 1].
+  torch::Tensor RenderLatents(const torch::Tensor& w, const SplatCamera& camera);
 
   TrainOptions options_;
   const AvatarDataset& data_;
@@ -104,8 +123,10 @@ class GanTrainer {
   CollapseWatch watch_;
   std::string warning_;                   // a collapse warning to log at the end of the step
   torch::Tensor frame_codes_;             // [frames, z_dim]: the warm-up's latent per frame
+  bool codes_trained_ = false;            // the training frames' rows of frame_codes_ were fitted
   double mapping_loss_ = 0;               // the mapping's last loss
   RenderExpressions samples_;
+  nlohmann::json expression_check_;       // CheckMappedExpressions' figures, for eval.json
   torch::Tensor reals_, conditions_;      // [N, 3, H, W] over the background; [N, 16]
   int render_w_ = 0, render_h_ = 0;
   GanState state_;
@@ -287,6 +308,21 @@ std::vector<ViewScores> GanTrainer::Evaluate(const fs::path& write_dir, int stri
   return scores;
 }
 
+torch::Tensor GanTrainer::RenderLatents(const torch::Tensor& w, const SplatCamera& camera) {
+  torch::NoGradGuard no_grad;
+  std::vector<torch::Tensor> images;
+  for (int64_t first = 0; first < w.size(0); first += kRenderBatch) {
+    const int64_t n = std::min<int64_t>(kRenderBatch, w.size(0) - first);
+    images.push_back(avatar_.generator
+                         ->Render(w.narrow(0, first, n).to(device_, torch::kFloat32),
+                                  std::vector<SplatCamera>(size_t(n), camera), data_.width, data_.height, kBackground,
+                                  nullptr)
+                         .image.clamp(0, 1)
+                         .cpu());
+  }
+  return torch::cat(images);
+}
+
 Status GanTrainer::WritePreview(const fs::path& dir, int step) {
   torch::NoGradGuard no_grad;
   // Four random latents (the same every preview) from four training cameras,
@@ -378,6 +414,11 @@ Status GanTrainer::ImportGenerator(const fs::path& dir) {
                                    std::to_string(data_.height) + "): was it trained on this workspace's pack?");
   avatar_.generator = trained.generator;
   avatar_.w_average = trained.w_average;
+  if (trained.frame_codes.defined() && trained.frame_codes.sizes() == frame_codes_.sizes()) {
+    torch::NoGradGuard no_grad;
+    frame_codes_.copy_(trained.frame_codes);
+    codes_trained_ = true;
+  }
   g_params_ = avatar_.generator->parameters();
   state_.step = config.at("training").value("steps", 0);
   state_.seconds = config.at("training").value("seconds", 0.0);
@@ -447,6 +488,7 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
                                         [&] { return SaveCheckpoint(checkpoint, stats->size()); }, progress));
   }
   progress->Finish(std::to_string(state_.step) + " steps");
+  codes_trained_ = options_.reconstruction_steps > 0 && state_.step > 0;
   // The GAN is done: a kill during the expression mapping resumes here.
   HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, stats->size()));
   state_.seconds = elapsed();
@@ -454,21 +496,71 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
   return Status::Ok();
 }
 
-Status GanTrainer::TrainMapping(const RenderTracker& track_renders, StatsLog* stats, Progress* progress) {
+torch::Tensor GanTrainer::MappingCodes(at::Generator& random) const {
+  if (options_.mapping_latents != "frames") return torch::Tensor();
+  std::vector<int64_t> frames;
+  for (const AvatarView& v : data_.train) frames.push_back(v.frame);
+  std::sort(frames.begin(), frames.end());
+  frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
+  const torch::Tensor trained = frame_codes_.detach().cpu().index_select(0, torch::tensor(frames, torch::kLong));
+  const int64_t count = trained.size(0), samples = options_.mapping_samples;
+  // Each training frame's latent once (evenly chosen where the samples are
+  // fewer), then blends of two frames' latents (expressions between them).
+  std::vector<torch::Tensor> rows;
+  const int64_t once = std::min(count, samples);
+  for (int64_t k = 0; k < once; ++k) rows.push_back(trained[k * count / once]);
+  for (int64_t k = count; k < samples; ++k) {
+    const int64_t a = torch::randint(count, {1}, random).item<int64_t>();
+    const int64_t b = torch::randint(count, {1}, random).item<int64_t>();
+    const double t = torch::rand({1}, random).item<double>();
+    rows.push_back(torch::lerp(trained[a], trained[b], t));
+  }
+  HF_LOG(Info) << "train: gan-avatar: the expression mapping's " << samples << " renders come from the warm-up's "
+               << "latents of " << once << " of the " << count << " training frames"
+               << (samples > count ? ", then blends of two" : "");
+  return torch::stack(rows);
+}
+
+Status GanTrainer::TrainMapping(const ImageTracker& track_images, StatsLog* stats, Progress* progress) {
   if (options_.mapping_steps == 0) return Status::Ok();
-  if (!track_renders) {
+  if (!track_images) {
     HF_LOG(Info) << "train: gan-avatar: no expression mapping in this build (its tracker needs the full one); the "
                     "model draws every frame with the mean latent until headforge train --generator-from adds it";
     return Status::Ok();
   }
+  if (options_.mapping_latents == "frames" && !codes_trained_)
+    return Status::InvalidArgument(
+        "train: --mapping-latents frames needs the latents the reconstruction warm-up fitted to the training frames, "
+        "and this GAN has none (no warm-up, or a model written before they were kept); use --mapping-latents random");
   const auto start = std::chrono::steady_clock::now();
   for (torch::Tensor& p : g_params_) p.requires_grad_(false);  // the generator is frozen
   const SplatCamera camera = RenderCamera(FrontalView());
   // Its own random stream: the same renders whether the GAN was trained here
   // or imported (--generator-from).
   at::Generator random = at::detail::createCPUGenerator(uint64_t(options_.seed) + 13);
-  HF_RETURN_IF_ERROR(track_renders(avatar_.generator, camera, data_.width, data_.height, kBackground, random, progress,
-                                   &samples_));
+  const int64_t samples = options_.mapping_samples;
+  const torch::Tensor codes = MappingCodes(random);
+  std::vector<torch::Tensor> ws, renders;
+  progress->Start("train: gan-avatar renders for the expression mapping", samples);
+  {
+    torch::NoGradGuard no_grad;
+    for (int64_t first = 0; first < samples; first += kRenderBatch) {
+      const int64_t n = std::min<int64_t>(kRenderBatch, samples - first);
+      const torch::Tensor z =
+          codes.defined() ? codes.narrow(0, first, n) : torch::randn({n, arch_.z_dim}, random);
+      ws.push_back(avatar_.generator->Map(z.to(device_)));
+      renders.push_back(RenderLatents(ws.back(), camera));
+      progress->Advance(n);
+      if (InterruptRequested()) {
+        progress->Finish("interrupted");
+        return Status::Interrupted("train: stopped while rendering the expression mapping's samples; the GAN is "
+                                   "kept: run the same command again to go on from it");
+      }
+    }
+  }
+  progress->Finish(std::to_string(samples) + " renders");
+  HF_RETURN_IF_ERROR(track_images(torch::cat(renders), {camera}, progress, &samples_));
+  samples_.w = torch::cat(ws).cpu().index_select(0, samples_.index);
   const int64_t expressions = samples_.expressions.size(1);
   torch::manual_seed(uint64_t(options_.seed) + 11);
   avatar_.mapping = ExpressionMapping(expressions, arch_.w_dim);
@@ -526,6 +618,113 @@ Status GanTrainer::TrainMapping(const RenderTracker& track_renders, StatsLog* st
   return Status::Ok();
 }
 
+Status GanTrainer::CheckMappedExpressions(const ImageTracker& track_images, Progress* progress) {
+  if (!avatar_.mapping || !track_images) return Status::Ok();
+  torch::NoGradGuard no_grad;
+  const int64_t expressions = samples_.expressions.size(1);
+  // The frames of the camera the mapping learnt from, at most as many as its
+  // own renders, evenly through the capture.
+  const AvatarView& frontal = FrontalView();
+  std::map<int, const AvatarView*> by_frame;
+  for (const std::vector<AvatarView>* list : {&data_.train, &data_.test})
+    for (const AvatarView& v : *list)
+      if (v.camera == frontal.camera && !v.unreliable) by_frame.emplace(v.frame, &v);
+  std::vector<const AvatarView*> all, chosen;
+  for (const auto& [frame, v] : by_frame) all.push_back(v);
+  const size_t count = std::min(all.size(), size_t(std::max(options_.mapping_samples, 2)));
+  for (size_t k = 0; k < count; ++k) chosen.push_back(all[k * all.size() / count]);
+  if (chosen.size() < 2) return Status::Ok();
+  std::vector<torch::Tensor> rows, frames;
+  std::vector<SplatCamera> cameras;
+  for (const AvatarView* v : chosen) {
+    rows.push_back(v->condition.narrow(0, 0, expressions).to(torch::kFloat32));
+    frames.push_back(v->image * v->mask + kBackground * (1 - v->mask));
+    cameras.push_back(RenderCamera(*v));
+  }
+  const torch::Tensor driving = torch::stack(rows);
+  const int64_t n = driving.size(0);
+  // The mapping's renders from its camera, the mean latent's last.
+  const torch::Tensor w =
+      torch::cat({avatar_.mapping->forward(driving.to(device_)), avatar_.w_average.unsqueeze(0).to(device_)}, 0);
+  const SplatCamera camera = RenderCamera(frontal);
+  RenderExpressions rendered, seen;
+  HF_RETURN_IF_ERROR(track_images(RenderLatents(w, camera), {camera}, progress, &rendered)
+                         .WithContext("tracking the mapping's renders of the capture's expressions"));
+  // The frames themselves, at the same size over the same background, each
+  // from its own camera: what the tracker can read back at this resolution.
+  HF_RETURN_IF_ERROR(track_images(torch::stack(frames), cameras, progress, &seen)
+                         .WithContext("tracking the frames at the model's resolution"));
+  // Rows both readings fitted.
+  torch::Tensor in_seen = torch::zeros({n + 1}, torch::kBool);
+  in_seen.index_put_({seen.index}, true);
+  torch::Tensor where_seen = torch::full({n + 1}, -1, torch::kLong);
+  where_seen.index_put_({seen.index}, torch::arange(seen.index.size(0)));
+  const torch::Tensor both = rendered.index < n & in_seen.index_select(0, rendered.index);
+  if (!(rendered.index == n).any().item<bool>() || both.sum().item<int64_t>() < 2) {
+    HF_LOG(Warning) << "train: gan-avatar: too few of the mapping's renders tracked to say whether they show their "
+                       "expressions";
+    return Status::Ok();
+  }
+  const torch::Tensor kept = rendered.index.index({both});
+  const torch::Tensor baseline = rendered.expressions.index({rendered.index == n}).squeeze(0);
+  const torch::Tensor truth = driving.index_select(0, kept);
+  const int all_shapes = int(expressions);
+  const ExpressionAgreement a =
+      CompareExpressions(truth, rendered.expressions.index({both}), baseline, data_.expression_names, all_shapes);
+  const ExpressionAgreement f =
+      CompareExpressions(truth, seen.expressions.index_select(0, where_seen.index_select(0, kept)), baseline,
+                         data_.expression_names, all_shapes);
+  // The blendshapes the frames themselves read back (correlation 0.5 or
+  // more: the reading sees them at this size), the most varying first.
+  nlohmann::json shapes = nlohmann::json::array();
+  std::string line;
+  double readable_correlation = 0, readable_frames_correlation = 0;
+  int readable = 0;
+  // How much each blendshape varies over the mapping's own data (the GAN's
+  // random renders read back): what it could learn.
+  const torch::Tensor sample_spread = samples_.expressions.to(torch::kFloat64).std(0, /*unbiased=*/false);
+  std::map<std::string, int64_t> column;
+  for (size_t j = 0; j < data_.expression_names.size(); ++j) column[data_.expression_names[j]] = int64_t(j);
+  for (size_t k = 0; k < a.blendshapes.size(); ++k) {
+    const ExpressionAgreement::Blendshape &b = a.blendshapes[k], &g = f.blendshapes[k];
+    if (g.correlation < kReadableCorrelation) continue;
+    readable_correlation += b.correlation;
+    readable_frames_correlation += g.correlation;
+    if (++readable > 5) continue;
+    shapes.push_back({{"name", b.name}, {"driving_std", b.driving_std}, {"error", b.error},
+                      {"correlation", b.correlation}, {"mean_latent_error", b.baseline_error},
+                      {"frames_error", g.error}, {"frames_correlation", g.correlation},
+                      {"samples_std", column.count(b.name) ? sample_spread[column[b.name]].item<double>() : 0.0}});
+    char text[128];
+    std::snprintf(text, sizeof(text), "%s%s r = %.2f (frames %.2f)", line.empty() ? "" : ", ", b.name.c_str(),
+                  b.correlation, g.correlation);
+    line += text;
+  }
+  expression_check_ = {
+      {"what", "frames of " + frontal.camera + " (reliably tracked; at most --mapping-samples, evenly spread) "
+               "driving the mapping with their tracked expressions, rendered from the mapping's camera and read "
+               "back by the landmark model and tracker, beside one render of the mean latent and the frames "
+               "themselves at the model's resolution read back the same way"},
+      {"frames", a.frames},
+      {"of", n},
+      {"error", a.error},
+      {"mean_latent_error", a.baseline_error},
+      {"frames_error", f.error},
+      {"readable_blendshapes", readable},
+      {"readable_mean_correlation", readable > 0 ? readable_correlation / readable : 0.0},
+      {"readable_frames_mean_correlation", readable > 0 ? readable_frames_correlation / readable : 0.0},
+      {"renders_flagged", rendered.flagged},
+      {"renders_median_residual_px", rendered.median_residual_px},
+      {"frames_flagged", seen.flagged},
+      {"frames_median_residual_px", seen.median_residual_px},
+      {"blendshapes", shapes}};
+  HF_LOG(Info) << "train: gan-avatar: the mapping's renders of " << a.frames << " frames read back within " << a.error
+               << " of their expressions (mean absolute weight; the mean latent " << a.baseline_error
+               << ", the frames themselves at this size " << f.error << "); of the " << readable
+               << " blendshapes the frames read back, the most varying: " << (line.empty() ? "none" : line);
+  return Status::Ok();
+}
+
 Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "held_out"));
   const std::vector<ViewScores> scores = Evaluate(out_dir / "held_out", 1);
@@ -546,7 +745,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
     const ViewScores m = MeanScores(list);
     cameras[name] = {{"views", list.size()}, {"psnr_masked", m.psnr_masked}, {"ssim_masked", m.ssim_masked}};
   }
-  const nlohmann::json eval = {
+  nlohmann::json eval = {
       {"held_out_frames", data_.HeldOutText()},
       {"background", kBackground},
       {"latent", avatar_.mapping ? "the expression mapping (" + options_.mapping_loss +
@@ -559,21 +758,32 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
       {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
       {"mapping", {{"renders", samples_.rendered}, {"tracked", samples_.w.defined() ? samples_.w.size(0) : 0},
                    {"flagged", samples_.flagged}, {"median_residual_px", samples_.median_residual_px},
-                   {"loss", options_.mapping_loss}, {"last_loss", mapping_loss_}}},
+                   {"loss", options_.mapping_loss}, {"latents", options_.mapping_latents},
+                   {"last_loss", mapping_loss_}}},
       {"views", views}};
+  if (!expression_check_.is_null()) eval["expression_agreement"] = expression_check_;
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "eval.json", eval, 1));
   // The model: the generator's weights and the mean latent; config.json its architecture.
   Checkpoint model;
   model.PutModule("generator.", *avatar_.generator);
   model.Put("w_average", avatar_.w_average);
   if (avatar_.mapping) model.PutModule("mapping.", *avatar_.mapping);
+  if (codes_trained_) {
+    std::vector<int64_t> frames;
+    for (const AvatarView& v : data_.train) frames.push_back(v.frame);
+    std::sort(frames.begin(), frames.end());
+    frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
+    model.Put("frame_codes", frame_codes_.detach().cpu());
+    model.Put("trained_frames", torch::tensor(frames, torch::kLong));
+  }
   HF_RETURN_IF_ERROR(model.Save(out_dir / "model.pt"));
   const nlohmann::json config = {
       {"model", "gan-avatar"},
       {"version", 1},
       {"architecture", arch_},
       {"expression_mapping", {{"expressions", data_.expression_names}, {"hidden", 256}, {"layers", 2},
-                              {"loss", options_.mapping_loss}, {"trained", bool(avatar_.mapping)}}},
+                              {"loss", options_.mapping_loss}, {"latents", options_.mapping_latents},
+                              {"trained", bool(avatar_.mapping)}}},
       {"render_size", {render_w_, render_h_}},
       {"output_size", {data_.width, data_.height}},
       {"background", kBackground},
@@ -617,7 +827,7 @@ GanAvatarOptions GanArchitecture(const TrainOptions& options, const AvatarDatase
   return arch;
 }
 
-Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const RenderTracker& track_renders,
+Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const ImageTracker& track_images,
                       const fs::path& out_dir, Progress* progress, TrainSummary* summary) {
   torch::Device device = torch::kCPU;
   HF_RETURN_IF_ERROR(ParseDevice("train", options.device, &device));
@@ -641,7 +851,8 @@ Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, co
     }
   }
   HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
-  HF_RETURN_IF_ERROR(trainer.TrainMapping(track_renders, stats, progress));
+  HF_RETURN_IF_ERROR(trainer.TrainMapping(track_images, stats, progress));
+  HF_RETURN_IF_ERROR(trainer.CheckMappedExpressions(track_images, progress));
   HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
   summary->resumed_from = resumed_from;
   summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json", "held_out"};

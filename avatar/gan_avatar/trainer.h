@@ -6,7 +6,6 @@
 // the expression mapping (expression_mapping.h).
 #pragma once
 
-#include <ATen/core/Generator.h>
 #include <torch/types.h>
 
 #include <functional>
@@ -25,25 +24,24 @@ GanAvatarOptions GanArchitecture(const TrainOptions& options, const AvatarDatase
 // The volume render's size for `data`'s frames at `options`' render resolution.
 void GanRenderSize(const TrainOptions& options, const AvatarDataset& data, int* width, int* height);
 
-// What the expression mapping learns from: renders of `generator` from
-// `camera` at width x height over `background`, latents drawn from `random`,
-// each render's expression estimated (render_expressions.h, the full
-// build's tracker).
-using RenderTracker =
-    std::function<Status(GanGenerator& generator, const SplatCamera& camera, int width, int height,
-                         double background, at::Generator& random, Progress* progress, RenderExpressions* out)>;
+// What the expression mapping learns from: the expression of each of
+// `images` ([M, 3, H, W] in [0, 1], the GAN's renders or frames drawn like
+// them, seen from `cameras`, one or one each) estimated
+// (render_expressions.h, the full build's landmark model and tracker).
+using ImageTracker = std::function<Status(const torch::Tensor& images, const std::vector<SplatCamera>& cameras,
+                                          Progress* progress, RenderExpressions* out)>;
 
 // Trains into `out_dir` (checkpoint.pt between attempts; a run that finds
 // one continues from it); writes model.pt, config.json (with every option,
 // for --generator-from), eval.json, held_out/ and previews/. Then, with
-// `track_renders`, trains the expression mapping, and scores the held-out
+// `track_images`, trains the expression mapping, and scores the held-out
 // frames driven by their tracked expressions; without it (headforge-train,
 // the LibTorch-only program) the model has no mapping and draws every frame
 // with the mean latent. With options.generator_from (a folder this function
 // wrote for the same views and architecture) the GAN is that folder's and
 // only the mapping trains. Opens out_dir's stats.jsonl and lists the
 // summary's outputs: the train stage's run, and a run from a pack.
-Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const RenderTracker& track_renders,
+Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, const ImageTracker& track_images,
                       const fs::path& out_dir, Progress* progress, TrainSummary* summary);
 
 }  // namespace headforge

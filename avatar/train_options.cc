@@ -96,6 +96,10 @@ Status TrainOptions::Check() const {
     if (mapping_latents != "random" && mapping_latents != "frames")
       return Status::InvalidArgument("train: --mapping-latents must be random or frames, not '" +
                                      mapping_latents + "'");
+    if (mapping_latents == "frames" && generator_from.empty() && reconstruction_steps == 0 && !(recon_weight > 0))
+      return Status::InvalidArgument("train: --mapping-latents frames renders the latents the reconstruction loss fits "
+                                     "to the training frames, and with --reconstruction-steps 0 and --recon-weight 0 "
+                                     "there are none; use --mapping-latents random");
     if (mapping_samples < 1 || mapping_steps < 0)
       return Status::InvalidArgument("train: --mapping-samples must be at least 1 and --mapping-steps at least 0");
     if (coarse_samples < 1 || fine_samples < 0)

@@ -321,6 +321,14 @@ TEST(GanAvatarOptions, ARenderSizeThatDoesNotDivideTheOutputIsRefused) {
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.err.find("--render-resolution must divide --resolution by a power of two"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(ws / kModelDir / "model.pt"));
+  // The frames' latents asked of a GAN that would fit none: refused before
+  // any training, not after it.
+  const Result no_codes =
+      Headforge({"train", "--workspace", ws.string(), "--model", "gan-avatar", "--mapping-latents", "frames",
+                 "--reconstruction-steps", "0", "--recon-weight", "0"});
+  EXPECT_EQ(no_codes.code, 2);
+  EXPECT_NE(no_codes.err.find("use --mapping-latents random"), std::string::npos) << no_codes.err;
+  EXPECT_FALSE(fs::exists(ws / kModelDir / "model.pt"));
 }
 
 }  // namespace

@@ -1,4 +1,4 @@
-// Renders of the generator tracked (render_expressions.h).
+// The expressions of images read by the landmark model and tracker (render_expressions.h).
 #include "avatar/gan_avatar/render_expressions.h"
 
 #include <torch/torch.h>
@@ -8,6 +8,7 @@
 #include <algorithm>
 
 #include "avatar/train/tensor_image.h"
+#include "avatar/train/view_camera.h"
 #include "calibration/landmark_embedding.h"
 #include "capture/landmarks.h"
 #include "core/interrupt.h"
@@ -75,7 +76,7 @@ Status EstimateImageExpressions(const at::Tensor& images, const std::vector<Spla
 
   const torch::Tensor cpu = images.detach().clamp(0, 1).cpu();
   std::vector<TrackingView> views;
-  progress->Start("train: gan-avatar landmarks of renders", samples);
+  progress->Start("train: gan-avatar reading expressions", samples);
   for (int k = 0; k < samples; ++k) {
     cv::Mat bgr;
     cv::resize(TensorToImage(cpu[k]), bgr, cv::Size(big_w, big_h), 0, 0, cv::INTER_CUBIC);
@@ -91,11 +92,11 @@ Status EstimateImageExpressions(const at::Tensor& images, const std::vector<Spla
     progress->Advance();
     if (InterruptRequested()) {
       progress->Finish("interrupted");
-      return Status::Interrupted("train: stopped while reading the landmarks of the GAN's renders; the GAN is kept: "
-                                 "run the same command again to go on from it");
+      return Status::Interrupted("train: stopped while reading expressions for the expression mapping; the GAN is "
+                                 "kept: run the same command again to go on from it");
     }
   }
-  progress->Finish(std::to_string(samples) + " renders");
+  progress->Finish(std::to_string(samples) + " images");
   // Every image one frame: its camera carries the (fixed) head, the
   // identity is shared, nothing ties one image to the next.
   TrackOptions fit;
@@ -104,10 +105,10 @@ Status EstimateImageExpressions(const at::Tensor& images, const std::vector<Spla
   fit.rotation_smoothness = fit.translation_smoothness = fit.expression_smoothness = 0;
   fit.threads = options.threads;
   TrackResult result;
-  HF_RETURN_IF_ERROR(TrackSequence(basis, views, samples, fit, &result).WithContext("tracking the renders"));
-  // Renders the tracker flagged (a large residual: a render the landmark
-  // model reads poorly) are kept and counted: the mapping learns from them
-  // what the tracker can say. Only renders without a fit are left out.
+  HF_RETURN_IF_ERROR(TrackSequence(basis, views, samples, fit, &result).WithContext("tracking the images"));
+  // Images the tracker flagged (a large residual: one the landmark model
+  // reads poorly) are kept and counted: the mapping learns from them what
+  // the tracker can say. Only images without a fit are left out.
   std::vector<int64_t> kept;
   std::vector<torch::Tensor> expressions;
   int flagged = 0;
@@ -123,15 +124,15 @@ Status EstimateImageExpressions(const at::Tensor& images, const std::vector<Spla
   out->rendered = samples;
   out->median_residual_px = result.median_residual_px;
   if (kept.empty())
-    return Status::DataError("the tracker found no expression in any of the " + std::to_string(samples) +
-                             " renders of the GAN (median landmark residual " +
-                             std::to_string(result.median_residual_px) +
-                             " px); train the GAN longer (--steps, --max-minutes) or at a larger --resolution");
+    return Status::DataError("the tracker fitted none of the " + std::to_string(samples) +
+                             " images (median landmark residual " + std::to_string(result.median_residual_px) +
+                             " px); for the GAN's renders, train the GAN longer (--steps, --max-minutes) or at a "
+                             "larger --resolution");
   out->index = torch::tensor(kept, torch::kLong);
   out->images = cpu.index_select(0, out->index);
   out->expressions = torch::stack(expressions);
   out->flagged = flagged;
-  HF_LOG(Info) << "train: gan-avatar: " << kept.size() << " of " << samples << " renders tracked, " << flagged
+  HF_LOG(Info) << "train: gan-avatar: " << kept.size() << " of " << samples << " images tracked, " << flagged
                << " of them flagged (median landmark residual " << result.median_residual_px << " px at " << big_w
                << "x" << big_h << ")";
   return Status::Ok();

@@ -1,8 +1,8 @@
-// The data the gan-avatar model's expression mapping learns from: latents
-// sampled and rendered from a frontal training camera (the trainer), each
-// render's expression estimated here by HeadForge's landmark model and
-// tracker (the paper runs Deep3DFace there). Needs the full build (dlib,
-// Ceres); the training pack's LibTorch-only trainer has no mapping.
+// The expressions the gan-avatar model's expression mapping learns from and
+// is checked against: images (the generator's renders from a frontal
+// training camera, or frames drawn like them) read by HeadForge's landmark
+// model and tracker (the paper runs Deep3DFace there). Needs the full build
+// (dlib, Ceres); the training pack's LibTorch-only trainer has no mapping.
 #pragma once
 
 #include <ATen/core/Tensor.h>
@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "avatar/gan_avatar/expression_mapping.h"
-#include "avatar/gan_avatar/model.h"
+#include "avatar/splat/splat_camera.h"
 #include "core/face_model.h"
 #include "core/progress.h"
 #include "core/status.h"

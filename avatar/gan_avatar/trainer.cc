@@ -80,6 +80,9 @@ class GanTrainer {
   // The latents z the mapping's renders come from ([mapping_samples,
   // z_dim]), or undefined for random ones (drawn batch by batch from `random`).
   torch::Tensor MappingCodes(at::Generator& random) const;
+  // The training views' frames, ascending, once each: the rows of
+  // frame_codes_ the reconstruction loss fits.
+  torch::Tensor TrainingFrames() const;
   Status Finish(const fs::path& out_dir, TrainSummary* summary);
   int step() const { return state_.step; }
 
@@ -414,11 +417,23 @@ Status GanTrainer::ImportGenerator(const fs::path& dir) {
                                    std::to_string(data_.height) + "): was it trained on this workspace's pack?");
   avatar_.generator = trained.generator;
   avatar_.w_average = trained.w_average;
-  if (trained.frame_codes.defined() && trained.frame_codes.sizes() == frame_codes_.sizes()) {
-    torch::NoGradGuard no_grad;
-    frame_codes_.copy_(trained.frame_codes);
-    codes_trained_ = true;
+  if (trained.frame_codes.defined()) {
+    const bool same = trained.frame_codes.sizes() == frame_codes_.sizes() &&
+                      torch::equal(trained.trained_frames.cpu(), TrainingFrames());
+    if (same) {
+      torch::NoGradGuard no_grad;
+      frame_codes_.copy_(trained.frame_codes);
+      codes_trained_ = true;
+    } else {
+      HF_LOG(Warning) << "train: --generator-from " << dir.string() << ": its per-frame latents are for other "
+                      << "training frames than these; they are not used";
+    }
   }
+  if (options_.mapping_latents == "frames" && !codes_trained_)
+    return Status::InvalidArgument("train: --mapping-latents frames: the GAN of " + dir.string() +
+                                   " kept no latents for this workspace's training frames (a model written before "
+                                   "they were kept, or trained without the reconstruction loss); use "
+                                   "--mapping-latents random");
   g_params_ = avatar_.generator->parameters();
   state_.step = config.at("training").value("steps", 0);
   state_.seconds = config.at("training").value("seconds", 0.0);
@@ -488,7 +503,9 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
                                         [&] { return SaveCheckpoint(checkpoint, stats->size()); }, progress));
   }
   progress->Finish(std::to_string(state_.step) + " steps");
-  codes_trained_ = options_.reconstruction_steps > 0 && state_.step > 0;
+  // The reconstruction loss fits each training frame's latent, in the
+  // warm-up and wherever it is kept beside the adversarial loss.
+  codes_trained_ = state_.step > 0 && (options_.reconstruction_steps > 0 || options_.recon_weight > 0);
   // The GAN is done: a kill during the expression mapping resumes here.
   HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, stats->size()));
   state_.seconds = elapsed();
@@ -496,13 +513,17 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
   return Status::Ok();
 }
 
-torch::Tensor GanTrainer::MappingCodes(at::Generator& random) const {
-  if (options_.mapping_latents != "frames") return torch::Tensor();
+torch::Tensor GanTrainer::TrainingFrames() const {
   std::vector<int64_t> frames;
   for (const AvatarView& v : data_.train) frames.push_back(v.frame);
   std::sort(frames.begin(), frames.end());
   frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
-  const torch::Tensor trained = frame_codes_.detach().cpu().index_select(0, torch::tensor(frames, torch::kLong));
+  return torch::tensor(frames, torch::kLong);
+}
+
+torch::Tensor GanTrainer::MappingCodes(at::Generator& random) const {
+  if (options_.mapping_latents != "frames") return torch::Tensor();
+  const torch::Tensor trained = frame_codes_.detach().cpu().index_select(0, TrainingFrames());
   const int64_t count = trained.size(0), samples = options_.mapping_samples;
   // Each training frame's latent once (evenly chosen where the samples are
   // fewer), then blends of two frames' latents (expressions between them).
@@ -528,10 +549,8 @@ Status GanTrainer::TrainMapping(const ImageTracker& track_images, StatsLog* stat
                     "model draws every frame with the mean latent until headforge train --generator-from adds it";
     return Status::Ok();
   }
-  if (options_.mapping_latents == "frames" && !codes_trained_)
-    return Status::InvalidArgument(
-        "train: --mapping-latents frames needs the latents the reconstruction warm-up fitted to the training frames, "
-        "and this GAN has none (no warm-up, or a model written before they were kept); use --mapping-latents random");
+  if (options_.mapping_latents == "frames" && !codes_trained_)  // TrainOptions::Check and ImportGenerator refuse it first
+    return Status::Internal("train: --mapping-latents frames without the training frames' latents");
   const auto start = std::chrono::steady_clock::now();
   for (torch::Tensor& p : g_params_) p.requires_grad_(false);  // the generator is frozen
   const SplatCamera camera = RenderCamera(FrontalView());
@@ -647,13 +666,23 @@ Status GanTrainer::CheckMappedExpressions(const ImageTracker& track_images, Prog
   const torch::Tensor w =
       torch::cat({avatar_.mapping->forward(driving.to(device_)), avatar_.w_average.unsqueeze(0).to(device_)}, 0);
   const SplatCamera camera = RenderCamera(frontal);
+  // A measurement: a reading that fails is said and the model kept (only a
+  // stop request stops the stage).
+  auto reading = [&](const Status& status, const char* what) {
+    if (status.ok() || status.code() == Status::Code::kInterrupted) return status;
+    HF_LOG(Warning) << "train: gan-avatar: could not read back " << what << " (" << status.message()
+                    << "); eval.json has no expression_agreement";
+    return Status::Ok();
+  };
   RenderExpressions rendered, seen;
-  HF_RETURN_IF_ERROR(track_images(RenderLatents(w, camera), {camera}, progress, &rendered)
-                         .WithContext("tracking the mapping's renders of the capture's expressions"));
+  const Status read_renders = track_images(RenderLatents(w, camera), {camera}, progress, &rendered);
+  HF_RETURN_IF_ERROR(reading(read_renders, "the mapping's renders"));
+  if (!read_renders.ok()) return Status::Ok();
   // The frames themselves, at the same size over the same background, each
   // from its own camera: what the tracker can read back at this resolution.
-  HF_RETURN_IF_ERROR(track_images(torch::stack(frames), cameras, progress, &seen)
-                         .WithContext("tracking the frames at the model's resolution"));
+  const Status read_frames = track_images(torch::stack(frames), cameras, progress, &seen);
+  HF_RETURN_IF_ERROR(reading(read_frames, "the frames at the model's size"));
+  if (!read_frames.ok()) return Status::Ok();
   // Rows both readings fitted.
   torch::Tensor in_seen = torch::zeros({n + 1}, torch::kBool);
   in_seen.index_put_({seen.index}, true);
@@ -680,8 +709,8 @@ Status GanTrainer::CheckMappedExpressions(const ImageTracker& track_images, Prog
   std::string line;
   double readable_correlation = 0, readable_frames_correlation = 0;
   int readable = 0;
-  // How much each blendshape varies over the mapping's own data (the GAN's
-  // random renders read back): what it could learn.
+  // How much each blendshape varies over the mapping's own renders (read
+  // back): what it could learn.
   const torch::Tensor sample_spread = samples_.expressions.to(torch::kFloat64).std(0, /*unbiased=*/false);
   std::map<std::string, int64_t> column;
   for (size_t j = 0; j < data_.expression_names.size(); ++j) column[data_.expression_names[j]] = int64_t(j);
@@ -769,12 +798,8 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   model.Put("w_average", avatar_.w_average);
   if (avatar_.mapping) model.PutModule("mapping.", *avatar_.mapping);
   if (codes_trained_) {
-    std::vector<int64_t> frames;
-    for (const AvatarView& v : data_.train) frames.push_back(v.frame);
-    std::sort(frames.begin(), frames.end());
-    frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
     model.Put("frame_codes", frame_codes_.detach().cpu());
-    model.Put("trained_frames", torch::tensor(frames, torch::kLong));
+    model.Put("trained_frames", TrainingFrames());
   }
   HF_RETURN_IF_ERROR(model.Save(out_dir / "model.pt"));
   const nlohmann::json config = {

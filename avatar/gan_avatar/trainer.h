@@ -9,10 +9,12 @@
 #include <torch/types.h>
 
 #include <functional>
+#include <vector>
 
 #include "avatar/avatar_train.h"
 #include "avatar/gan_avatar/expression_mapping.h"
 #include "avatar/gan_avatar/model.h"
+#include "avatar/splat/splat_camera.h"
 #include "avatar/train/dataset.h"
 
 namespace headforge {

@@ -26,6 +26,7 @@ ExpressionAgreement CompareExpressions(const torch::Tensor& driving, const torch
     const int64_t j = order[k].item<int64_t>();
     ExpressionAgreement::Blendshape s;
     s.name = size_t(j) < names.size() ? names[size_t(j)] : std::to_string(j);
+    s.column = j;
     s.driving_std = spread[j].item<double>();
     const torch::Tensor dj = d.select(1, j), tj = t.select(1, j);
     s.error = (tj - dj).abs().mean().item<double>();

@@ -48,6 +48,7 @@ struct RenderExpressions {
 struct ExpressionAgreement {
   struct Blendshape {
     std::string name;
+    int64_t column = 0;  // its column in the expression tensors
     double driving_std = 0;
     double error = 0;           // mean |tracked - driving|
     double baseline_error = 0;  // mean |baseline - driving|

@@ -668,27 +668,24 @@ Status GanTrainer::CheckMappedExpressions(const ImageTracker& track_images, Prog
   const SplatCamera camera = RenderCamera(frontal);
   // A measurement: a reading that fails is said and the model kept (only a
   // stop request stops the stage).
-  auto reading = [&](const Status& status, const char* what) {
-    if (status.ok() || status.code() == Status::Code::kInterrupted) return status;
-    HF_LOG(Warning) << "train: gan-avatar: could not read back " << what << " (" << status.message()
-                    << "); eval.json has no expression_agreement";
-    return Status::Ok();
+  Status status = Status::Ok();
+  auto failed = [&](Status read) {
+    if (read.ok()) return false;
+    if (read.code() == Status::Code::kInterrupted) status = read;
+    else
+      HF_LOG(Warning) << "train: gan-avatar: could not read back the mapping's renders or the frames ("
+                      << read.message() << "); eval.json has no expression_agreement";
+    return true;
   };
   RenderExpressions rendered, seen;
-  const Status read_renders = track_images(RenderLatents(w, camera), {camera}, progress, &rendered);
-  HF_RETURN_IF_ERROR(reading(read_renders, "the mapping's renders"));
-  if (!read_renders.ok()) return Status::Ok();
+  if (failed(track_images(RenderLatents(w, camera), {camera}, progress, &rendered))) return status;
   // The frames themselves, at the same size over the same background, each
-  // from its own camera: what the tracker can read back at this resolution.
-  const Status read_frames = track_images(torch::stack(frames), cameras, progress, &seen);
-  HF_RETURN_IF_ERROR(reading(read_frames, "the frames at the model's size"));
-  if (!read_frames.ok()) return Status::Ok();
-  // Rows both readings fitted.
-  torch::Tensor in_seen = torch::zeros({n + 1}, torch::kBool);
-  in_seen.index_put_({seen.index}, true);
+  // from its own camera: what the tracker can read back at this size.
+  if (failed(track_images(torch::stack(frames), cameras, progress, &seen))) return status;
+  // Rows both readings fitted (where_seen: each frame's row in `seen`, or -1).
   torch::Tensor where_seen = torch::full({n + 1}, -1, torch::kLong);
   where_seen.index_put_({seen.index}, torch::arange(seen.index.size(0)));
-  const torch::Tensor both = rendered.index < n & in_seen.index_select(0, rendered.index);
+  const torch::Tensor both = rendered.index < n & where_seen.index_select(0, rendered.index) >= 0;
   if (!(rendered.index == n).any().item<bool>() || both.sum().item<int64_t>() < 2) {
     HF_LOG(Warning) << "train: gan-avatar: too few of the mapping's renders tracked to say whether they show their "
                        "expressions";
@@ -712,8 +709,6 @@ Status GanTrainer::CheckMappedExpressions(const ImageTracker& track_images, Prog
   // How much each blendshape varies over the mapping's own renders (read
   // back): what it could learn.
   const torch::Tensor sample_spread = samples_.expressions.to(torch::kFloat64).std(0, /*unbiased=*/false);
-  std::map<std::string, int64_t> column;
-  for (size_t j = 0; j < data_.expression_names.size(); ++j) column[data_.expression_names[j]] = int64_t(j);
   for (size_t k = 0; k < a.blendshapes.size(); ++k) {
     const ExpressionAgreement::Blendshape &b = a.blendshapes[k], &g = f.blendshapes[k];
     if (g.correlation < kReadableCorrelation) continue;
@@ -723,7 +718,7 @@ Status GanTrainer::CheckMappedExpressions(const ImageTracker& track_images, Prog
     shapes.push_back({{"name", b.name}, {"driving_std", b.driving_std}, {"error", b.error},
                       {"correlation", b.correlation}, {"mean_latent_error", b.baseline_error},
                       {"frames_error", g.error}, {"frames_correlation", g.correlation},
-                      {"samples_std", column.count(b.name) ? sample_spread[column[b.name]].item<double>() : 0.0}});
+                      {"samples_std", sample_spread[b.column].item<double>()}});
     char text[128];
     std::snprintf(text, sizeof(text), "%s%s r = %.2f (frames %.2f)", line.empty() ? "" : ", ", b.name.c_str(),
                   b.correlation, g.correlation);

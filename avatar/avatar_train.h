@@ -152,6 +152,7 @@ struct TrainSummary {
   double psnr_masked = 0, ssim_masked = 0, psnr_full = 0, ssim_full = 0, l1_masked = 0;
   double train_psnr_masked = 0;  // every 10th training view, with its own frame latent
   std::vector<std::string> outputs;  // relative to the output folder
+  std::string note;                  // what the user should know of the run ("" or a clause)
   std::string OneLine() const;
 };
 

@@ -138,7 +138,7 @@ std::string TrainSummary::OneLine() const {
                 "%.2f dB / %.3f over the frame",
                 steps, seconds, resumed.c_str(), count.c_str(), test_views, psnr_masked, ssim_masked, psnr_full,
                 ssim_full);
-  return text;
+  return note.empty() ? std::string(text) : std::string(text) + "; " + note;
 }
 
 }  // namespace headforge

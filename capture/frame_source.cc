@@ -149,8 +149,22 @@ class FolderFrameSource : public FrameSource {
     is_folder_ = true;
     fps_ = fps;
     files_ = ListFiles(path, ImageExtensions());
-    if (files_.empty())
+    if (files_.empty()) {
+      // A capture of several cameras (the simulator's, a studio's export):
+      // one folder of images per camera.
+      std::vector<std::string> cameras;
+      std::error_code ec;
+      for (const auto& entry : fs::directory_iterator(path, ec))
+        if (entry.is_directory(ec) && !ListFiles(entry.path(), ImageExtensions()).empty())
+          cameras.push_back(entry.path().string());
+      std::sort(cameras.begin(), cameras.end());
+      std::string hint;
+      for (const std::string& c : cameras) hint += " " + c;
+      if (!cameras.empty())
+        return Status::DataError("folder " + path_ + " holds no images, but " + std::to_string(cameras.size()) +
+                                 " of its folders do: give one folder per camera, --video" + hint);
       return Status::DataError("folder " + path_ + " holds no images (.png, .jpg, ...)");
+    }
     cv::Mat first;
     HF_RETURN_IF_ERROR(ReadImage(files_[0], &first, cv::IMREAD_UNCHANGED));
     size_ = first.size();

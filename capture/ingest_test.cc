@@ -282,7 +282,9 @@ TEST(Ingest, ALongRecordingKeepsFramesForWhatTheyShowNotForHowLongTheyLast) {
   int held = 0;
   for (size_t i = 0; i < capture.samples.size(); ++i) {
     held += capture.samples[i] < 60 ? 1 : 0;
-    if (i > 0) EXPECT_LT(capture.samples[i - 1], capture.samples[i]);
+    if (i > 0) {
+      EXPECT_LT(capture.samples[i - 1], capture.samples[i]);
+    }
   }
   EXPECT_LE(held, 2);
   int unselected = 0;

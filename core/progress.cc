@@ -23,10 +23,14 @@ void StderrProgress::Start(const std::string& label, int64_t total) {
   label_ = label;
   total_ = total;
   done_ = 0;
+  resumed_ = 0;
   last_quarter_ = 0;
   start_ = last_print_ = std::chrono::steady_clock::now();
-  if (plain_) std::fprintf(stderr, "[headforge] %s: started (%lld)\n", label_.c_str(),
-                           static_cast<long long>(total_));
+  // A task of unknown length (total 0) says no count.
+  if (plain_ && total_ > 0)
+    std::fprintf(stderr, "[headforge] %s: started (%lld)\n", label_.c_str(), static_cast<long long>(total_));
+  else if (plain_)
+    std::fprintf(stderr, "[headforge] %s: started\n", label_.c_str());
 }
 
 void StderrProgress::Advance(int64_t units) {
@@ -36,15 +40,27 @@ void StderrProgress::Advance(int64_t units) {
   Draw(false);
 }
 
+void StderrProgress::Resume(int64_t units) {
+  if (Quiet()) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  done_ += units;
+  resumed_ += units;
+}
+
+double StderrProgress::SecondsLeft(double elapsed) const {
+  const int64_t now = done_ - resumed_;
+  return now > 0 && total_ > done_ ? elapsed * double(total_ - done_) / double(now) : 0.0;
+}
+
 void StderrProgress::Finish(const std::string& summary) {
   if (Quiet()) return;
   std::lock_guard<std::mutex> lock(mutex_);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   if (!plain_) std::fprintf(stderr, "\r\033[K");
-  std::fprintf(stderr, "[headforge] %s: done %lld in %.1f s%s%s\n", label_.c_str(),
-               static_cast<long long>(done_), seconds, summary.empty() ? "" : ", ",
-               summary.c_str());
+  const std::string count = total_ > 0 || done_ > 0 ? " " + std::to_string(done_) : "";
+  std::fprintf(stderr, "[headforge] %s: done%s in %.1f s%s%s\n", label_.c_str(), count.c_str(), seconds,
+               summary.empty() ? "" : ", ", summary.c_str());
   std::fflush(stderr);
 }
 
@@ -57,7 +73,11 @@ void StderrProgress::Draw(bool final_line) {
     if (quarter <= last_quarter_ && now - last_print_ < interval_) return;
     last_quarter_ = std::max(quarter, last_quarter_);
     last_print_ = now;
-    if (total_ > 0)
+    if (total_ > 0 && SecondsLeft(elapsed) > 0)
+      std::fprintf(stderr, "[headforge] %s: %lld/%lld (%.0f%%), %.1f s, ~%.0f s left\n", label_.c_str(),
+                   static_cast<long long>(done_), static_cast<long long>(total_), 100.0 * fraction, elapsed,
+                   SecondsLeft(elapsed));
+    else if (total_ > 0)
       std::fprintf(stderr, "[headforge] %s: %lld/%lld (%.0f%%), %.1f s\n", label_.c_str(),
                    static_cast<long long>(done_), static_cast<long long>(total_),
                    100.0 * fraction, elapsed);
@@ -74,7 +94,7 @@ void StderrProgress::Draw(bool final_line) {
   char bar[kWidth + 1];
   for (int i = 0; i < kWidth; ++i) bar[i] = i < filled ? '#' : '.';
   bar[kWidth] = '\0';
-  const double eta = fraction > 0 ? elapsed * (1.0 - fraction) / fraction : 0.0;
+  const double eta = SecondsLeft(elapsed);
   std::fprintf(stderr, "\r\033[K%s [%s] %lld/%lld  %.1f s elapsed, ~%.0f s left", label_.c_str(),
                bar, static_cast<long long>(done_), static_cast<long long>(total_), elapsed, eta);
   std::fflush(stderr);

@@ -17,6 +17,9 @@ class Progress {
   virtual void Start(const std::string& label, int64_t total) = 0;
   // Adds `units` done; callable from several threads.
   virtual void Advance(int64_t units = 1) = 0;
+  // Counts `units` an earlier, interrupted attempt did (a resumed task):
+  // done, but not in this attempt's rate.
+  virtual void Resume(int64_t units) { Advance(units); }
   // Ends the current task with a closing line.
   virtual void Finish(const std::string& summary = "") = 0;
 };
@@ -39,15 +42,19 @@ class StderrProgress : public Progress {
 
   void Start(const std::string& label, int64_t total) override;
   void Advance(int64_t units = 1) override;
+  void Resume(int64_t units) override;
   void Finish(const std::string& summary = "") override;
 
  private:
+  // Seconds left at this attempt's rate (0 when it has none yet).
+  double SecondsLeft(double elapsed) const;
   void Draw(bool final_line);
 
   std::mutex mutex_;
   std::string label_;
   int64_t total_ = 0;
   int64_t done_ = 0;
+  int64_t resumed_ = 0;  // of done_, what an earlier attempt did
   int last_quarter_ = 0;
   bool plain_;
   std::chrono::seconds interval_;

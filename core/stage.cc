@@ -5,17 +5,26 @@
 
 namespace headforge {
 
+Status RequireStagesCurrent(const Workspace& workspace, const std::vector<std::string>& stages, const std::string& who) {
+  for (const auto& name : stages) {
+    const StageRecord* r = workspace.Find(name);
+    if (!r || r->status != StageStatus::kDone)
+      return Status::InvalidArgument(who + " needs the " + name + " stage first (headforge " + name +
+                                     " or headforge run)");
+    if (const std::string why = workspace.OutOfDate(name); !why.empty())
+      return Status::InvalidArgument(who + " needs " + name + " run again first: its outputs are out of date (" + why +
+                                     "); run headforge " + name + " and the stages after it again, or headforge run --workspace " +
+                                     workspace.root().string() + " with the options you gave them");
+  }
+  return Status::Ok();
+}
+
 Status StageFingerprint(const StageEntry& entry, const StageJob& job, const OptionSet& options,
                         const Workspace& workspace, const StageSettings& settings, std::string* fingerprint) {
   Hasher h;
   h.Add(entry.name + "-" + std::to_string(entry.version)).Add(options.ToIni(entry.name, true));
-  for (const auto& name : entry.upstream) {
-    const StageRecord* r = workspace.Find(name);
-    if (!r || r->status != StageStatus::kDone)
-      return Status::InvalidArgument(entry.name + " needs the " + name + " stage first (headforge " + name +
-                                     " or headforge run)");
-    h.Add(r->fingerprint);
-  }
+  HF_RETURN_IF_ERROR(RequireStagesCurrent(workspace, entry.upstream, entry.name));
+  for (const auto& name : entry.upstream) h.Add(workspace.Find(name)->fingerprint);
   if (entry.uses_face_model) {
     std::error_code ec;
     if (!fs::is_regular_file(settings.face_model, ec))
@@ -37,6 +46,7 @@ Status RunStageJob(const StageEntry& entry, StageJob* job, const OptionSet& opti
   run.name = entry.name;
   run.options_ini = options.ToIni(entry.name);
   run.resumable = entry.resumable;
+  run.upstream = entry.upstream;
   HF_RETURN_IF_ERROR(StageFingerprint(entry, *job, options, *workspace, settings, &run.fingerprint));
   run.force = force;
   // A resumable stage stops on SIGINT/SIGTERM after writing a checkpoint.

@@ -69,10 +69,15 @@ struct StageEntry {
   std::function<std::unique_ptr<StageJob>()> make;
 };
 
+// Fails, naming what to run, when one of `stages` is not done or its outputs
+// are out of date (Workspace::OutOfDate: a stage it reads was run again since).
+// `who` begins the message ("train", "render").
+Status RequireStagesCurrent(const Workspace& workspace, const std::vector<std::string>& stages, const std::string& who);
+
 // The fingerprint of `entry` run by `job` with `options` (the options' INI
 // text of its section, its version, every upstream stage's fingerprint, the
 // face model's stamp, the job's own inputs). Fails, naming the stage to run,
-// when an upstream stage is not done.
+// when an upstream stage is not done or out of date.
 Status StageFingerprint(const StageEntry& entry, const StageJob& job, const OptionSet& options,
                         const Workspace& workspace, const StageSettings& settings, std::string* fingerprint);
 

@@ -77,6 +77,11 @@ Status Workspace::Open(const fs::path& root, Mode mode, std::unique_ptr<Workspac
   return Status::Ok();
 }
 
+bool Workspace::Exists(const fs::path& root) {
+  std::error_code ec;
+  return fs::exists(root / kManifest, ec);
+}
+
 Workspace::~Workspace() {
   if (lock_fd_ >= 0) ::close(lock_fd_);  // releases the flock
 }
@@ -101,8 +106,13 @@ Status Workspace::Load() {
       record.started_at = stage.value("started_at", "");
       record.finished_at = stage.value("finished_at", "");
       record.message = stage.value("message", "");
+      record.commit = stage.value("commit", 0L);
+      record.committed_fingerprint = stage.value("committed_fingerprint", "");
+      for (const auto& from : stage.value("made_from", nlohmann::json::array()))
+        record.made_from.emplace_back(from.at("stage").get<std::string>(), from.at("commit").get<long>());
       records_.push_back(record);
     }
+    commits_ = manifest.value("commits", 0L);
   } catch (const nlohmann::json::exception& e) {
     return Status::DataError(path.string() + " is damaged (" + e.what() +
                              "); move it away to start the workspace afresh");
@@ -114,8 +124,11 @@ Status Workspace::Save() const {
   HF_CHECK(mode_ == Mode::kReadWrite);
   nlohmann::json manifest;
   manifest["version"] = kManifestVersion;
+  manifest["commits"] = commits_;
   manifest["stages"] = nlohmann::json::array();
   for (const auto& r : records_) {
+    nlohmann::json made_from = nlohmann::json::array();
+    for (const auto& [name, commit] : r.made_from) made_from.push_back({{"stage", name}, {"commit", commit}});
     manifest["stages"].push_back({{"name", r.name},
                                   {"status", StageStatusName(r.status)},
                                   {"fingerprint", r.fingerprint},
@@ -123,7 +136,10 @@ Status Workspace::Save() const {
                                   {"wall_time_s", r.wall_time_s},
                                   {"started_at", r.started_at},
                                   {"finished_at", r.finished_at},
-                                  {"message", r.message}});
+                                  {"message", r.message},
+                                  {"commit", r.commit},
+                                  {"committed_fingerprint", r.committed_fingerprint},
+                                  {"made_from", made_from}});
   }
   return WriteFileAtomic(root_ / kManifest, manifest.dump(2) + "\n");
 }
@@ -159,9 +175,20 @@ StageRecord* Workspace::Mutable(const std::string& stage) {
   return &records_.back();
 }
 
+std::string Workspace::OutOfDate(const std::string& stage) const {
+  const StageRecord* r = Find(stage);
+  if (!r || r->status != StageStatus::kDone) return "";
+  for (const auto& [name, commit] : r->made_from) {
+    const StageRecord* u = Find(name);
+    if (!u || u->commit == commit) continue;
+    return name + " was run again after it";
+  }
+  return "";
+}
+
 bool Workspace::IsUpToDate(const std::string& stage, const std::string& fingerprint) const {
   const StageRecord* r = Find(stage);
-  if (!r || r->status != StageStatus::kDone || r->fingerprint != fingerprint) return false;
+  if (!r || r->status != StageStatus::kDone || r->fingerprint != fingerprint || !OutOfDate(stage).empty()) return false;
   std::error_code ec;
   for (const auto& output : r->outputs)
     if (!fs::exists(root_ / output, ec)) return false;
@@ -180,14 +207,24 @@ bool Workspace::WasInterrupted(const std::string& stage) const {
   return free;
 }
 
-Status Workspace::BeginStage(const std::string& stage, const std::string& fingerprint, bool resumable,
-                             fs::path* staging, bool* resumed) {
+Status Workspace::BeginStage(const std::string& stage, const std::string& fingerprint,
+                             const std::vector<std::string>& upstream, bool resumable, fs::path* staging,
+                             bool* resumed) {
   HF_CHECK(mode_ == Mode::kReadWrite);
   *staging = root_ / kStagingDir / stage;
   // We hold the lock, so a record that says running belongs to a run that died.
   const StageRecord* last = Find(stage);
+  std::vector<std::pair<std::string, long>> made_from;
+  for (const std::string& name : upstream) {
+    const StageRecord* u = Find(name);
+    made_from.emplace_back(name, u ? u->commit : 0);
+  }
+  // A checkpoint made from other upstream outputs (the same fingerprint, an
+  // upstream stage run again since) is not resumed; one from before records
+  // said what they were made from is.
   std::error_code ec;
   *resumed = resumable && last != nullptr && last->fingerprint == fingerprint &&
+             (last->made_from.empty() || last->made_from == made_from) &&
              (last->status == StageStatus::kRunning || last->status == StageStatus::kInterrupted) &&
              fs::is_directory(*staging, ec);
   if (!*resumed) HF_RETURN_IF_ERROR(RemoveAll(*staging));  // leftovers of an interrupted attempt
@@ -196,6 +233,7 @@ Status Workspace::BeginStage(const std::string& stage, const std::string& finger
   StageRecord* r = Mutable(stage);
   r->status = StageStatus::kRunning;
   r->fingerprint = fingerprint;
+  r->made_from = made_from;
   r->started_at = NowIso8601();
   r->finished_at.clear();
   r->message.clear();
@@ -203,7 +241,7 @@ Status Workspace::BeginStage(const std::string& stage, const std::string& finger
 }
 
 Status Workspace::CommitStage(const std::string& stage, const std::vector<std::string>& outputs,
-                              double wall_time_s, const std::string& message) {
+                              double wall_time_s, const std::string& message, bool forced) {
   HF_CHECK(mode_ == Mode::kReadWrite);
   const fs::path staging = root_ / kStagingDir / stage;
   for (const auto& output : outputs) {
@@ -215,10 +253,23 @@ Status Workspace::CommitStage(const std::string& stage, const std::vector<std::s
   HF_RETURN_IF_ERROR(RemoveAll(staging));
   StageRecord* r = Mutable(stage);
   r->status = StageStatus::kDone;
+  if (forced || r->commit == 0 || r->committed_fingerprint != r->fingerprint) r->commit = ++commits_;
+  r->committed_fingerprint = r->fingerprint;
   r->outputs = outputs;
   r->wall_time_s = wall_time_s;
   r->finished_at = NowIso8601();
   r->message = message;
+  return Save();
+}
+
+Status Workspace::RecordMadeFrom(const std::string& stage, const std::vector<std::string>& upstream) {
+  HF_CHECK(mode_ == Mode::kReadWrite);
+  StageRecord* r = Mutable(stage);
+  if (!r->made_from.empty() || upstream.empty()) return Status::Ok();
+  for (const std::string& name : upstream) {
+    const StageRecord* u = Find(name);
+    r->made_from.emplace_back(name, u ? u->commit : 0);
+  }
   return Save();
 }
 
@@ -261,14 +312,16 @@ Status RunStage(Workspace* workspace, const StageRun& run, const StageBody& body
   if (!run.force && workspace->IsUpToDate(stage, run.fingerprint)) {
     HF_LOG(Info) << stage << ": up to date (inputs and options unchanged), skipped";
     *skipped = true;
-    return Status::Ok();
+    return workspace->RecordMadeFrom(stage, run.upstream);
   }
   *skipped = false;
+  if (const std::string why = workspace->OutOfDate(stage); !why.empty() && !run.force)
+    HF_LOG(Info) << stage << ": out of date (" << why << "), redoing it";
   const bool cut_short = workspace->WasInterrupted(stage) ||
                          (workspace->Find(stage) && workspace->Find(stage)->status == StageStatus::kInterrupted);
   StageContext context;
-  HF_RETURN_IF_ERROR(
-      workspace->BeginStage(stage, run.fingerprint, run.resumable && !run.force, &context.staging, &context.resumed));
+  HF_RETURN_IF_ERROR(workspace->BeginStage(stage, run.fingerprint, run.upstream, run.resumable && !run.force,
+                                           &context.staging, &context.resumed));
   if (context.resumed) {
     HF_LOG(Info) << stage << ": an earlier run was interrupted; resuming from its checkpoint";
   } else if (cut_short) {
@@ -305,7 +358,7 @@ Status RunStage(Workspace* workspace, const StageRun& run, const StageBody& body
     return status.WithMessage(message).WithContext(stage);
   }
   result.outputs.push_back(stage + ".ini");
-  return workspace->CommitStage(stage, result.outputs, seconds(), result.message);
+  return workspace->CommitStage(stage, result.outputs, seconds(), result.message, run.force);
 }
 
 }  // namespace headforge

@@ -14,6 +14,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/fs.h"
@@ -35,6 +36,16 @@ struct StageRecord {
   std::string started_at;            // ISO 8601 UTC
   std::string finished_at;
   std::string message;               // one-line summary, or the failure reason
+  // Which commit of the workspace made the outputs (numbered from 1 over all
+  // stages; 0: none yet, or a workspace from before the numbering), the
+  // fingerprint they were made with, and the upstream stages' numbers when
+  // this stage last started: an upstream stage committed again since means
+  // these outputs were made from older ones. A stage redone with the
+  // fingerprint its outputs already had (they were missing, or an attempt in
+  // between failed) keeps its number, unless forced.
+  long commit = 0;
+  std::string committed_fingerprint;
+  std::vector<std::pair<std::string, long>> made_from;
 };
 
 class Workspace {
@@ -44,6 +55,8 @@ class Workspace {
   // Opens the workspace at `root`. kReadWrite creates it if missing and takes an
   // exclusive lock (a second concurrent run fails with a clear message).
   static Status Open(const fs::path& root, Mode mode, std::unique_ptr<Workspace>* workspace);
+  // Whether `root` holds a workspace (its workspace.json).
+  static bool Exists(const fs::path& root);
   ~Workspace();
 
   const fs::path& root() const { return root_; }
@@ -54,8 +67,15 @@ class Workspace {
   std::vector<StageRecord> Stages(const std::vector<std::string>& order) const;
   // nullptr when the stage has never started.
   const StageRecord* Find(const std::string& stage) const;
-  // Done with this fingerprint, and every recorded output still present.
+  // Done with this fingerprint, every recorded output still present, and not
+  // out of date.
   bool IsUpToDate(const std::string& stage, const std::string& fingerprint) const;
+  // Why the stage's outputs are older than what they were made from ("ingest
+  // was run again after it"), or "" when they are not (or the stage is not
+  // done, or its record predates the check). Only the stages the record names
+  // as read are compared; the stage table lists every stage a stage reads,
+  // directly or not.
+  std::string OutOfDate(const std::string& stage) const;
   // True when the record says running but no process holds the lock: the run
   // that started it was interrupted.
   bool WasInterrupted(const std::string& stage) const;
@@ -64,13 +84,19 @@ class Workspace {
   // `resumable` stage whose last attempt was interrupted (killed, or stopped
   // on a signal) with the same fingerprint, that attempt's folder with its
   // checkpoints (`*resumed` true). An earlier failure's kept files
-  // (failed/<stage>/) are removed.
-  Status BeginStage(const std::string& stage, const std::string& fingerprint, bool resumable, fs::path* staging,
-                    bool* resumed);
+  // (failed/<stage>/) are removed. The `upstream` stages' commits are
+  // recorded as what the outputs are made from.
+  Status BeginStage(const std::string& stage, const std::string& fingerprint, const std::vector<std::string>& upstream,
+                    bool resumable, fs::path* staging, bool* resumed);
   // Moves each output (relative to the staging folder) into the workspace root,
-  // replacing what was there, then marks the stage done.
+  // replacing what was there, then marks the stage done, with the next commit
+  // number when `forced` or its fingerprint is not the one its outputs had.
   Status CommitStage(const std::string& stage, const std::vector<std::string>& outputs,
-                     double wall_time_s, const std::string& message);
+                     double wall_time_s, const std::string& message, bool forced = false);
+  // For a stage that is up to date but whose record predates `made_from`:
+  // records its upstream stages' present numbers (its fingerprint matched, so
+  // they are what it was made from).
+  Status RecordMadeFrom(const std::string& stage, const std::vector<std::string>& upstream);
   // Marks the stage failed; its previous outputs stay where they are. What the
   // failed attempt wrote (logs, a COLMAP database, ...) moves to
   // failed/<stage>/, replacing an older failure's, and `message` is rewritten
@@ -90,6 +116,7 @@ class Workspace {
   Mode mode_ = Mode::kReadOnly;
   int lock_fd_ = -1;
   std::vector<StageRecord> records_;
+  long commits_ = 0;  // the last commit number given
 };
 
 // One attempt at a stage, as RunStage makes it.
@@ -99,6 +126,7 @@ struct StageRun {
   std::string options_ini;  // the effective options, written beside the outputs as <name>.ini
   bool resumable = false;   // keeps checkpoints in its staging folder (Workspace::BeginStage)
   bool force = false;       // run even when up to date, from a clean staging folder
+  std::vector<std::string> upstream = {};  // the stages whose outputs it reads (Workspace::OutOfDate)
 };
 
 // What the body of a stage is handed.
@@ -115,7 +143,9 @@ struct StageResult {
 
 using StageBody = std::function<Status(const StageContext& context, StageResult* result)>;
 
-// Runs `body` as `run.name` unless it is up to date with `run.fingerprint`.
+// Runs `body` as `run.name` unless it is up to date: done with
+// `run.fingerprint`, its outputs present and none of its upstream stages run
+// again since (Workspace::OutOfDate).
 // The body writes into the staging folder; RunStage writes the options there
 // as <name>.ini, commits, and records the wall time. `*skipped` tells whether
 // the body ran. When the body fails, what it wrote is kept in failed/<stage>/

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
+
 namespace headforge {
 namespace {
 
@@ -142,7 +144,7 @@ TEST_F(WorkspaceTest, ManifestPersistsAndInterruptedRunIsDetected) {
     ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
     fs::path staging;
     bool resumed = true;
-    ASSERT_TRUE(ws->BeginStage("ingest", "f", false, &staging, &resumed).ok());
+    ASSERT_TRUE(ws->BeginStage("ingest", "f", {}, false, &staging, &resumed).ok());
     EXPECT_FALSE(resumed);
     // The process "dies" here: the lock is released with the object.
   }
@@ -166,7 +168,7 @@ TEST_F(WorkspaceTest, ResumableStageGetsItsCheckpointBackAfterAKill) {
     ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
     fs::path staging;
     bool resumed = true;
-    ASSERT_TRUE(ws->BeginStage("train", "f", true, &staging, &resumed).ok());
+    ASSERT_TRUE(ws->BeginStage("train", "f", {}, true, &staging, &resumed).ok());
     EXPECT_FALSE(resumed);
     ASSERT_TRUE(WriteFileAtomic(staging / "checkpoint.txt", "step 40").ok());
     // Killed here: the record says running and nobody holds the lock.
@@ -189,7 +191,7 @@ TEST_F(WorkspaceTest, ResumableStageGetsItsCheckpointBackAfterAKill) {
   // Killed again, then rerun with other options: a clean start.
   fs::path staging;
   bool resumed = false;
-  ASSERT_TRUE(ws->BeginStage("train", "g", true, &staging, &resumed).ok());
+  ASSERT_TRUE(ws->BeginStage("train", "g", {}, true, &staging, &resumed).ok());
   ASSERT_TRUE(WriteFileAtomic(staging / "checkpoint.txt", "step 7").ok());
   ws.reset();
   ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
@@ -237,6 +239,111 @@ TEST_F(WorkspaceTest, InterruptedStageKeepsItsFolderAndIsNotResumedUnlessResumab
                        },
                        &skipped)
                   .ok());
+}
+
+// A stage whose upstream stage is run again (new outputs, even with the same
+// fingerprint) is out of date: reported, never skipped, and current again
+// once redone. A failed attempt upstream leaves its outputs, so nothing goes
+// out of date; a manifest from before the check says nothing is.
+TEST_F(WorkspaceTest, StageIsOutOfDateWhenAnUpstreamStageRunsAgain) {
+  std::unique_ptr<Workspace> ws;
+  ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
+  std::map<std::string, int> runs;
+  auto stage = [&](const std::string& name, const std::string& fingerprint, std::vector<std::string> upstream,
+                   bool force = false) {
+    StageRun run{name, fingerprint, "", false, force, upstream};
+    bool skipped = false;
+    const Status s = RunStage(ws.get(), run,
+                              Body([&, name](const fs::path& staging, StageResult* result) {
+                                ++runs[name];
+                                HF_RETURN_IF_ERROR(WriteFileAtomic(staging / (name + ".out"), "x"));
+                                result->outputs = {name + ".out"};
+                                return Status::Ok();
+                              }),
+                              &skipped);
+    EXPECT_TRUE(s.ok()) << s.message();
+    return skipped;
+  };
+  stage("ingest", "i1", {});
+  stage("calibrate", "c", {"ingest"});
+  stage("track", "t", {"ingest", "calibrate"});
+  for (const char* name : {"ingest", "calibrate", "track"}) EXPECT_EQ(ws->OutOfDate(name), "") << name;
+  EXPECT_TRUE(stage("calibrate", "c", {"ingest"}));  // up to date: skipped
+
+  stage("ingest", "i2", {});  // new inputs
+  EXPECT_EQ(ws->OutOfDate("ingest"), "");
+  EXPECT_EQ(ws->OutOfDate("calibrate"), "ingest was run again after it");
+  EXPECT_EQ(ws->OutOfDate("track"), "ingest was run again after it");
+  EXPECT_FALSE(ws->IsUpToDate("calibrate", "c"));
+  EXPECT_FALSE(stage("calibrate", "c", {"ingest"}));  // same fingerprint, still redone
+  EXPECT_EQ(runs["calibrate"], 2);
+  EXPECT_EQ(ws->OutOfDate("calibrate"), "");
+  EXPECT_EQ(ws->OutOfDate("track"), "ingest was run again after it");  // the first stage it read that changed
+  EXPECT_FALSE(stage("track", "t", {"ingest", "calibrate"}));
+  EXPECT_EQ(ws->OutOfDate("track"), "");
+
+  stage("calibrate", "c", {"ingest"}, /*force=*/true);  // same fingerprint, new outputs
+  EXPECT_EQ(ws->OutOfDate("track"), "calibrate was run again after it");
+  EXPECT_FALSE(stage("track", "t", {"ingest", "calibrate"}));
+
+  bool skipped = false;
+  EXPECT_FALSE(RunStage(ws.get(), {"ingest", "i3", ""},
+                        Body([](const fs::path&, StageResult*) { return Status::DataError("no face"); }), &skipped)
+                   .ok());
+  EXPECT_EQ(ws->OutOfDate("calibrate"), "");  // ingest's outputs are still the ones calibrate read
+  EXPECT_EQ(ws->OutOfDate("track"), "");
+  // Redone with the inputs its outputs were made from (the failed attempt's
+  // were others): the same outputs, so the same number.
+  EXPECT_FALSE(stage("ingest", "i2", {}));
+  EXPECT_EQ(ws->OutOfDate("calibrate"), "");
+  EXPECT_EQ(ws->OutOfDate("track"), "");
+
+  // A checkpoint made from outputs an upstream stage has replaced since is
+  // not resumed, even with the same fingerprint.
+  auto train = [&](bool stop, bool* resumed) {
+    StageRun run{"train", "r", "", /*resumable=*/true, false, {"ingest"}};
+    return RunStage(ws.get(), run,
+                    [&](const StageContext& context, StageResult* result) {
+                      *resumed = context.resumed;
+                      HF_RETURN_IF_ERROR(WriteFileAtomic(context.staging / "model", "m"));
+                      if (stop) return Status::Interrupted("stopped");
+                      result->outputs = {"model"};
+                      return Status::Ok();
+                    },
+                    &skipped);
+  };
+  bool resumed = true;
+  EXPECT_EQ(train(true, &resumed).code(), Status::Code::kInterrupted);
+  EXPECT_FALSE(resumed);
+  ASSERT_TRUE(train(true, &resumed).code() == Status::Code::kInterrupted);
+  EXPECT_TRUE(resumed);  // nothing upstream changed: its checkpoint comes back
+  stage("ingest", ws->Find("ingest")->fingerprint, {}, /*force=*/true);
+  ASSERT_TRUE(train(false, &resumed).ok());
+  EXPECT_FALSE(resumed);
+
+  // The numbers persist.
+  stage("ingest", "i4", {});
+  ws.reset();
+  std::unique_ptr<Workspace> reopened;
+  ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadOnly, &reopened).ok());
+  EXPECT_EQ(reopened->OutOfDate("track"), "ingest was run again after it");
+  ASSERT_NE(reopened->Find("track"), nullptr);
+  EXPECT_EQ(reopened->Find("track")->made_from.size(), 2u);
+  reopened.reset();
+
+  // A manifest written before stages recorded what they were made from.
+  ASSERT_TRUE(WriteFileAtomic(root_ / "workspace.json",
+                              R"({"version": 1, "stages": [{"name": "ingest", "status": "done", "fingerprint": "a"},
+                                  {"name": "calibrate", "status": "done", "fingerprint": "b"}]})")
+                  .ok());
+  ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
+  EXPECT_EQ(ws->OutOfDate("calibrate"), "");
+  // Skipped as up to date, it records what it was made from; from then on a
+  // new ingest makes it out of date.
+  EXPECT_TRUE(stage("calibrate", "b", {"ingest"}));
+  ASSERT_EQ(ws->Find("calibrate")->made_from.size(), 1u);
+  stage("ingest", "a2", {});
+  EXPECT_EQ(ws->OutOfDate("calibrate"), "ingest was run again after it");
 }
 
 TEST_F(WorkspaceTest, SecondWriterIsRefused) {

@@ -181,6 +181,11 @@ std::vector<fs::path> BenchResultFiles(const ExportOptions& options, const fs::p
   return files;
 }
 
+bool ExportNeedsModel(const ExportOptions& options) {
+  return Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos") ||
+         !options.frames.empty();
+}
+
 std::string ExportSummary::OneLine() const {
   char text[96];
   std::snprintf(text, sizeof(text), "%zu files in %.1f s", files.size(), seconds);
@@ -216,8 +221,7 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
     return Status::InvalidArgument("export: --frames bakes the Gaussian avatar's clip; the gan-avatar model is a volume "
                                    "and has no Gaussians (its videos show it moving)");
   // Refused before anything is written: the formats that need a trained model.
-  const bool needs_model =
-      Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos") || clip;
+  const bool needs_model = ExportNeedsModel(options);
   if (needs_model && !trained)
     return Status::NotFound("no trained avatar in " + model_dir.string() + " (run headforge train" +
                             (gan ? " --model gan-avatar" : "") + " first, or export --formats mesh report alone)");

@@ -73,6 +73,10 @@ struct ExportSummary {
   std::string OneLine() const;
 };
 
+// Whether the formats asked for need a trained model (Gaussians, weights,
+// videos, a baked clip) or only the tracking (mesh, viewer, report).
+bool ExportNeedsModel(const ExportOptions& options);
+
 // Writes into `out_dir` what options.formats asks for from `workspace`
 // (tracked; trained for the Gaussians, weights and videos).
 Status RunExport(const ExportOptions& options, const fs::path& workspace, const std::string& face_model,

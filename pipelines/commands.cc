@@ -113,6 +113,21 @@ int ParseOrExit(OptionSet* options, const std::vector<std::string>& args, const 
   return -1;
 }
 
+Status CheckTrackedWorkspace(const std::string& path, bool with_model, const std::string& who) {
+  // A folder of a workspace's files without its manifest (headforge bench
+  // truth-workspace's): its readers say what is missing.
+  std::error_code ec;
+  if (!Workspace::Exists(path) && fs::exists(fs::path(path) / "tracking.json", ec)) return Status::Ok();
+  std::unique_ptr<Workspace> workspace;
+  HF_RETURN_IF_ERROR(Workspace::Open(path, Workspace::Mode::kReadOnly, &workspace));
+  HF_RETURN_IF_ERROR(RequireStagesCurrent(*workspace, {"ingest", "calibrate", "align", "track"}, who));
+  if (with_model)
+    if (const std::string why = workspace->OutOfDate("train"); !why.empty())
+      HF_LOG(Warning) << who << ": the trained model is older than the tracked capture (" << why
+                      << "); headforge train makes it again from the present one";
+  return Status::Ok();
+}
+
 int ReportFailure(const Status& status) {
   std::fprintf(stderr, "headforge: %s\n", status.message().c_str());
   return status.code() == Status::Code::kInvalidArgument ? kExitUsage : kExitFailure;

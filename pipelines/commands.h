@@ -53,6 +53,14 @@ int ParseOrExit(OptionSet* options, const std::vector<std::string>& args, const 
                 const std::string& description);
 // Prints "headforge: <message>" on stderr and returns the exit code for `status`.
 int ReportFailure(const Status& status);
+// For a command that reads a workspace's tracked capture and its trained
+// model (render, pack): fails when the workspace does not exist or one of
+// ingest ... track is not done or out of date (RequireStagesCurrent); warns
+// when `with_model` and the train stage's model is older than the tracking
+// (a model may also come from elsewhere: headforge-train on a GPU machine).
+// A folder with tracking.json but no manifest (bench truth-workspace's) is
+// not checked.
+Status CheckTrackedWorkspace(const std::string& workspace, bool with_model, const std::string& who);
 
 // Command entry points (the stages' own are in stage_table.h).
 int SimulateCommand(const std::vector<std::string>& args);

@@ -14,11 +14,17 @@ namespace headforge {
 
 int StatusCommand(const std::vector<std::string>& args) {
   OptionSet options;
-  std::string workspace_path;
+  std::string workspace_path, workspace_flag;
   options.AddPositional("WORKSPACE", &workspace_path, "The workspace folder.");
-  const int parsed = ParseOrExit(&options, args, "headforge status WORKSPACE",
-                                 "Prints each stage's status, wall time and summary.");
+  options.Add("workspace", &workspace_flag, "The workspace folder, as every other command takes it.", "",
+              OptionSet::Effect::kRuntime);
+  const int parsed = ParseOrExit(&options, args, "headforge status WORKSPACE (or --workspace WORKSPACE)",
+                                 "Prints each stage's status, wall time and summary. A stage is out of date when a stage\n"
+                                 "whose outputs it read was run again after it: headforge run redoes it.");
   if (parsed >= 0) return parsed;
+  if (!workspace_flag.empty() && !workspace_path.empty() && workspace_flag != workspace_path)
+    return ReportFailure(Status::InvalidArgument("give one workspace, as WORKSPACE or with --workspace"));
+  if (workspace_path.empty()) workspace_path = workspace_flag;
   if (workspace_path.empty()) return ReportFailure(Status::InvalidArgument("give the WORKSPACE folder"));
   std::unique_ptr<Workspace> workspace;
   if (Status s = Workspace::Open(workspace_path, Workspace::Mode::kReadOnly, &workspace); !s.ok())
@@ -27,12 +33,17 @@ int StatusCommand(const std::vector<std::string>& args) {
   std::printf("%-10s %-12s %10s  %-20s  %s\n", "stage", "status", "wall time", "finished", "summary");
   for (const auto& r : workspace->Stages(StageNames())) {
     std::string status = StageStatusName(r.status);
+    std::string summary = r.message;
     if (workspace->WasInterrupted(r.name)) status = "interrupted";
+    if (const std::string why = workspace->OutOfDate(r.name); !why.empty()) {
+      status = "out of date";
+      summary = "(" + why + ") " + summary;
+    }
     char wall[32] = "";
     if (r.status == StageStatus::kDone || r.status == StageStatus::kFailed)
       std::snprintf(wall, sizeof(wall), "%.2f s", r.wall_time_s);
     std::printf("%-10s %-12s %10s  %-20s  %s\n", r.name.c_str(), status.c_str(), wall,
-                r.finished_at.c_str(), r.message.c_str());
+                r.finished_at.c_str(), summary.c_str());
   }
   return kExitOk;
 }

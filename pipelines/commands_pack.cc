@@ -35,6 +35,7 @@ int PackCommand(const std::vector<std::string>& args) {
   if (out.empty()) return ReportFailure(Status::InvalidArgument("pack: give the file to write with --out FILE"));
   if (Status s = ApplyTrainPreset(options, &train); !s.ok()) return ReportFailure(s);
   ApplyCommonOptions(common);
+  if (Status s = CheckTrackedWorkspace(common.workspace, false, "pack"); !s.ok()) return ReportFailure(s);
   if (Status s = WriteTrainPack(train, common.workspace, common.Settings().face_model, out); !s.ok())
     return ReportFailure(s);
   std::error_code ec;

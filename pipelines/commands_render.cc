@@ -50,6 +50,8 @@ int RenderCommand(const std::vector<std::string>& args) {
   if (!(render.background >= 0 && render.background <= 1))
     return ReportFailure(Status::InvalidArgument("--background must be in [0, 1]"));
   ApplyCommonOptions(common);
+  if (Status s = CheckTrackedWorkspace(common.workspace, render.model.empty(), "render"); !s.ok())
+    return ReportFailure(s);
   const fs::path out_dir = out.empty() ? fs::path(common.workspace) / (truth.empty() ? "renders" : "novel_views")
                                        : fs::path(out);
   if (!truth.empty()) {
@@ -69,8 +71,10 @@ int RenderCommand(const std::vector<std::string>& args) {
   if (Status s = RenderAvatarFrames(common.workspace, common.Settings().face_model, render, out_dir, &progress, &summary);
       !s.ok())
     return ReportFailure(s);
-  HF_LOG(Info) << "render: " << summary.frames << " frames into " << out_dir.string() << ", "
-               << 1000 * summary.seconds_per_frame << " ms per frame (posing and rendering)";
+  char per_frame[32];
+  std::snprintf(per_frame, sizeof(per_frame), "%.1f", 1000 * summary.seconds_per_frame);
+  HF_LOG(Info) << "render: " << summary.frames << (summary.frames == 1 ? " frame" : " frames") << " into "
+               << out_dir.string() << ", " << per_frame << " ms per frame (posing and rendering)";
   return kExitOk;
 }
 

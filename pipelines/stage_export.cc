@@ -1,5 +1,6 @@
 // The export stage's job: the trained avatar in the formats other tools open, into export/.
 #include "core/hash.h"
+#include "core/log.h"
 #include "core/options.h"
 #include "core/paths.h"
 #include "export/export.h"
@@ -40,6 +41,10 @@ class ExportJob : public StageJob {
     return Status::Ok();
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
+    if (ExportNeedsModel(options_))
+      if (const std::string why = env.workspace->OutOfDate("train"); !why.empty())
+        HF_LOG(Warning) << "export: the trained model is older than the tracked capture (" << why
+                        << "); headforge train makes it again from the present one";
     ExportSummary summary;
     HF_RETURN_IF_ERROR(RunExport(options_, env.workspace->root(), env.settings->face_model,
                                  context.staging / "export", env.progress, &summary));

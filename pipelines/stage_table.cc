@@ -1,7 +1,10 @@
 #include "pipelines/stage_table.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cstdio>
+#include <sstream>
 
 #include "core/json_io.h"
 #include "core/log.h"
@@ -131,6 +134,41 @@ std::string Description(const StageEntry& entry) {
   return text;
 }
 
+// Writes to `config` the options ingest last ran with in `workspace` (its
+// ingest.ini), for a run that gives no --video, less what the run resolves
+// afresh: the data folder's model paths, and the frame budget when a preset
+// is given (the preset's). Refuses a relative input that no longer names
+// what was ingested (the run is in another folder).
+Status RecordedIngestConfig(const fs::path& workspace, bool preset_given, const fs::path& config) {
+  std::string text;
+  HF_RETURN_IF_ERROR(ReadFileToString(workspace / "ingest.ini", &text));
+  nlohmann::json capture;
+  HF_RETURN_IF_ERROR(ReadJson(workspace / "capture.json", &capture).WithContext("run without --video"));
+  std::vector<fs::path> sources;
+  for (const auto& camera : capture.value("cameras", nlohmann::json::array()))
+    sources.push_back(fs::weakly_canonical(camera.value("source", "")));
+  std::istringstream lines(text);
+  std::string kept;
+  for (std::string line; std::getline(lines, line);) {
+    const size_t eq = line.find(" = ");
+    const std::string key = eq == std::string::npos ? "" : line.substr(0, eq);
+    const std::string value = eq == std::string::npos ? "" : line.substr(eq + 3);
+    if (key == "ultraface_dir" || key == "landmark_model" || (key == "select" && preset_given)) continue;
+    if ((key == "video" || key == "masks") && !value.empty() && fs::path(value).is_relative()) {
+      std::error_code ec;
+      const bool same = key == "masks" ? fs::exists(value, ec)
+                                       : std::find(sources.begin(), sources.end(), fs::weakly_canonical(value, ec)) !=
+                                             sources.end();
+      if (!same)
+        return Status::InvalidArgument("run without --video: " + (workspace / "ingest.ini").string() + " gives --" +
+                                       key + " " + value + ", relative to the folder ingest ran in, and from here it " +
+                                       "names something else; run from that folder, or give --" + key + " again");
+    }
+    kept += line + "\n";
+  }
+  return WriteFileAtomic(config, kept);
+}
+
 int OpenForWriting(const CommonOptions& common, std::unique_ptr<Workspace>* workspace) {
   if (Status s = Workspace::Open(common.workspace, Workspace::Mode::kReadWrite, workspace); !s.ok())
     return ReportFailure(s);
@@ -156,6 +194,12 @@ int StageCommand(const StageEntry& entry, const std::vector<std::string>& args) 
   job->Resolve(settings, options);
   if (Status s = job->Check(); !s.ok()) return ReportFailure(s);
   ApplyCommonOptions(common);
+  // Only ingest (and run) make a workspace: another stage on a mistyped path
+  // would make an empty one and then ask for ingest.
+  if (!entry.upstream.empty() && !Workspace::Exists(common.workspace))
+    return ReportFailure(Status::NotFound("no workspace at " + common.workspace +
+                                          " (no workspace.json); headforge run --video FILE --workspace " +
+                                          common.workspace + " makes one"));
   std::unique_ptr<Workspace> workspace;
   if (int code = OpenForWriting(common, &workspace); code >= 0) return code;
   StderrProgress progress;
@@ -184,9 +228,33 @@ int RunCommand(const std::vector<std::string>& args) {
       &options, args, "headforge run --video FILE|DIR... --workspace DIR [options]",
       "Runs the pipeline's stages in order into one workspace: " + Joined(StageNames()) +
           " (those available in this version). A stage whose inputs and options are unchanged is\n"
-          "skipped; a failed or interrupted one is redone, or resumed from its checkpoint.\n"
+          "skipped; a failed or interrupted one is redone, or resumed from its checkpoint, and one\n"
+          "made from outputs that have changed since (headforge status: out of date) is redone.\n"
+          "On a workspace already ingested --video may be left out: ingest then runs with the\n"
+          "inputs and options it last ran with (WORKSPACE/ingest.ini).\n"
           "Options of every stage are accepted, by their short flag or their dotted key.");
   if (parsed >= 0) return parsed;
+  // On a workspace already ingested, --video may be left out: ingest's
+  // inputs and options are those it last ran with (its ingest.ini, read as a
+  // config file; the command line still wins).
+  const bool config_given = std::any_of(args.begin(), args.end(), [](const std::string& a) {
+    return a == "--config" || a.rfind("--config=", 0) == 0;
+  });
+  std::error_code ec;
+  if (!common.workspace.empty() && !options.WasGiven("ingest.video") && !config_given &&
+      fs::is_regular_file(fs::path(common.workspace) / "ingest.ini", ec)) {
+    const fs::path config =
+        fs::temp_directory_path() / ("headforge_run_" + std::to_string(::getpid()) + "_ingest.ini");
+    if (Status s = RecordedIngestConfig(common.workspace, options.WasGiven("train.preset"), config); !s.ok())
+      return ReportFailure(s);
+    HF_LOG(Info) << "run: no --video: ingest's inputs and options as it last ran ("
+                 << (fs::path(common.workspace) / "ingest.ini").string() << ")";
+    std::vector<std::string> again = {"--config", config.string()};
+    again.insert(again.end(), args.begin(), args.end());
+    const int code = RunCommand(again);
+    fs::remove(config, ec);
+    return code;
+  }
   if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
   for (const std::string* name : {&from, &until}) {
     if (!name->empty() && !FindStage(*name))

@@ -35,7 +35,10 @@ class TrainJob : public StageJob {
       if (s.ok()) return s;
       if (first.ok()) first = s;
     }
-    return options_.model == "auto" ? first.WithContext("--model auto: no model takes these options") : first;
+    // An option neither model takes (a bad step count) is said as it is.
+    bool same = true;
+    for (const TrainOptions& t : resolved_) same = same && t.Check().message() == first.message();
+    return options_.model == "auto" && !same ? first.WithContext("--model auto: no model takes these options") : first;
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     std::string model = options_.model, why = "as asked";

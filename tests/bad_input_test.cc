@@ -121,9 +121,16 @@ std::vector<BadInput> CommandLineCases() {
        2, {"'tpu' is not a device"}, true},
       {"train before align",
        [](const fs::path& d) {
+         fs::create_directories(d / "fresh");
+         WriteText(d / "fresh" / "workspace.json", R"({"version": 1, "stages": []})");
          return std::vector<std::string>{"train", "--workspace", (d / "fresh").string()};
        },
        2, {"needs the ingest stage first", "headforge run"}},
+      {"a stage given a folder that holds no workspace",
+       [](const fs::path& d) {
+         return std::vector<std::string>{"track", "--workspace", (d / "mistyped").string()};
+       },
+       1, {"no workspace at", "mistyped (no workspace.json); headforge run --video FILE --workspace"}},
       {"a config file with a value of the wrong kind",
        [=](const fs::path& d) {
          WriteText(d / "bad.ini", "[ingest]\nfps = fast\n");
@@ -198,6 +205,16 @@ std::vector<BadInput> InputCases() {
          return video(d, {"--video", (d / "empty_folder").string()});
        },
        1, {"holds no images"}},
+      {"a capture's folder instead of its cameras' folders",
+       [=](const fs::path& d) {
+         for (const char* cam : {"cam0", "cam1"}) {
+           fs::create_directories(d / "capture" / cam);
+           cv::imwrite((d / "capture" / cam / "000000.png").string(), cv::Mat(64, 64, CV_8UC3, cv::Scalar(40, 80, 120)));
+         }
+         return video(d, {"--video", (d / "capture").string()});
+       },
+       1, {"holds no images, but 2 of its folders do: give one folder per camera, --video", "capture/cam0",
+           "capture/cam1"}},
       {"a folder of images of two sizes",
        [=](const fs::path& d) {
          fs::create_directories(d / "mixed");

@@ -147,6 +147,57 @@ TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
   EXPECT_FALSE(Contains(redone.err, "up to date")) << redone.err;
   EXPECT_GT(fs::last_write_time(ws / "capture.json"), written);
   EXPECT_EQ(CountFiles(ws / "frames" / "cam0"), 5u);
+
+  // Ingest ran again after the stages that read it: they are out of date and
+  // say so; what reads them refuses, naming the stage to run; a run redoes
+  // them even where their own options are unchanged.
+  const Result stale = Headforge({"status", ws.string()});
+  ASSERT_EQ(stale.code, 0);
+  for (const char* line : {"calibrate  out of date", "align      out of date", "track      out of date",
+                           "(ingest was run again after it)"})
+    EXPECT_TRUE(Contains(stale.out, line)) << line << "\n" << stale.out;
+  const std::string why = "needs calibrate run again first: its outputs are out of date (ingest was run again after it)";
+  const Result track = Headforge({"track", "--workspace", ws.string()});
+  EXPECT_EQ(track.code, 2);
+  EXPECT_TRUE(Contains(track.err, "headforge: track " + why)) << track.err;
+  const Result render = Headforge({"render", "--workspace", ws.string()});
+  EXPECT_EQ(render.code, 2);
+  EXPECT_TRUE(Contains(render.err, "headforge: render " + why)) << render.err;
+  const Result pack = Headforge({"pack", "--workspace", ws.string(), "--out", (ws / "x.pack").string()});
+  EXPECT_EQ(pack.code, 2);
+  EXPECT_TRUE(Contains(pack.err, "headforge: pack " + why)) << pack.err;
+  EXPECT_FALSE(fs::exists(ws / "x.pack"));
+  // Without --video, ingest's inputs and options are those it last ran with:
+  // up to date.
+  const Result redone_all = Headforge({"run", "--workspace", ws.string(), "--until", "track"});
+  ASSERT_EQ(redone_all.code, 0) << redone_all.err;
+  EXPECT_TRUE(Contains(redone_all.err, "run: no --video: ingest's inputs and options as it last ran")) << redone_all.err;
+  EXPECT_TRUE(Contains(redone_all.err, "ingest: up to date")) << redone_all.err;
+  EXPECT_TRUE(Contains(redone_all.err, "calibrate: out of date (ingest was run again after it), redoing it"))
+      << redone_all.err;
+  EXPECT_FALSE(Contains(Headforge({"status", ws.string()}).out, "out of date"));
+  // A preset given there sets the frame budget afresh (the recorded one was
+  // the earlier preset's or --select's).
+  const Result preset = Headforge({"run", "--workspace", ws.string(), "--until", "ingest", "--preset", "standard"});
+  ASSERT_EQ(preset.code, 0) << preset.err;
+  EXPECT_TRUE(Contains(Slurp(ws / "ingest.ini"), "select = 2000\n"));
+  // A relative input recorded by a run in another folder is refused, not
+  // read from this one.
+  std::string ini = Slurp(ws / "ingest.ini");
+  const std::string video = "video = " + (kGrid / "bbaf2n.mpg").string();
+  ASSERT_TRUE(Contains(ini, video)) << ini;
+  ini.replace(ini.find(video), video.size(), "video = elsewhere/bbaf2n.mpg");
+  ASSERT_TRUE(WriteFileAtomic(ws / "ingest.ini", ini).ok());
+  const Result relative = Headforge({"run", "--workspace", ws.string(), "--until", "track"});
+  EXPECT_EQ(relative.code, 2);
+  EXPECT_TRUE(Contains(relative.err, "gives --video elsewhere/bbaf2n.mpg, relative to the folder ingest ran in"))
+      << relative.err;
+
+  // A stage other than ingest does not make a workspace on a mistyped path.
+  const Result nowhere = Headforge({"track", "--workspace", (ws / "nope").string()});
+  EXPECT_EQ(nowhere.code, 1);
+  EXPECT_TRUE(Contains(nowhere.err, "no workspace at " + (ws / "nope").string())) << nowhere.err;
+  EXPECT_FALSE(fs::exists(ws / "nope"));
 }
 
 TEST_F(CliTest, KilledMidIngestResumesToTheSameOutputs) {
@@ -241,6 +292,14 @@ TEST(Cli, HelpVersionAndUsageErrors) {
   EXPECT_TRUE(Contains(missing.err, "/no/such.mp4")) << missing.err;
   const Result no_ws = Headforge({"status", "/tmp/hf_cli_never_created"});
   EXPECT_EQ(no_ws.code, 1);
+  const Result no_ws_flag = Headforge({"status", "--workspace", "/tmp/hf_cli_never_created"});  // as elsewhere
+  EXPECT_EQ(no_ws_flag.code, 1);
+  EXPECT_TRUE(Contains(no_ws_flag.err, "no workspace at /tmp/hf_cli_never_created")) << no_ws_flag.err;
+  // An option no model takes is said as it is, without --model auto's words.
+  const Result steps = Headforge({"train", "--workspace", "/tmp/hf_cli_never_created", "--steps", "-5"});
+  EXPECT_EQ(steps.code, 2);
+  EXPECT_TRUE(Contains(steps.err, "headforge: train: --steps must be at least 1")) << steps.err;
+  EXPECT_FALSE(fs::exists("/tmp/hf_cli_never_created"));
   const Result bench_help = Headforge({"bench", "calibrate", "--help"});
   EXPECT_EQ(bench_help.code, 0);
   for (const char* text : {"--repeat", "--quick", "--scenes"}) EXPECT_TRUE(Contains(bench_help.out, text)) << text;

@@ -309,6 +309,33 @@ TEST_F(TrainStage, RenderDrawsAnyFrameFromAnyCamera) {
   EXPECT_FALSE(fs::exists(range / "frame_000121.png"));
 }
 
+// Tracking run again after training: the model still renders and exports
+// (a model may come from elsewhere, headforge-train on a GPU machine), but
+// status, render and export say it is older than the tracking.
+TEST_F(TrainStage, AModelOlderThanTheTrackingIsSaidToBe) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const fs::path ws = CopyOf(reference_, Scratch("retracked"));
+  const Result track = Headforge({"track", "--workspace", ws.string(), "--force"});
+  ASSERT_EQ(track.code, 0) << track.err;
+  const Result status = Headforge({"status", ws.string()});
+  EXPECT_NE(status.out.find("train      out of date"), std::string::npos) << status.out;
+  EXPECT_NE(status.out.find("(track was run again after it)"), std::string::npos) << status.out;
+  const std::string warning = "the trained model is older than the tracked capture (track was run again after it)";
+  const Result render = Headforge({"render", "--workspace", ws.string(), "--frames", "110", "--out",
+                                   (ws / "renders").string()});
+  ASSERT_EQ(render.code, 0) << render.err;
+  EXPECT_NE(render.err.find("render: " + warning), std::string::npos) << render.err;
+  EXPECT_TRUE(fs::exists(ws / "renders" / "frame_000110.png"));
+  const Result exported = Headforge({"export", "--workspace", ws.string(), "--formats", "weights"});
+  ASSERT_EQ(exported.code, 0) << exported.err;
+  EXPECT_NE(exported.err.find("export: " + warning), std::string::npos) << exported.err;
+  // The mesh avatar needs only the tracking: nothing to say.
+  const Result mesh = Headforge({"export", "--workspace", ws.string(), "--formats", "mesh", "--bake-views", "2",
+                                 "--texture-size", "64"});
+  ASSERT_EQ(mesh.code, 0) << mesh.err;
+  EXPECT_EQ(mesh.err.find(warning), std::string::npos) << mesh.err;
+}
+
 TEST_F(TrainStage, HeldOutFramesAreScoredAgainstTheSimulatorsTruth) {
   ASSERT_EQ(first_.code, 0) << first_.err;
   // The capture the workspace came from: its one camera is the training
@@ -1375,6 +1402,23 @@ TEST(TrainHardCases, FramesTheTrackerFlaggedAreLeftOutOfTraining) {
   EXPECT_NE(r.err.find("20 of 100 training views left out"), std::string::npos) << r.err;
   for (const auto& line : StatsLines(ws / kModelDir / "stats.jsonl"))
     EXPECT_TRUE(std::isfinite(line["loss"].get<double>())) << line;
+}
+
+// A time limit that ends training before the deformation's stage says so,
+// in the log and in the stage's summary: that avatar does not animate.
+TEST(TrainHardCases, ATimeLimitBeforeStageTwoIsSaid) {
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("time_limit"));
+  std::vector<std::string> args = TrainArgs(ws);
+  *(std::find(args.begin(), args.end(), "--max-minutes") + 1) = "0.0001";  // 6 ms: after the first step
+  const Result r = Headforge(args);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const std::string note = "stage 1 only: the time limit came before stage 2 (step 151)";
+  EXPECT_NE(r.err.find("train: " + note), std::string::npos) << r.err;
+  EXPECT_NE(Headforge({"status", ws.string()}).out.find(note), std::string::npos);
+  for (const auto& line : StatsLines(ws / kModelDir / "stats.jsonl")) {
+    if (!line.contains("stage")) continue;
+    EXPECT_EQ(line["stage"], 1) << line;
+  }
 }
 
 }  // namespace

@@ -446,7 +446,7 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
   auto elapsed = [&] { return state_.seconds + SecondsSince(start_); };
   if (!options_.generator_from.empty()) return Status::Ok();  // the GAN was trained elsewhere
   progress->Start("train: gan-avatar", options_.steps);
-  progress->Advance(state_.step);
+  progress->Resume(state_.step);
   for (int step = state_.step + 1; step <= options_.steps; ++step) {
     Step(step);
     if (step == options_.reconstruction_steps + 1 && options_.reconstruction_steps > 0)
@@ -685,7 +685,7 @@ Status GanTrainer::CheckMappedExpressions(const ImageTracker& track_images, Prog
   // Rows both readings fitted (where_seen: each frame's row in `seen`, or -1).
   torch::Tensor where_seen = torch::full({n + 1}, -1, torch::kLong);
   where_seen.index_put_({seen.index}, torch::arange(seen.index.size(0)));
-  const torch::Tensor both = rendered.index < n & where_seen.index_select(0, rendered.index) >= 0;
+  const torch::Tensor both = (rendered.index < n) & (where_seen.index_select(0, rendered.index) >= 0);
   if (!(rendered.index == n).any().item<bool>() || both.sum().item<int64_t>() < 2) {
     HF_LOG(Warning) << "train: gan-avatar: too few of the mapping's renders tracked to say whether they show their "
                        "expressions";

@@ -467,7 +467,7 @@ Status DecoderTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint
                << " PTI steps on " << pti_views_.size() << " extreme-pose frames, " << options_.decoder_steps
                << " fusion steps" << (options_.full_tune ? " (full-tune: the generator trained too)" : "");
   progress->Start("train: stage 3", total_);
-  progress->Advance(step_);
+  progress->Resume(step_);
   for (int step = step_ + 1; step <= total_; ++step) {
     const Phase phase = PhaseOf(step);
     // Only the phase's own parameters take gradients.

@@ -298,8 +298,15 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
 
 Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
   auto elapsed = [&] { return state_.seconds + SecondsSince(start_); };
-  progress->Start("train: gaussian-style", options_.steps);
-  progress->Advance(state_.step);
+  std::string label = "train: gaussian-style";
+  if (options_.max_minutes > 0) {
+    char limit[96];
+    std::snprintf(limit, sizeof(limit), " (%d steps or %g min, whichever comes first)", options_.steps,
+                  options_.max_minutes);
+    label += limit;
+  }
+  progress->Start(label, options_.steps);
+  progress->Resume(state_.step);
   for (int step = state_.step + 1; step <= options_.steps; ++step) {
     if (step == stage1_steps_ + 1 && options_.deform)
       HF_LOG(Info) << "train: stage 2 (deformation" << (options_.region_weight > 0 ? ", region loss" : "")
@@ -367,6 +374,12 @@ Status Trainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   HF_RETURN_IF_ERROR(FinishAvatar(avatar_, options_, data_, out_dir, nlohmann::json::object(), summary));
   summary->steps = state_.step;
   summary->seconds = state_.seconds;
+  if (options_.deform && options_.max_minutes > 0 && state_.step <= stage1_steps_ && stage1_steps_ < options_.steps) {
+    // The time limit came first: the deformation never trained.
+    summary->note = "stage 1 only: the time limit came before stage 2 (step " + std::to_string(stage1_steps_ + 1) +
+                    "), so the avatar does not follow the expressions; give more --max-minutes or fewer --steps";
+    HF_LOG(Warning) << "train: " << summary->note;
+  }
   return Status::Ok();
 }
 

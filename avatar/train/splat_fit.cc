@@ -252,7 +252,7 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
   SplatRenderOptions render_options;
   render_options.splat = options.splat;
   progress->Start("splat-fit", options.iterations);
-  progress->Advance(state.step);
+  progress->Resume(state.step);
   result->resumed_from = state.step;
   int step = 0;
   for (step = state.step + 1; step <= options.iterations; ++step) {

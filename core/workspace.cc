@@ -231,6 +231,9 @@ Status Workspace::BeginStage(const std::string& stage, const std::string& finger
   HF_RETURN_IF_ERROR(RemoveAll(root_ / kFailedDir / stage));  // an earlier failure's files
   HF_RETURN_IF_ERROR(EnsureDirectory(*staging));
   StageRecord* r = Mutable(stage);
+  // Made from other upstream outputs, its outputs will be new ones even with
+  // the same fingerprint: CommitStage numbers them afresh.
+  if (!r->made_from.empty() && r->made_from != made_from) r->committed_fingerprint.clear();
   r->status = StageStatus::kRunning;
   r->fingerprint = fingerprint;
   r->made_from = made_from;

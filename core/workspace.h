@@ -41,8 +41,9 @@ struct StageRecord {
   // fingerprint they were made with, and the upstream stages' numbers when
   // this stage last started: an upstream stage committed again since means
   // these outputs were made from older ones. A stage redone with the
-  // fingerprint its outputs already had (they were missing, or an attempt in
-  // between failed) keeps its number, unless forced.
+  // fingerprint its outputs already had, from the same upstream outputs (they
+  // were missing, or an attempt in between failed), keeps its number, unless
+  // forced.
   long commit = 0;
   std::string committed_fingerprint;
   std::vector<std::pair<std::string, long>> made_from;

@@ -284,7 +284,15 @@ TEST_F(WorkspaceTest, StageIsOutOfDateWhenAnUpstreamStageRunsAgain) {
 
   stage("calibrate", "c", {"ingest"}, /*force=*/true);  // same fingerprint, new outputs
   EXPECT_EQ(ws->OutOfDate("track"), "calibrate was run again after it");
+  // Redone from new upstream outputs, track's outputs are new although its
+  // fingerprint is not: a stage that read the earlier ones sees it.
+  stage("train", "x", {"ingest", "calibrate", "track"});  // (RunStage alone does not refuse it)
+  const long track_before = ws->Find("track")->commit;
   EXPECT_FALSE(stage("track", "t", {"ingest", "calibrate"}));
+  EXPECT_NE(ws->Find("track")->commit, track_before);
+  EXPECT_EQ(ws->OutOfDate("train"), "track was run again after it");
+  EXPECT_FALSE(stage("train", "x", {"ingest", "calibrate", "track"}));
+  EXPECT_EQ(ws->OutOfDate("train"), "");
 
   bool skipped = false;
   EXPECT_FALSE(RunStage(ws.get(), {"ingest", "i3", ""},

@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 #include "core/log.h"
@@ -73,14 +74,12 @@ void StderrProgress::Draw(bool final_line) {
     if (quarter <= last_quarter_ && now - last_print_ < interval_) return;
     last_quarter_ = std::max(quarter, last_quarter_);
     last_print_ = now;
-    if (total_ > 0 && SecondsLeft(elapsed) > 0)
-      std::fprintf(stderr, "[headforge] %s: %lld/%lld (%.0f%%), %.1f s, ~%.0f s left\n", label_.c_str(),
+    const double left = SecondsLeft(elapsed);
+    const std::string eta = left > 0 ? ", ~" + std::to_string(std::lround(left)) + " s left" : "";
+    if (total_ > 0)
+      std::fprintf(stderr, "[headforge] %s: %lld/%lld (%.0f%%), %.1f s%s\n", label_.c_str(),
                    static_cast<long long>(done_), static_cast<long long>(total_), 100.0 * fraction, elapsed,
-                   SecondsLeft(elapsed));
-    else if (total_ > 0)
-      std::fprintf(stderr, "[headforge] %s: %lld/%lld (%.0f%%), %.1f s\n", label_.c_str(),
-                   static_cast<long long>(done_), static_cast<long long>(total_),
-                   100.0 * fraction, elapsed);
+                   eta.c_str());
     else
       std::fprintf(stderr, "[headforge] %s: %lld, %.1f s\n", label_.c_str(),
                    static_cast<long long>(done_), elapsed);

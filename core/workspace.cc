@@ -186,6 +186,15 @@ std::string Workspace::OutOfDate(const std::string& stage) const {
   return "";
 }
 
+std::vector<std::pair<std::string, long>> Workspace::UpstreamCommits(const std::vector<std::string>& upstream) const {
+  std::vector<std::pair<std::string, long>> commits;
+  for (const std::string& name : upstream) {
+    const StageRecord* u = Find(name);
+    commits.emplace_back(name, u ? u->commit : 0);
+  }
+  return commits;
+}
+
 bool Workspace::IsUpToDate(const std::string& stage, const std::string& fingerprint) const {
   const StageRecord* r = Find(stage);
   if (!r || r->status != StageStatus::kDone || r->fingerprint != fingerprint || !OutOfDate(stage).empty()) return false;
@@ -214,11 +223,7 @@ Status Workspace::BeginStage(const std::string& stage, const std::string& finger
   *staging = root_ / kStagingDir / stage;
   // We hold the lock, so a record that says running belongs to a run that died.
   const StageRecord* last = Find(stage);
-  std::vector<std::pair<std::string, long>> made_from;
-  for (const std::string& name : upstream) {
-    const StageRecord* u = Find(name);
-    made_from.emplace_back(name, u ? u->commit : 0);
-  }
+  const std::vector<std::pair<std::string, long>> made_from = UpstreamCommits(upstream);
   // A checkpoint made from other upstream outputs (the same fingerprint, an
   // upstream stage run again since) is not resumed; one from before records
   // said what they were made from is.
@@ -269,10 +274,7 @@ Status Workspace::RecordMadeFrom(const std::string& stage, const std::vector<std
   HF_CHECK(mode_ == Mode::kReadWrite);
   StageRecord* r = Mutable(stage);
   if (!r->made_from.empty() || upstream.empty()) return Status::Ok();
-  for (const std::string& name : upstream) {
-    const StageRecord* u = Find(name);
-    r->made_from.emplace_back(name, u ? u->commit : 0);
-  }
+  r->made_from = UpstreamCommits(upstream);
   return Save();
 }
 

@@ -112,6 +112,8 @@ class Workspace {
   Status Load();
   Status Save() const;
   StageRecord* Mutable(const std::string& stage);
+  // Each of `upstream` with its present commit number (0: never committed).
+  std::vector<std::pair<std::string, long>> UpstreamCommits(const std::vector<std::string>& upstream) const;
 
   fs::path root_;
   Mode mode_ = Mode::kReadOnly;

@@ -29,15 +29,15 @@ class TrainJob : public StageJob {
     // With auto, options only one model takes (a render size for the
     // gan-avatar's volume) are fine until the model is chosen; Run checks
     // the chosen one's again.
+    // An option neither model takes (a bad step count) is said as it is.
     Status first;
+    bool same = true;
     for (const TrainOptions& t : resolved_) {
       const Status s = t.Check();
       if (s.ok()) return s;
       if (first.ok()) first = s;
+      same = same && s.message() == first.message();
     }
-    // An option neither model takes (a bad step count) is said as it is.
-    bool same = true;
-    for (const TrainOptions& t : resolved_) same = same && t.Check().message() == first.message();
     return options_.model == "auto" && !same ? first.WithContext("--model auto: no model takes these options") : first;
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {

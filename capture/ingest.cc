@@ -150,11 +150,12 @@ Status AddIngestInputs(const IngestOptions& options, Hasher* hasher) {
     }
   }
   if (!options.masks.empty()) HF_RETURN_IF_ERROR(h.AddTreeContents(options.masks));
-  // Model files by stamp: hashing 100 MB on every run is not worth it.
-  if (fs::exists(options.landmark_model)) HF_RETURN_IF_ERROR(h.AddFileStamp(options.landmark_model));
+  // Model files by a digest of samples: hashing 100 MB on every run is not
+  // worth it, and a copied or reinstalled model is the same model.
+  if (fs::exists(options.landmark_model)) HF_RETURN_IF_ERROR(h.AddFileDigest(options.landmark_model));
   const std::string detector_model = options.detector.UltraFaceModelPath();
   if (!detector_model.empty() && fs::exists(detector_model))
-    HF_RETURN_IF_ERROR(h.AddFileStamp(detector_model));
+    HF_RETURN_IF_ERROR(h.AddFileDigest(detector_model));
   return Status::Ok();
 }
 

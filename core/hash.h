@@ -18,8 +18,13 @@ class Hasher {
   Hasher& Add(int64_t value);
   // Adds the full contents of a file.
   Status AddFileContents(const fs::path& path);
-  // Adds a file's name, size and modification time (cheap: for large model files).
+  // Adds a file's name, size and modification time (cheap; changes when the
+  // file is rewritten, copied or moved, even with the same contents).
   Status AddFileStamp(const fs::path& path);
+  // Adds what a file holds, wherever it lies: its contents up to 16 MiB,
+  // beyond that its size and 64 blocks of 64 KiB spread over it (model
+  // files: a copied or reinstalled model reads as the same one).
+  Status AddFileDigest(const fs::path& path);
   // Adds every regular file under `dir` (relative name and contents), sorted.
   Status AddTreeContents(const fs::path& dir);
 

@@ -31,7 +31,7 @@ Status StageFingerprint(const StageEntry& entry, const StageJob& job, const Opti
       return Status::NotFound(entry.name + ": no face model at " + settings.face_model +
                               " (give --face-model FILE, or --data DIR with ict_facekit/ict_face_model.h5 in it; "
                               "headforge face-model import-ict builds one from ICT-FaceKit's folder)");
-    HF_RETURN_IF_ERROR(h.AddFileStamp(settings.face_model).WithContext("face model"));
+    HF_RETURN_IF_ERROR(h.AddFileDigest(settings.face_model).WithContext("face model"));
   }
   HF_RETURN_IF_ERROR(job.AddInputs(&h).WithContext(entry.name));
   *fingerprint = h.Hex();

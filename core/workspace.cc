@@ -110,6 +110,8 @@ Status Workspace::Load() {
       record.committed_fingerprint = stage.value("committed_fingerprint", "");
       for (const auto& from : stage.value("made_from", nlohmann::json::array()))
         record.made_from.emplace_back(from.at("stage").get<std::string>(), from.at("commit").get<long>());
+      for (const auto& from : stage.value("committed_from", nlohmann::json::array()))
+        record.committed_from.emplace_back(from.at("stage").get<std::string>(), from.at("commit").get<long>());
       records_.push_back(record);
     }
     commits_ = manifest.value("commits", 0L);
@@ -127,8 +129,11 @@ Status Workspace::Save() const {
   manifest["commits"] = commits_;
   manifest["stages"] = nlohmann::json::array();
   for (const auto& r : records_) {
-    nlohmann::json made_from = nlohmann::json::array();
-    for (const auto& [name, commit] : r.made_from) made_from.push_back({{"stage", name}, {"commit", commit}});
+    auto commits = [](const std::vector<std::pair<std::string, long>>& list) {
+      nlohmann::json out = nlohmann::json::array();
+      for (const auto& [name, commit] : list) out.push_back({{"stage", name}, {"commit", commit}});
+      return out;
+    };
     manifest["stages"].push_back({{"name", r.name},
                                   {"status", StageStatusName(r.status)},
                                   {"fingerprint", r.fingerprint},
@@ -139,7 +144,8 @@ Status Workspace::Save() const {
                                   {"message", r.message},
                                   {"commit", r.commit},
                                   {"committed_fingerprint", r.committed_fingerprint},
-                                  {"made_from", made_from}});
+                                  {"made_from", commits(r.made_from)},
+                                  {"committed_from", commits(r.committed_from)}});
   }
   return WriteFileAtomic(root_ / kManifest, manifest.dump(2) + "\n");
 }
@@ -175,15 +181,31 @@ StageRecord* Workspace::Mutable(const std::string& stage) {
   return &records_.back();
 }
 
-std::string Workspace::OutOfDate(const std::string& stage) const {
-  const StageRecord* r = Find(stage);
-  if (!r || r->status != StageStatus::kDone) return "";
-  for (const auto& [name, commit] : r->made_from) {
-    const StageRecord* u = Find(name);
+namespace {
+
+// The first stage of `made_from` committed again since, said; "" if none.
+std::string NewerUpstream(const Workspace& workspace, const std::vector<std::pair<std::string, long>>& made_from) {
+  for (const auto& [name, commit] : made_from) {
+    const StageRecord* u = workspace.Find(name);
     if (!u || u->commit == commit) continue;
     return name + " was run again after it";
   }
   return "";
+}
+
+}  // namespace
+
+std::string Workspace::OutOfDate(const std::string& stage) const {
+  const StageRecord* r = Find(stage);
+  if (!r || r->status != StageStatus::kDone) return "";
+  return NewerUpstream(*this, r->made_from);
+}
+
+std::string Workspace::OutputsOutOfDate(const std::string& stage) const {
+  const StageRecord* r = Find(stage);
+  if (!r) return "";
+  if (!r->committed_from.empty()) return NewerUpstream(*this, r->committed_from);
+  return OutOfDate(stage);  // a record from before committed_from: known only while done
 }
 
 std::vector<std::pair<std::string, long>> Workspace::UpstreamCommits(const std::vector<std::string>& upstream) const {
@@ -263,6 +285,7 @@ Status Workspace::CommitStage(const std::string& stage, const std::vector<std::s
   r->status = StageStatus::kDone;
   if (forced || r->commit == 0 || r->committed_fingerprint != r->fingerprint) r->commit = ++commits_;
   r->committed_fingerprint = r->fingerprint;
+  r->committed_from = r->made_from;
   r->outputs = outputs;
   r->wall_time_s = wall_time_s;
   r->finished_at = NowIso8601();
@@ -273,9 +296,12 @@ Status Workspace::CommitStage(const std::string& stage, const std::vector<std::s
 Status Workspace::RecordMadeFrom(const std::string& stage, const std::vector<std::string>& upstream) {
   HF_CHECK(mode_ == Mode::kReadWrite);
   StageRecord* r = Mutable(stage);
-  if (!r->made_from.empty() || upstream.empty()) return Status::Ok();
-  r->made_from = UpstreamCommits(upstream);
-  return Save();
+  const bool fill_made_from = r->made_from.empty() && !upstream.empty();
+  if (fill_made_from) r->made_from = UpstreamCommits(upstream);
+  // Up to date, its outputs were committed from what it was made from.
+  const bool fill_committed = r->committed_from.empty() && !r->made_from.empty() && r->status == StageStatus::kDone;
+  if (fill_committed) r->committed_from = r->made_from;
+  return fill_made_from || fill_committed ? Save() : Status::Ok();
 }
 
 Status Workspace::FailStage(const std::string& stage, std::string* message, double wall_time_s) {

@@ -47,6 +47,10 @@ struct StageRecord {
   long commit = 0;
   std::string committed_fingerprint;
   std::vector<std::pair<std::string, long>> made_from;
+  // made_from as it was when the outputs were committed: a later attempt
+  // that failed or was interrupted records what it started from in
+  // made_from, and leaves the outputs (empty: from before this record).
+  std::vector<std::pair<std::string, long>> committed_from;
 };
 
 class Workspace {
@@ -77,6 +81,10 @@ class Workspace {
   // as read are compared; the stage table lists every stage a stage reads,
   // directly or not.
   std::string OutOfDate(const std::string& stage) const;
+  // The same for the outputs the stage committed last, whatever it is doing
+  // now: after a failed attempt its earlier outputs are still in place (a
+  // trained model render draws), and may be older than what they read.
+  std::string OutputsOutOfDate(const std::string& stage) const;
   // True when the record says running but no process holds the lock: the run
   // that started it was interrupted.
   bool WasInterrupted(const std::string& stage) const;
@@ -94,9 +102,9 @@ class Workspace {
   // number when `forced` or its fingerprint is not the one its outputs had.
   Status CommitStage(const std::string& stage, const std::vector<std::string>& outputs,
                      double wall_time_s, const std::string& message, bool forced = false);
-  // For a stage that is up to date but whose record predates `made_from`:
-  // records its upstream stages' present numbers (its fingerprint matched, so
-  // they are what it was made from).
+  // For a stage that is up to date but whose record predates `made_from` or
+  // `committed_from`: records its upstream stages' present numbers (its
+  // fingerprint matched, so they are what it was made from).
   Status RecordMadeFrom(const std::string& stage, const std::vector<std::string>& upstream);
   // Marks the stage failed; its previous outputs stay where they are. What the
   // failed attempt wrote (logs, a COLMAP database, ...) moves to

@@ -293,6 +293,18 @@ TEST_F(WorkspaceTest, StageIsOutOfDateWhenAnUpstreamStageRunsAgain) {
   EXPECT_EQ(ws->OutOfDate("train"), "track was run again after it");
   EXPECT_FALSE(stage("train", "x", {"ingest", "calibrate", "track"}));
   EXPECT_EQ(ws->OutOfDate("train"), "");
+  EXPECT_EQ(ws->OutputsOutOfDate("train"), "");
+  // A failed attempt after track ran again leaves the older model in place:
+  // the stage is not done, and its outputs are still older than the tracking.
+  stage("track", "t", {"ingest", "calibrate"}, /*force=*/true);
+  bool failed_skip = false;
+  EXPECT_FALSE(RunStage(ws.get(), {"train", "x", "", false, false, {"ingest", "calibrate", "track"}},
+                        Body([](const fs::path&, StageResult*) { return Status::DataError("NaN"); }), &failed_skip)
+                   .ok());
+  EXPECT_EQ(ws->OutOfDate("train"), "");
+  EXPECT_EQ(ws->OutputsOutOfDate("train"), "track was run again after it");
+  EXPECT_FALSE(stage("train", "x", {"ingest", "calibrate", "track"}));
+  EXPECT_EQ(ws->OutputsOutOfDate("train"), "");
 
   bool skipped = false;
   EXPECT_FALSE(RunStage(ws.get(), {"ingest", "i3", ""},

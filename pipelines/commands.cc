@@ -122,7 +122,7 @@ Status CheckTrackedWorkspace(const std::string& path, bool with_model, const std
   HF_RETURN_IF_ERROR(Workspace::Open(path, Workspace::Mode::kReadOnly, &workspace));
   HF_RETURN_IF_ERROR(RequireStagesCurrent(*workspace, {"ingest", "calibrate", "align", "track"}, who));
   if (with_model)
-    if (const std::string why = workspace->OutOfDate("train"); !why.empty())
+    if (const std::string why = workspace->OutputsOutOfDate("train"); !why.empty())
       HF_LOG(Warning) << who << ": the trained model is older than the tracked capture (" << why
                       << "); headforge train makes it again from the present one";
   return Status::Ok();

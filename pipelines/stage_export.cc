@@ -29,7 +29,7 @@ class ExportJob : public StageJob {
       const fs::path model = fs::path(workspace_) / "models" / folder;
       for (const char* file : {"config.json", "model.pt"}) {
         if (fs::exists(model / file)) {
-          HF_RETURN_IF_ERROR(hasher->AddFileStamp(model / file));
+          HF_RETURN_IF_ERROR(hasher->AddFileDigest(model / file));
         } else {
           hasher->Add(std::string("no ") + folder + "/" + file);
         }
@@ -37,12 +37,12 @@ class ExportJob : public StageJob {
     }
     // The benches' results the report shows.
     for (const fs::path& file : BenchResultFiles(options_, workspace_))
-      HF_RETURN_IF_ERROR(hasher->AddFileStamp(file));
+      HF_RETURN_IF_ERROR(hasher->AddFileDigest(file));
     return Status::Ok();
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     if (ExportNeedsModel(options_))
-      if (const std::string why = env.workspace->OutOfDate("train"); !why.empty())
+      if (const std::string why = env.workspace->OutputsOutOfDate("train"); !why.empty())
         HF_LOG(Warning) << "export: the trained model is older than the tracked capture (" << why
                         << "); headforge train makes it again from the present one";
     ExportSummary summary;

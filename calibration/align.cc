@@ -44,7 +44,7 @@ void AddAlignOptions(OptionSet* o, AlignOptions* a) {
          "Drop triangulated landmarks that reproject worse than this (px).", "max-reprojection");
   o->Add("align.landmark_embedding", &a->landmark_embedding,
          "Where the detector's 68 landmarks sit on the face model; empty: the model's landmark vertices.",
-         "align-landmark-embedding");
+         "align-landmark-embedding", OptionSet::Effect::kRuntime);  // its contents count instead (the job's inputs)
   o->Add("align.method", &a->method,
          "views: rotation from the views' head poses, scale and translation from the landmarks; "
          "landmarks: Umeyama on triangulated landmarks.",

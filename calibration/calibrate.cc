@@ -40,7 +40,7 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
   o->Add("calibrate.landmark_embedding", &c->landmark_embedding,
          "Where the detector's 68 landmarks sit on the face model (headforge embed-landmarks); "
          "empty: the model's landmark vertices.",
-         "landmark-embedding");
+         "landmark-embedding", OptionSet::Effect::kRuntime);  // its contents count instead (the job's inputs)
   c->colmap.executable = DefaultColmapExecutable();
   o->Add("calibrate.colmap.executable", &c->colmap.executable, "The colmap program.", "colmap",
          OptionSet::Effect::kRuntime);

@@ -15,6 +15,18 @@ std::string DefaultLandmarkEmbedding() { return HEADFORGE_LANDMARK_EMBEDDING; }
 std::string ViewLandmarkEmbedding() { return HEADFORGE_VIEW_LANDMARK_EMBEDDING; }
 std::string IdentityLandmarkEmbedding() { return HEADFORGE_IDENTITY_LANDMARK_EMBEDDING; }
 
+Status AddLandmarkEmbeddingInputs(const std::vector<std::string>& files, Hasher* hasher) {
+  for (const std::string& file : files) {
+    if (file.empty()) {
+      hasher->Add(std::string("the face model's landmark vertices"));
+      continue;
+    }
+    hasher->Add(std::string("landmark embedding"));
+    HF_RETURN_IF_ERROR(hasher->AddFileDigest(file).WithContext("landmark embedding"));
+  }
+  return Status::Ok();
+}
+
 namespace {
 
 // Renders the mean face by `scene_text`, detects the 68 points in every frame

@@ -15,6 +15,7 @@
 
 #include "capture/face_detector.h"
 #include "core/face_model.h"
+#include "core/hash.h"
 #include "core/status.h"
 
 namespace headforge {
@@ -81,5 +82,10 @@ std::string DefaultLandmarkEmbedding();
 std::string ViewLandmarkEmbedding();
 // The points with their identity columns (embed-landmarks --identity), for `track`.
 std::string IdentityLandmarkEmbedding();
+
+// Adds what each embedding file holds to a stage's fingerprint (its contents,
+// not its path: the shipped files move with the program); "" stands for the
+// face model's own landmark vertices.
+Status AddLandmarkEmbeddingInputs(const std::vector<std::string>& files, Hasher* hasher);
 
 }  // namespace headforge

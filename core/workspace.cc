@@ -112,6 +112,10 @@ Status Workspace::Load() {
         record.made_from.emplace_back(from.at("stage").get<std::string>(), from.at("commit").get<long>());
       for (const auto& from : stage.value("committed_from", nlohmann::json::array()))
         record.committed_from.emplace_back(from.at("stage").get<std::string>(), from.at("commit").get<long>());
+      // A record from before committed_from: a done stage's outputs were
+      // committed from what it last started from.
+      if (!stage.contains("committed_from") && record.status == StageStatus::kDone)
+        record.committed_from = record.made_from;
       records_.push_back(record);
     }
     commits_ = manifest.value("commits", 0L);

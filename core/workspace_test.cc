@@ -364,6 +364,24 @@ TEST_F(WorkspaceTest, StageIsOutOfDateWhenAnUpstreamStageRunsAgain) {
   ASSERT_EQ(ws->Find("calibrate")->made_from.size(), 1u);
   stage("ingest", "a2", {});
   EXPECT_EQ(ws->OutOfDate("calibrate"), "ingest was run again after it");
+  ws.reset();
+
+  // One written with made_from but before committed_from: a done stage's
+  // outputs were made from what it started from, and stay so after a
+  // failed attempt.
+  ASSERT_TRUE(WriteFileAtomic(root_ / "workspace.json",
+                              R"({"version": 1, "commits": 2, "stages": [
+                                  {"name": "ingest", "status": "done", "fingerprint": "a", "commit": 1,
+                                   "committed_fingerprint": "a", "outputs": ["ingest.out"]},
+                                  {"name": "train", "status": "done", "fingerprint": "x", "commit": 2,
+                                   "committed_fingerprint": "x", "made_from": [{"stage": "ingest", "commit": 1}]}]})")
+                  .ok());
+  ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
+  stage("ingest", "a3", {});
+  EXPECT_FALSE(RunStage(ws.get(), {"train", "x", "", false, false, {"ingest"}},
+                        Body([](const fs::path&, StageResult*) { return Status::DataError("NaN"); }), &skipped)
+                   .ok());
+  EXPECT_EQ(ws->OutputsOutOfDate("train"), "ingest was run again after it");
 }
 
 TEST_F(WorkspaceTest, SecondWriterIsRefused) {

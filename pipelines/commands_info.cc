@@ -38,6 +38,11 @@ int StatusCommand(const std::vector<std::string>& args) {
     if (const std::string why = workspace->OutOfDate(r.name); !why.empty()) {
       status = "out of date";
       summary = "(" + why + ") " + summary;
+    } else if (r.status != StageStatus::kDone && r.commit > 0) {
+      // Not done now, but earlier outputs are still in place (a trained
+      // model that render draws): say when those are older too.
+      if (const std::string older = workspace->OutputsOutOfDate(r.name); !older.empty())
+        summary += " (the outputs in place are from before: " + older + ")";
     }
     char wall[32] = "";
     if (r.status == StageStatus::kDone || r.status == StageStatus::kFailed)

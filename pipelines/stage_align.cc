@@ -3,6 +3,7 @@
 #include <cstring>
 
 #include "calibration/align.h"
+#include "calibration/landmark_embedding.h"
 #include "pipelines/stage_jobs.h"
 
 namespace headforge {
@@ -29,6 +30,9 @@ class AlignJob : public StageJob {
  public:
   void AddOptions(OptionSet* options) override { AddAlignOptions(options, &options_); }
   Status Check() const override { return options_.Check(); }
+  Status AddInputs(Hasher* hasher) const override {
+    return AddLandmarkEmbeddingInputs({options_.landmark_embedding}, hasher);
+  }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     IngestedCapture capture;
     HF_RETURN_IF_ERROR(ReadIngestedCapture(env.workspace->root(), &capture));

@@ -1,6 +1,7 @@
 // The calibrate stage's job: cameras for the ingested frames (COLMAP, head
 // pose refined with the face model, or a rig file).
 #include "calibration/calibrate.h"
+#include "calibration/landmark_embedding.h"
 #include "pipelines/stage_jobs.h"
 #include "reconstruction/track_stage.h"
 
@@ -11,6 +12,9 @@ class CalibrateJob : public StageJob {
  public:
   void AddOptions(OptionSet* options) override { AddCalibrateOptions(options, &options_); }
   Status Check() const override { return options_.Check(); }
+  Status AddInputs(Hasher* hasher) const override {
+    return AddLandmarkEmbeddingInputs({options_.landmark_embedding}, hasher);
+  }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     IngestedCapture capture;
     HF_RETURN_IF_ERROR(ReadIngestedCapture(env.workspace->root(), &capture));

@@ -23,21 +23,25 @@ class ExportJob : public StageJob {
   Status Check() const override { return options_.Check(); }
   // The trained model is not an upstream stage (the mesh avatar and the
   // report need only tracking), so its files enter the fingerprint here:
-  // training again makes export run again.
+  // training again makes export run again. Whole: a model trained again
+  // has the same size, and may differ in a few of its bytes.
   Status AddInputs(Hasher* hasher) const override {
     for (const char* folder : {"gaussian_style", "gan_avatar"}) {
       const fs::path model = fs::path(workspace_) / "models" / folder;
       for (const char* file : {"config.json", "model.pt"}) {
+        hasher->Add(std::string(folder) + "/" + file);
         if (fs::exists(model / file)) {
-          HF_RETURN_IF_ERROR(hasher->AddFileDigest(model / file));
+          HF_RETURN_IF_ERROR(hasher->AddFileContents(model / file));
         } else {
-          hasher->Add(std::string("no ") + folder + "/" + file);
+          hasher->Add(std::string("none"));
         }
       }
     }
     // The benches' results the report shows.
-    for (const fs::path& file : BenchResultFiles(options_, workspace_))
-      HF_RETURN_IF_ERROR(hasher->AddFileDigest(file));
+    for (const fs::path& file : BenchResultFiles(options_, workspace_)) {
+      hasher->Add(fs::relative(file, workspace_).string());
+      HF_RETURN_IF_ERROR(hasher->AddFileContents(file));
+    }
     return Status::Ok();
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {

@@ -1,6 +1,7 @@
 // The track stage's job: the face model fitted to the landmarks over the sequence.
 #include <cstdio>
 
+#include "calibration/landmark_embedding.h"
 #include "pipelines/stage_jobs.h"
 #include "reconstruction/track_stage.h"
 
@@ -12,6 +13,12 @@ class TrackJob : public StageJob {
   void AddOptions(OptionSet* options) override { AddTrackOptions(options, &options_); }
   void Resolve(const StageSettings& settings, const OptionSet&) override { options_.fit.threads = settings.threads; }
   Status Check() const override { return options_.Check(); }
+  Status AddInputs(Hasher* hasher) const override {
+    // Empty: one of the shipped files, chosen from the cameras when it runs.
+    if (options_.landmark_embedding.empty())
+      return AddLandmarkEmbeddingInputs({ViewLandmarkEmbedding(), IdentityLandmarkEmbedding()}, hasher);
+    return AddLandmarkEmbeddingInputs({options_.landmark_embedding}, hasher);
+  }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     IngestedCapture capture;
     HF_RETURN_IF_ERROR(ReadIngestedCapture(env.workspace->root(), &capture));

@@ -161,7 +161,7 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
          "Where the detector's 68 landmarks sit on the face model (JSON; embed-landmarks); empty: the shipped view "
          "grid when the views of a frame see the head from directions more than --grid-min-span apart in yaw, else "
          "the shipped points with their identity columns (embed-landmarks --identity).",
-         "track-landmark-embedding");
+         "track-landmark-embedding", OptionSet::Effect::kRuntime);  // its contents count instead (the job's inputs)
   o->Add("track.grid_min_span", &t->grid_min_span_deg,
          "The spread of one frame's views' yaws about the head (degrees) above which the views surround the head: "
          "each then uses the detector's points as seen from its side (with the default embedding), and the jaw "

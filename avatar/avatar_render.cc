@@ -99,6 +99,28 @@ Status LoadDrawableAvatar(const fs::path& workspace, fs::path model_dir, const s
 
 }  // namespace
 
+std::string RenderFileName(const AvatarRenderOptions& options, int frame, int orbit_step) {
+  auto number = [](const char* format, double value) {
+    char text[32];
+    std::snprintf(text, sizeof(text), format, value + 0.0);  // + 0.0: -0 reads as +0
+    return std::string(text);
+  };
+  char text[32];
+  std::snprintf(text, sizeof(text), "frame_%06d", frame);
+  std::string name = text;
+  if (!options.drive.empty()) name += "_driven";
+  if (options.side_by_side) name += "_side_by_side";
+  // Renders from another camera sit beside the frame's own without replacing them.
+  if (options.yaw_deg != 0 || options.pitch_deg != 0)
+    name += "_yaw" + number("%+g", options.yaw_deg) + "_pitch" + number("%+g", options.pitch_deg);
+  if (options.orbit_deg > 0) {
+    const int digits = std::max(3, int(std::to_string(std::max(0, options.orbit_steps - 1)).size()));
+    std::snprintf(text, sizeof(text), "_%0*d", digits, orbit_step);
+    name += "_orbit" + number("%g", options.orbit_deg) + text;
+  }
+  return name + ".png";
+}
+
 Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_model, const AvatarRenderOptions& options,
                           const fs::path& out_dir, Progress* progress, AvatarRenderSummary* summary) {
   UseTensorThreads();
@@ -175,8 +197,7 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
       }
       HF_RETURN_IF_ERROR(video.Write(image));
     } else {
-      char name[48];
-      std::snprintf(name, sizeof(name), "frame_%06d.png", frame);
+      const std::string name = RenderFileName(options, frame, int(i));
       HF_RETURN_IF_ERROR(WriteImageAtomic(out_dir / name, image));
       summary->files.push_back(name);
     }

@@ -40,7 +40,15 @@ struct AvatarRenderSummary {
   std::vector<std::string> files;
 };
 
-// Renders the avatar trained in `workspace` (or options.model) into `out_dir`.
+// A PNG render's file name, which says what was drawn so that renders into
+// one folder do not replace each other: frame_000070.png from the frame's
+// own camera, then what differs: _driven (by --drive's frame 70),
+// _side_by_side, _yaw+20_pitch+0 (the camera moved round the head),
+// _orbit30_012 (an --orbit 30's render 12; `orbit_step` counts them).
+std::string RenderFileName(const AvatarRenderOptions& options, int frame, int orbit_step);
+
+// Renders the avatar trained in `workspace` (or options.model) into `out_dir`,
+// one PNG a render named by RenderFileName, or one video.
 Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_model, const AvatarRenderOptions& options,
                           const fs::path& out_dir, Progress* progress, AvatarRenderSummary* summary);
 

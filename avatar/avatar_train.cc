@@ -8,6 +8,7 @@
 #include "avatar/train/dataset_pack.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/loop.h"
+#include "capture/capture_io.h"
 #include "core/camera_set.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -296,6 +297,31 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* t) {
   fill("train.prior_steps", &t->prior_steps, preset->prior_steps);
   fill("train.pti_steps", &t->pti_steps, preset->pti_steps);
   return Status::Ok();
+}
+
+int HeldOutFrames(int frames, double holdout, bool interleaved) {
+  if (!interleaved) return std::max(1, int(std::lround(holdout * frames)));
+  const int every = std::max(2, int(std::lround(1 / holdout)));
+  int held = 0;
+  for (int f = 0; f < frames; ++f) held += f % every == every / 2;
+  return held;
+}
+
+Status CheckEnoughFramesToTrain(const fs::path& workspace, double holdout) {
+  IngestedCapture capture;
+  if (!ReadIngestedCapture(workspace, &capture).ok()) return Status::Ok();  // the stages say what is wrong
+  auto trainable = [&](int frames) {
+    return frames - std::min(HeldOutFrames(frames, holdout, false), HeldOutFrames(frames, holdout, true));
+  };
+  const int frames = capture.num_frames();
+  if (trainable(frames) >= kFewestTrainingFrames) return Status::Ok();
+  int needed = frames + 1;
+  while (trainable(needed) < kFewestTrainingFrames) ++needed;
+  return Status::DataError("train: ingest made " + std::to_string(frames) + (frames == 1 ? " frame" : " frames") +
+                           "; an avatar needs at least " + std::to_string(needed) + " (" +
+                           std::to_string(kFewestTrainingFrames) + " to train on besides those it holds out). " +
+                           "Ingest a longer video (or more of it: --fps, --max-frames, --select), or give --until "
+                           "track to stop before train");
 }
 
 Status ChooseModel(const fs::path& workspace, std::string* model, std::string* why) {

@@ -19,6 +19,9 @@
 
 namespace headforge {
 
+// Both models train on at least this many frames besides those held out.
+constexpr int kFewestTrainingFrames = 8;
+
 struct TrainOptions {
   std::string model = "gaussian-style";
   // draft: two CPU cores, about 15 minutes; standard: one GPU; high: the
@@ -140,6 +143,16 @@ int PresetFrameBudget(const std::string& preset);
 // kWalkAroundSpreadDeg or more round the head (a 360-degree or multi-view
 // capture), else gaussian-style (one fixed camera, or one that moves a
 // little); `why` says which in a few words.
+// How many of `frames` training holds out: the last round(holdout x frames)
+// (one at least), or, interleaved, every round(1 / holdout)-th from the
+// middle of the first stride (DatasetOptions::holdout_order).
+int HeldOutFrames(int frames, double holdout, bool interleaved);
+
+// Fails when the ingested capture in `workspace` has too few frames for
+// either model to train on kFewestTrainingFrames besides those held out
+// (whichever way they are chosen); Ok when it has enough or cannot be read.
+Status CheckEnoughFramesToTrain(const fs::path& workspace, double holdout);
+
 Status ChooseModel(const fs::path& workspace, std::string* model, std::string* why);
 
 struct TrainSummary {

@@ -329,17 +329,31 @@ std::string OptionSet::Help(const std::string& usage, const std::string& descrip
     for (size_t i = 0; i < positionals_.size(); ++i)
       out << "  " << positionals_[i].first << "\n      " << positional_help_[i] << "\n";
   }
-  out << "\nOptions (each also accepted as 'key = value' under its [section] in --config):\n";
+  // Grouped by section (the key's text before its first dot): those without
+  // one first, then in the order they first appear, under a heading each when
+  // there are several (run's options of every stage).
+  std::vector<std::string> sections;
   for (const auto& option : options_) {
-    out << "  ";
-    if (!option->flag.empty()) out << "--" << option->flag << ", ";
-    out << "--" << option->key << " <" << option->type_name << ">";
-    if (option->is_bool) out << " (--flag alone means true; --flag=false)";
-    out << "\n      " << option->help;
-    out << "\n      default: " << (option->default_text.empty() ? "(none)" : option->default_text)
-        << "\n";
+    const auto dot = option->key.find('.');
+    const std::string section = dot == std::string::npos ? "" : option->key.substr(0, dot);
+    if (std::find(sections.begin(), sections.end(), section) == sections.end()) sections.push_back(section);
   }
-  out << "  -h, --help\n      Show this help.\n";
+  std::stable_partition(sections.begin(), sections.end(), [](const std::string& s) { return s.empty(); });
+  out << "\nOptions (each also accepted as 'key = value' under its [section] in --config):\n";
+  for (const std::string& section : sections) {
+    if (sections.size() > 1) out << "\n" << (section.empty() ? std::string("General") : section) << " options:\n";
+    for (const auto& option : options_) {
+      const auto dot = option->key.find('.');
+      if ((dot == std::string::npos ? "" : option->key.substr(0, dot)) != section) continue;
+      out << "  ";
+      if (!option->flag.empty()) out << "--" << option->flag << ", ";
+      out << "--" << option->key << " <" << option->type_name << ">";
+      if (option->is_bool) out << " (--flag alone means true; --flag=false)";
+      out << "\n      " << option->help;
+      out << "\n      default: " << (option->default_text.empty() ? "(none)" : option->default_text) << "\n";
+    }
+    if (section.empty()) out << "  -h, --help\n      Show this help.\n";
+  }
   return out.str();
 }
 

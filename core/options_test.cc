@@ -139,6 +139,18 @@ TEST(OptionSet, HelpListsEveryOptionWithDefault) {
   for (const char* text : {"--fps, --ingest.fps", "--max-frames, --ingest.max_frames",
                            "default: 10", "--ingest.name", "--threads", "--config"})
     EXPECT_NE(help.find(text), std::string::npos) << text;
+  // Options of several sections come under a heading each, in order.
+  const size_t general = help.find("\nGeneral options:\n"), ingest = help.find("\ningest options:\n");
+  ASSERT_NE(general, std::string::npos) << help;
+  ASSERT_NE(ingest, std::string::npos) << help;
+  EXPECT_LT(general, ingest);
+  EXPECT_LT(help.find("--threads"), ingest);
+  EXPECT_LT(help.find("--help"), ingest);
+  EXPECT_GT(help.find("--ingest.fps"), ingest);
+  int only = 1;
+  OptionSet single;  // --config and --threads: no section, no heading
+  single.Add("threads", &only, "Threads.");
+  EXPECT_EQ(single.Help("headforge version", "Says.").find(" options:\n"), std::string::npos);
 }
 
 TEST(OptionSet, TakenShortFlagFallsBackToDottedKey) {

@@ -25,6 +25,7 @@ void StderrProgress::Start(const std::string& label, int64_t total) {
   total_ = total;
   done_ = 0;
   resumed_ = 0;
+  limit_ = 0;
   last_quarter_ = 0;
   start_ = last_print_ = std::chrono::steady_clock::now();
   // A task of unknown length (total 0) says no count.
@@ -48,9 +49,16 @@ void StderrProgress::Resume(int64_t units) {
   resumed_ += units;
 }
 
+void StderrProgress::LimitTime(double seconds) {
+  if (Quiet()) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  limit_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count() + std::max(0.0, seconds);
+}
+
 double StderrProgress::SecondsLeft(double elapsed) const {
   const int64_t now = done_ - resumed_;
-  return now > 0 && total_ > done_ ? elapsed * double(total_ - done_) / double(now) : 0.0;
+  const double at_rate = now > 0 && total_ > done_ ? elapsed * double(total_ - done_) / double(now) : 0.0;
+  return limit_ > 0 && at_rate > 0 ? std::min(at_rate, std::max(0.0, limit_ - elapsed)) : at_rate;
 }
 
 void StderrProgress::Finish(const std::string& summary) {

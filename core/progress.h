@@ -20,6 +20,9 @@ class Progress {
   // Counts `units` an earlier, interrupted attempt did (a resumed task):
   // done, but not in this attempt's rate.
   virtual void Resume(int64_t units) { Advance(units); }
+  // The current task stops within `seconds` from now whatever its count (a
+  // time limit): the time said to be left is never more.
+  virtual void LimitTime(double seconds) {}
   // Ends the current task with a closing line.
   virtual void Finish(const std::string& summary = "") = 0;
 };
@@ -43,6 +46,7 @@ class StderrProgress : public Progress {
   void Start(const std::string& label, int64_t total) override;
   void Advance(int64_t units = 1) override;
   void Resume(int64_t units) override;
+  void LimitTime(double seconds) override;
   void Finish(const std::string& summary = "") override;
 
  private:
@@ -55,6 +59,7 @@ class StderrProgress : public Progress {
   int64_t total_ = 0;
   int64_t done_ = 0;
   int64_t resumed_ = 0;  // of done_, what an earlier attempt did
+  double limit_ = 0;     // > 0: seconds after start_ at which the task stops (LimitTime)
   int last_quarter_ = 0;
   bool plain_;
   std::chrono::seconds interval_;

@@ -47,6 +47,10 @@ class StageJob {
   // (ingest: the videos' contents); options and upstream fingerprints are
   // hashed by the runner.
   virtual Status AddInputs(Hasher* hasher) const { return Status::Ok(); }
+  // In `headforge run`, after each earlier stage: whether what is in the
+  // workspace already rules this stage out (train: too few frames), so that
+  // the run stops before the stages between spend their time for nothing.
+  virtual Status Ahead(const fs::path& workspace) const { return Status::Ok(); }
   // Writes the stage's outputs into `context.staging` and names them in
   // `result` with a one-line summary.
   virtual Status Run(const StageEnv& env, const StageContext& context, StageResult* result) = 0;

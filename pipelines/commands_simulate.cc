@@ -63,9 +63,9 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   AddCommonOptions(&options, &common, /*with_workspace=*/false);
   std::string out;
   options.Add("embed.out", &out,
-              "Where to write the embedding (JSON); default: the shipped file for what is measured, "
-              "data/ict_dlib68_landmark_embedding.json or, with --views or --identity, ..._views.json or "
-              "..._identity.json.",
+              "Where to write the embedding (JSON); default: the shipped file's name in the current folder "
+              "(ict_dlib68_landmark_embedding.json or, with --views or --identity, ..._views.json or "
+              "..._identity.json). The shipped file in data/ is replaced only when --out names it.",
               "out");
   bool views = false;
   options.Add("embed.views", &views,
@@ -94,8 +94,11 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   if (views && identity)
     return ReportFailure(
         Status::InvalidArgument("embed-landmarks: --views and --identity measure different files; give one"));
-  if (out.empty())
-    out = views ? ViewLandmarkEmbedding() : identity ? IdentityLandmarkEmbedding() : DefaultLandmarkEmbedding();
+  const std::string shipped =
+      views ? ViewLandmarkEmbedding() : identity ? IdentityLandmarkEmbedding() : DefaultLandmarkEmbedding();
+  // A measurement lands beside the user, not over the file that calibrate,
+  // align and track read by default: replacing that is a deliberate --out.
+  if (out.empty()) out = fs::path(shipped).filename().string();
   if (identity) {
     LandmarkEmbedding embedding;
     IdentityFitReport report;
@@ -122,6 +125,12 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
     if (Status s = WriteLandmarkEmbedding(out, points); !s.ok()) return ReportFailure(s);
   }
   HF_LOG(Info) << "embed-landmarks: wrote " << out;
+  std::error_code ec;
+  if (!fs::equivalent(out, shipped, ec))
+    HF_LOG(Info) << "embed-landmarks: the stages use it when given it: "
+                 << (views      ? "track --track-landmark-embedding " + out + " (views that surround the head)"
+                     : identity ? "track --track-landmark-embedding " + out + " (one camera)"
+                                : "calibrate --landmark-embedding " + out + ", align --align-landmark-embedding " + out);
   return kExitOk;
 }
 

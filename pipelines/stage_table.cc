@@ -232,7 +232,10 @@ int RunCommand(const std::vector<std::string>& args) {
           "made from outputs that have changed since (headforge status: out of date) is redone.\n"
           "On a workspace already ingested --video may be left out: ingest then runs with the\n"
           "inputs and options it last ran with (WORKSPACE/ingest.ini).\n"
-          "Options of every stage are accepted, by their short flag or their dotted key.");
+          "Options of every stage are accepted, by their short flag or their dotted key; where two\n"
+          "stages share a flag's name the first stage has it (--resolution is ingest's frame size)\n"
+          "and the other is given by its key (--train.resolution, the training size). A capture with\n"
+          "too few frames to train on stops the run after ingest, before calibrate spends its time.");
   if (parsed >= 0) return parsed;
   // On a workspace already ingested, --video may be left out: ingest's
   // inputs and options are those it last ran with (its ingest.ini, read as a
@@ -290,6 +293,14 @@ int RunCommand(const std::vector<std::string>& args) {
       return ReportFailure(s);
     last = entry.name;
     if (entry.name == until) break;
+    // What this stage made may already rule a later one out: say so now,
+    // not after the stages between have run.
+    for (size_t j = i + 1; j < table.size(); ++j) {
+      if (!jobs[j] || !table[j].unavailable.empty()) break;
+      if (Status s = jobs[j]->Ahead(common.workspace); !s.ok())
+        return ReportFailure(s.WithContext("run: stopped after " + entry.name));
+      if (table[j].name == until) break;
+    }
   }
   HF_LOG(Info) << "run: results are in " << common.workspace << " (headforge status " << common.workspace << ")";
   // Where the exports are, as export.json lists them (the report first).

@@ -40,6 +40,9 @@ class TrainJob : public StageJob {
     }
     return options_.model == "auto" && !same ? first.WithContext("--model auto: no model takes these options") : first;
   }
+  Status Ahead(const fs::path& workspace) const override {
+    return CheckEnoughFramesToTrain(workspace, options_.holdout);
+  }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     std::string model = options_.model, why = "as asked";
     if (model == "auto") HF_RETURN_IF_ERROR(ChooseModel(env.workspace->root(), &model, &why));

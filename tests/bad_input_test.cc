@@ -349,6 +349,18 @@ TEST(BadInputsAccepted, ATruncatedVideoIsIngestedAndTheDamageSaid) {
   EXPECT_GT(capture["cameras"][0].value("decoder_errors", 0), 0);
   ASSERT_TRUE(ReadJson(dir / "w" / "workspace.json", &manifest).ok());
   EXPECT_NE(manifest.dump().find("DAMAGED INPUT"), std::string::npos);
+  // Too few frames to train on: `run` stops after ingest (up to date) and
+  // says so, before calibrate and track spend their time on them.
+  const int frames = int(capture["cameras"][0]["frames"].size());
+  ASSERT_LT(frames, 8);
+  const Result run = Headforge({"run", "--video", (dir / "cut.mpg").string(), "--workspace", (dir / "w").string()});
+  EXPECT_NE(run.code, 0);
+  EXPECT_NE(run.err.find("run: stopped after ingest: train: ingest made " + std::to_string(frames) + " frame"),
+            std::string::npos)
+      << run.err;
+  EXPECT_NE(run.err.find("--until track"), std::string::npos) << run.err;
+  ASSERT_TRUE(ReadJson(dir / "w" / "workspace.json", &manifest).ok());
+  for (const auto& stage : manifest["stages"]) EXPECT_NE(stage["name"], "calibrate") << manifest.dump();
   // The whole clip is not.
   const Result whole = Headforge({"ingest", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
                                   (dir / "whole").string()});

@@ -247,16 +247,20 @@ TEST_F(GanAvatarTrain, TheLatentLossAblationMapsToo) {
 TEST_F(GanAvatarTrain, RenderDrawsItFromTurnedCamerasAndDrivenByAnotherCapture) {
   ASSERT_EQ(first_.code, 0) << first_.err;
   const fs::path ws = CopyOf(reference_, Scratch("render"));
-  auto render = [&](std::vector<std::string> extra) {
+  auto render = [&](std::vector<std::string> extra, const std::string& name = "frame_000100.png") {
     std::vector<std::string> args = {"render", "--workspace", ws.string(), "--frames", "100"};
     args.insert(args.end(), extra.begin(), extra.end());
     const Result r = Headforge(args);
     EXPECT_EQ(r.code, 0) << r.err;
-    const cv::Mat image = cv::imread((ws / "renders" / "frame_000100.png").string());
+    // The one render, named for what it drew (frame_000100.png, _yaw+40_pitch+0, _driven).
+    std::vector<std::string> files;
+    for (const auto& entry : fs::directory_iterator(ws / "renders")) files.push_back(entry.path().filename());
+    EXPECT_EQ(files, std::vector<std::string>{name}) << name;
+    const cv::Mat image = cv::imread((ws / "renders" / name).string());
     fs::remove_all(ws / "renders");
     return image;
   };
-  const cv::Mat front = render({}), turned = render({"--yaw", "40"});
+  const cv::Mat front = render({}), turned = render({"--yaw", "40"}, "frame_000100_yaw+40_pitch+0.png");
   ASSERT_FALSE(front.empty());
   EXPECT_EQ(front.cols, 32);  // the model's output size
   EXPECT_EQ(front.rows, 32);
@@ -265,14 +269,14 @@ TEST_F(GanAvatarTrain, RenderDrawsItFromTurnedCamerasAndDrivenByAnotherCapture) 
   EXPECT_EQ(cv::norm(front, again, cv::NORM_L1), 0);  // the same frame, the same image
   // Driven by another tracked capture's expressions (here the same capture
   // through its shared workspace: its frame 100 has this frame's expression).
-  const cv::Mat driven = render({"--drive", TrackedTalkingStatic().string()});
+  const cv::Mat driven = render({"--drive", TrackedTalkingStatic().string()}, "frame_000100_driven.png");
   ASSERT_FALSE(driven.empty());
   EXPECT_EQ(driven.size(), front.size());
   // The held-out frames side by side with the frames: render | frame | error.
   const Result strip = Headforge({"render", "--workspace", ws.string(), "--held-out", "--side-by-side"});
   ASSERT_EQ(strip.code, 0) << strip.err;
   EXPECT_EQ(CountFiles(ws / "renders"), 25u);
-  EXPECT_EQ(cv::imread((ws / "renders" / "frame_000110.png").string()).cols, 96);
+  EXPECT_EQ(cv::imread((ws / "renders" / "frame_000110_side_by_side.png").string()).cols, 96);
 }
 
 // Export of a workspace whose only model is gan-avatar: the mesh avatar and

@@ -290,9 +290,21 @@ TEST_F(TrainStage, RenderDrawsAnyFrameFromAnyCamera) {
   const Result turned = Headforge({"render", "--workspace", reference_.string(), "--frames", "110", "--yaw", "20",
                                    "--background", "0.5", "--out", (out / "yaw20").string()});
   ASSERT_EQ(turned.code, 0) << turned.err;
-  const cv::Mat side = cv::imread((out / "yaw20" / "frame_000110.png").string());
+  const cv::Mat side = cv::imread((out / "yaw20" / "frame_000110_yaw+20_pitch+0.png").string());
   ASSERT_EQ(side.size(), render.size());
   EXPECT_GT(cv::norm(side, render, cv::NORM_L1) / double(render.total() * 3), 2.0);
+  // Renders from other cameras into one folder sit beside each other: an
+  // orbit's three, and frame 110 from below, next to frame 110's own.
+  const Result orbit = Headforge({"render", "--workspace", reference_.string(), "--frames", "110", "--orbit", "30",
+                                  "--orbit-steps", "3", "--out", out.string()});
+  ASSERT_EQ(orbit.code, 0) << orbit.err;
+  const Result below = Headforge({"render", "--workspace", reference_.string(), "--frames", "110", "--pitch", "-7.5",
+                                  "--out", out.string()});
+  ASSERT_EQ(below.code, 0) << below.err;
+  for (const char* f : {"frame_000110_orbit30_000.png", "frame_000110_orbit30_001.png", "frame_000110_orbit30_002.png",
+                        "frame_000110_yaw+0_pitch-7.5.png"})
+    EXPECT_TRUE(fs::exists(out / f)) << f;
+  EXPECT_EQ(cv::norm(cv::imread((out / "frame_000110.png").string()), render, cv::NORM_INF), 0.0);
 
   const Result missing = Headforge({"render", "--workspace", reference_.string(), "--frames", "500", "--out",
                                     out.string()});
@@ -334,6 +346,18 @@ TEST_F(TrainStage, AModelOlderThanTheTrackingIsSaidToBe) {
                                  "--texture-size", "64"});
   ASSERT_EQ(mesh.code, 0) << mesh.err;
   EXPECT_EQ(mesh.err.find(warning), std::string::npos) << mesh.err;
+  // An attempt to train again that fails leaves the older model in place,
+  // and it is still said to be older.
+  const Result failed = Headforge({"train", "--workspace", ws.string(), "--holdout-cameras", "cam9"});
+  ASSERT_NE(failed.code, 0);
+  EXPECT_NE(failed.err.find("no camera cam9 to hold out"), std::string::npos) << failed.err;
+  const Result again = Headforge({"render", "--workspace", ws.string(), "--frames", "110", "--out",
+                                  (ws / "renders").string()});
+  ASSERT_EQ(again.code, 0) << again.err;
+  EXPECT_NE(again.err.find("render: " + warning), std::string::npos) << again.err;
+  const Result after = Headforge({"status", ws.string()});
+  EXPECT_NE(after.out.find("(the outputs in place are from before: track was run again after it)"), std::string::npos)
+      << after.out;
 }
 
 TEST_F(TrainStage, HeldOutFramesAreScoredAgainstTheSimulatorsTruth) {
@@ -1386,6 +1410,34 @@ TEST(TrainBadInput, TooFewFramesIsAClearError) {
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.err.find("the capture has 6 frames"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("ingest a longer video"), std::string::npos) << r.err;
+
+  // `run`'s check after ingest (CheckEnoughFramesToTrain) refuses what the
+  // dataset refuses and nothing more: 9 frames leave 7 besides the 2 held
+  // out, 10 leave 8.
+  FaceModel model;
+  ASSERT_TRUE(FaceModel::Load(DefaultDataDir() + "/ict_facekit/ict_face_model.h5", &model).ok());
+  nlohmann::json capture, tracking;
+  ASSERT_TRUE(ReadJson(TrackedTalkingStatic() / "capture.json", &capture).ok());
+  ASSERT_TRUE(ReadJson(TrackedTalkingStatic() / "tracking.json", &tracking).ok());
+  for (const int n : {8, 9, 10, 11}) {
+    nlohmann::json c = capture, t = tracking;
+    c["frames"].erase(c["frames"].begin() + n, c["frames"].end());
+    for (auto& cam : c["cameras"]) cam["frames"].erase(cam["frames"].begin() + n, cam["frames"].end());
+    t["frames"].erase(t["frames"].begin() + n, t["frames"].end());
+    ASSERT_TRUE(WriteJsonAtomic(ws / "capture.json", c).ok());
+    ASSERT_TRUE(WriteJsonAtomic(ws / "tracking.json", t).ok());
+    DatasetOptions loading;
+    loading.images = false;
+    AvatarDataset data;
+    const Status loaded = LoadAvatarDataset(ws, model, loading, &data);
+    const Status ahead = CheckEnoughFramesToTrain(ws, loading.holdout);
+    EXPECT_EQ(loaded.ok(), n >= 10) << n << ": " << loaded.message();
+    EXPECT_EQ(ahead.ok(), loaded.ok()) << n << ": " << ahead.message();
+    if (!ahead.ok())
+      EXPECT_NE(ahead.message().find("ingest made " + std::to_string(n) + " frames; an avatar needs at least 10"),
+                std::string::npos)
+          << ahead.message();
+  }
 }
 
 TEST(TrainHardCases, FramesTheTrackerFlaggedAreLeftOutOfTraining) {

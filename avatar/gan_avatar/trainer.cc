@@ -447,6 +447,7 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
   if (!options_.generator_from.empty()) return Status::Ok();  // the GAN was trained elsewhere
   progress->Start("train: gan-avatar", options_.steps);
   progress->Resume(state_.step);
+  if (options_.max_minutes > 0) progress->LimitTime(60.0 * options_.max_minutes - state_.seconds);
   for (int step = state_.step + 1; step <= options_.steps; ++step) {
     Step(step);
     if (step == options_.reconstruction_steps + 1 && options_.reconstruction_steps > 0)

@@ -307,6 +307,7 @@ Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, Stats
   }
   progress->Start(label, options_.steps);
   progress->Resume(state_.step);
+  if (options_.max_minutes > 0) progress->LimitTime(60.0 * options_.max_minutes - state_.seconds);
   for (int step = state_.step + 1; step <= options_.steps; ++step) {
     if (step == stage1_steps_ + 1 && options_.deform)
       HF_LOG(Info) << "train: stage 2 (deformation" << (options_.region_weight > 0 ? ", region loss" : "")

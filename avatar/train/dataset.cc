@@ -142,12 +142,10 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   const bool interleaved =
       options.holdout_order == "interleaved" ||
       (options.holdout_order == "auto" && cameras.WalksRoundTheHead());
-  int held = std::max(1, int(std::lround(options.holdout * frames)));
+  const int held = HeldOutFrames(frames, options.holdout, interleaved);
   if (interleaved) {
     out.holdout_every = std::max(2, int(std::lround(1 / options.holdout)));
     out.first_test_frame = frames;
-    held = 0;
-    for (int f = 0; f < frames; ++f) held += out.HeldOut(f);
   } else {
     out.first_test_frame = frames - held;
   }

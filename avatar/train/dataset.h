@@ -18,6 +18,7 @@
 #include <utility>
 #include <vector>
 
+#include "avatar/avatar_train.h"
 #include "avatar/splat/splat_camera.h"
 #include "core/face_model.h"
 #include "core/fs.h"
@@ -56,7 +57,7 @@ struct DatasetOptions {
   // Cameras held out whole: every frame of theirs is a test view (a 360
   // capture's views from sides training never saw).
   std::vector<std::string> holdout_cameras;
-  int min_train_frames = 8;   // fewer is refused
+  int min_train_frames = kFewestTrainingFrames;  // fewer is refused
   bool images = true;         // false: cameras and conditions only (rendering)
   int uv_map_side = 0;        // > 0: the training views' UV maps on a canvas this side (stage 3)
   // The head masks the models train and are scored on: "ingest" (the

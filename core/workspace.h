@@ -42,10 +42,12 @@ struct StageRecord {
   // this stage last started: an upstream stage committed again since means
   // these outputs were made from older ones. A stage redone with the
   // fingerprint its outputs already had, from the same upstream outputs (they
-  // were missing, or an attempt in between failed), keeps its number, unless
-  // forced.
+  // were missing, or an attempt in between failed), keeps its number when it
+  // wrote the same bytes (`outputs_digest`) and was not forced; a stage that
+  // does not repeat itself (COLMAP) gets a new one.
   long commit = 0;
   std::string committed_fingerprint;
+  std::string outputs_digest;  // names and contents of the committed outputs
   std::vector<std::pair<std::string, long>> made_from;
   // made_from as it was when the outputs were committed: a later attempt
   // that failed or was interrupted records what it started from in
@@ -99,7 +101,8 @@ class Workspace {
                     bool resumable, fs::path* staging, bool* resumed);
   // Moves each output (relative to the staging folder) into the workspace root,
   // replacing what was there, then marks the stage done, with the next commit
-  // number when `forced` or its fingerprint is not the one its outputs had.
+  // number when `forced`, its fingerprint is not the one its outputs had, or
+  // the outputs' contents differ from the last commit's.
   Status CommitStage(const std::string& stage, const std::vector<std::string>& outputs,
                      double wall_time_s, const std::string& message, bool forced = false);
   // For a stage that is up to date but whose record predates `made_from` or

@@ -66,7 +66,8 @@ Status TrainOptions::Check() const {
     return Status::InvalidArgument("train: --holdout-order must be auto, last or interleaved, not '" + holdout_order +
                                    "'");
   if (mask != "auto" && mask != "ingest" && mask != "mesh")
-    return Status::InvalidArgument("train: --mask must be auto, ingest or mesh, not '" + mask + "'");
+    return Status::InvalidArgument("train: --mask must be auto, ingest or mesh, not '" + mask +
+                                   "' (your own masks: a folder given to ingest's --masks)");
   if (!(mask_hair >= 0 && mask_hair <= 0.3) || !(mask_skin >= 0 && mask_skin <= 0.3))
     return Status::InvalidArgument("train: --mask-hair and --mask-skin must be in [0, 0.3] metres");
   if (!(pose_lr >= 0)) return Status::InvalidArgument("train: --pose-lr must be zero or positive");

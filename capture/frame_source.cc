@@ -91,9 +91,22 @@ Status NoFrames(const std::string& path, const std::string& otherwise) {
   return Status::DataError(otherwise);
 }
 
+// ffmpeg's own lines ("moov atom not found", "error while decoding MB")
+// would reach stderr beside the one-line reason ingest gives; they are
+// silenced unless the user asks for them (OPENCV_FFMPEG_LOGLEVEL or
+// OPENCV_FFMPEG_DEBUG set). OpenCV reads these when it opens its first video.
+void QuietFfmpegUnlessAsked() {
+  static const bool quiet = [] {
+    if (std::getenv("OPENCV_FFMPEG_LOGLEVEL") || std::getenv("OPENCV_FFMPEG_DEBUG")) return false;
+    return ::setenv("OPENCV_FFMPEG_LOGLEVEL", "-8", 0) == 0;  // AV_LOG_QUIET
+  }();
+  (void)quiet;
+}
+
 class VideoFrameSource : public FrameSource {
  public:
   Status OpenVideo(const fs::path& path) {
+    QuietFfmpegUnlessAsked();
     path_ = path.string();
     if (!capture_.open(path_, cv::CAP_FFMPEG))
       return NoFrames(path_, "cannot decode " + path_ +

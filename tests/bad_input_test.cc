@@ -103,6 +103,11 @@ std::vector<BadInput> CommandLineCases() {
          return std::vector<std::string>{"train", "--workspace", (d / "ws").string(), "--holdout", "2"};
        },
        2, {"--holdout must be in (0, 0.9)"}, true},
+      {"a folder of masks given to train's --mask",
+       [](const fs::path& d) {
+         return std::vector<std::string>{"train", "--workspace", (d / "ws").string(), "--mask", (d / "my_masks").string()};
+       },
+       2, {"--mask must be auto, ingest or mesh", "ingest's --masks"}, true},
       {"an unknown camera among the held-out ones (comma-separated)",
        [](const fs::path& d) {
          return std::vector<std::string>{"train", "--workspace", (d / "ws").string(), "--holdout-cameras",
@@ -198,6 +203,18 @@ std::vector<BadInput> InputCases() {
          return video(d, {"--video", (d / "cut.mpg").string()});
        },
        1, {"cut.mpg", "damaged or truncated"}},
+      {"an MP4 cut off before its index (moov atom)",
+       [=](const fs::path& d) {
+         EXPECT_EQ(std::system(("ffmpeg -loglevel error -y -i '" + grid + "' -t 1 -an '" + (d / "whole.mp4").string() +
+                                "'")
+                                   .c_str()),
+                   0);
+         std::string bytes;
+         EXPECT_TRUE(ReadFileToString(d / "whole.mp4", &bytes).ok());
+         WriteText(d / "cut.mp4", bytes.substr(0, bytes.size() / 2));  // the index is written last
+         return video(d, {"--video", (d / "cut.mp4").string()});
+       },
+       1, {"cut.mp4", "does not recognise it as a video"}},
       {"a folder without images",
        [=](const fs::path& d) {
          fs::create_directories(d / "empty_folder");
@@ -314,6 +331,8 @@ TEST_P(BadInputs, SayWhatHappenedAndWhatToTryAndLoseNothing) {
   EXPECT_EQ(r.code, bad.code) << bad.name << "\n" << r.err;
   const std::vector<std::string> lines = ReasonLines(r.err);
   ASSERT_EQ(lines.size(), 1u) << bad.name << ": one line saying why, not:\n" << r.err;
+  // Nor does ffmpeg add its own ("[mov,mp4,... @ 0x55…] moov atom not found").
+  EXPECT_EQ(r.err.find(" @ 0x"), std::string::npos) << bad.name << ": ffmpeg's own lines reached stderr:\n" << r.err;
   for (const std::string& part : bad.says)
     EXPECT_NE(lines[0].find(part), std::string::npos) << bad.name << ": '" << part << "' not in\n" << lines[0];
   if (bad.on_workspace) {

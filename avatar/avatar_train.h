@@ -138,21 +138,23 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* train);
 // run`): draft 300, standard 2000, high 6000; 0 for a name that is none.
 int PresetFrameBudget(const std::string& preset);
 
-// The model `--model auto` (the train stage's default) trains on an aligned
-// workspace: gan-avatar when its cameras are several, or its views spread
-// kWalkAroundSpreadDeg or more round the head (a 360-degree or multi-view
-// capture), else gaussian-style (one fixed camera, or one that moves a
-// little); `why` says which in a few words.
 // How many of `frames` training holds out: the last round(holdout x frames)
-// (one at least), or, interleaved, every round(1 / holdout)-th from the
+// (one at least), or, interleaved, every HoldoutStride(holdout)-th from the
 // middle of the first stride (DatasetOptions::holdout_order).
 int HeldOutFrames(int frames, double holdout, bool interleaved);
+// The interleaved hold-out's stride: round(1 / holdout), 2 at least.
+int HoldoutStride(double holdout);
 
 // Fails when the ingested capture in `workspace` has too few frames for
 // either model to train on kFewestTrainingFrames besides those held out
 // (whichever way they are chosen); Ok when it has enough or cannot be read.
 Status CheckEnoughFramesToTrain(const fs::path& workspace, double holdout);
 
+// The model `--model auto` (the train stage's default) trains on an aligned
+// workspace: gan-avatar when its cameras are several, or its views spread
+// kWalkAroundSpreadDeg or more round the head (a 360-degree or multi-view
+// capture), else gaussian-style (one fixed camera, or one that moves a
+// little); `why` says which in a few words.
 Status ChooseModel(const fs::path& workspace, std::string* model, std::string* why);
 
 struct TrainSummary {

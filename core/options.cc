@@ -212,6 +212,12 @@ void OptionSet::AddPositional(const std::string& name, std::string* value,
 
 namespace {
 
+// An option key's section: its text before the first dot ("" for none).
+std::string SectionOf(const std::string& key) {
+  const auto dot = key.find('.');
+  return dot == std::string::npos ? "" : key.substr(0, dot);
+}
+
 po::value_semantic* MakeSemantic(const OptionSet::Option& option) {
   if (option.is_list) return po::value<std::vector<std::string>>()->multitoken()->composing();
   if (option.is_bool) return po::value<std::string>()->implicit_value("true");
@@ -334,8 +340,7 @@ std::string OptionSet::Help(const std::string& usage, const std::string& descrip
   // there are several (run's options of every stage).
   std::vector<std::string> sections;
   for (const auto& option : options_) {
-    const auto dot = option->key.find('.');
-    const std::string section = dot == std::string::npos ? "" : option->key.substr(0, dot);
+    const std::string section = SectionOf(option->key);
     if (std::find(sections.begin(), sections.end(), section) == sections.end()) sections.push_back(section);
   }
   std::stable_partition(sections.begin(), sections.end(), [](const std::string& s) { return s.empty(); });
@@ -343,8 +348,7 @@ std::string OptionSet::Help(const std::string& usage, const std::string& descrip
   for (const std::string& section : sections) {
     if (sections.size() > 1) out << "\n" << (section.empty() ? std::string("General") : section) << " options:\n";
     for (const auto& option : options_) {
-      const auto dot = option->key.find('.');
-      if ((dot == std::string::npos ? "" : option->key.substr(0, dot)) != section) continue;
+      if (SectionOf(option->key) != section) continue;
       out << "  ";
       if (!option->flag.empty()) out << "--" << option->flag << ", ";
       out << "--" << option->key << " <" << option->type_name << ">";
@@ -364,9 +368,8 @@ std::string OptionSet::ToIni(const std::string& section, bool semantic_only) con
   for (const auto& option : options_) {
     if (option->key == "config") continue;
     if (semantic_only && option->effect != Effect::kSemantic) continue;
-    const auto dot = option->key.find('.');
-    const std::string group = dot == std::string::npos ? "" : option->key.substr(0, dot);
-    const std::string name = dot == std::string::npos ? option->key : option->key.substr(dot + 1);
+    const std::string group = SectionOf(option->key);
+    const std::string name = group.empty() ? option->key : option->key.substr(group.size() + 1);
     if (!section.empty() && group != section) continue;
     if (!lines.count(group)) order.push_back(group);
     auto& group_lines = lines[group];

@@ -144,7 +144,7 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       (options.holdout_order == "auto" && cameras.WalksRoundTheHead());
   const int held = HeldOutFrames(frames, options.holdout, interleaved);
   if (interleaved) {
-    out.holdout_every = std::max(2, int(std::lround(1 / options.holdout)));
+    out.holdout_every = HoldoutStride(options.holdout);
     out.first_test_frame = frames;
   } else {
     out.first_test_frame = frames - held;

@@ -592,6 +592,8 @@ int BenchTruthWorkspace(const std::vector<std::string>& args) {
   if (fs::exists(to) && !fs::is_empty(to, ec) && !fs::exists(marker))
     return ReportFailure(Status::InvalidArgument(
         "--out " + out + " holds files bench truth-workspace did not write; name a new folder"));
+  if (Status s = CheckTrackedWorkspace(common.workspace, /*with_model=*/false, "bench truth-workspace"); !s.ok())
+    return ReportFailure(s);
   FaceModel model;
   if (Status s = FaceModel::Load(common.Settings().face_model, &model); !s.ok()) return ReportFailure(s);
   IngestedCapture capture;

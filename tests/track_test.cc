@@ -304,6 +304,24 @@ TEST(TruthWorkspace, DrawsTheTrueMeshWhereTheSimulatorDid) {
                                     "--out", only.string(), "--replace", "lighting"});
   EXPECT_NE(unknown.code, 0);
   EXPECT_NE(unknown.err.find("no part 'lighting'"), std::string::npos) << unknown.err;
+
+  // Nor copy a tracking that is out of date: a workspace whose ingest ran
+  // again after track (its manifest alone says so).
+  const fs::path stale = Scratch("truth_stale_source");
+  fs::create_directories(stale);
+  nlohmann::json manifest = Json(ws / "workspace.json");
+  const long next = manifest.at("commits").get<long>() + 1;
+  manifest["commits"] = next;
+  for (auto& stage : manifest.at("stages"))
+    if (stage.at("name") == "ingest") stage["commit"] = next;
+  ASSERT_TRUE(WriteJsonAtomic(stale / "workspace.json", manifest, 2).ok());
+  const fs::path from_stale = Scratch("truth_from_stale");
+  const Result out_of_date = Headforge({"bench", "truth-workspace", "--workspace", stale.string(), "--truth",
+                                        sim.string(), "--out", from_stale.string()});
+  EXPECT_NE(out_of_date.code, 0);
+  EXPECT_NE(out_of_date.err.find("needs calibrate run again first"), std::string::npos) << out_of_date.err;
+  EXPECT_NE(out_of_date.err.find("ingest was run again after it"), std::string::npos) << out_of_date.err;
+  EXPECT_FALSE(fs::exists(from_stale));
 }
 
 // Eight fixed cameras on a 120-degree arc, the whole scene (2 s), through the

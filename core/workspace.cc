@@ -9,7 +9,6 @@
 #include <ctime>
 #include <nlohmann/json.hpp>
 
-#include "core/hash.h"
 #include "core/log.h"
 
 namespace headforge {
@@ -20,21 +19,6 @@ constexpr const char* kLockFile = ".lock";
 constexpr const char* kStagingDir = ".staging";
 constexpr const char* kFailedDir = "failed";
 constexpr int kManifestVersion = 1;
-
-// What a stage's outputs hold: each one's name and contents (a folder's
-// files with their relative names). Read once per commit; the largest outputs
-// (a trained model, an exported video) are tens of megabytes.
-Status DigestOutputs(const fs::path& dir, const std::vector<std::string>& outputs, std::string* digest) {
-  Hasher h;
-  for (const auto& output : outputs) {
-    h.Add(output);
-    std::error_code ec;
-    const fs::path path = dir / output;
-    HF_RETURN_IF_ERROR(fs::is_directory(path, ec) ? h.AddTreeContents(path) : h.AddFileContents(path));
-  }
-  *digest = h.Hex();
-  return Status::Ok();
-}
 
 StageStatus ParseStatus(const std::string& text) {
   if (text == "running") return StageStatus::kRunning;
@@ -124,7 +108,6 @@ Status Workspace::Load() {
       record.message = stage.value("message", "");
       record.commit = stage.value("commit", 0L);
       record.committed_fingerprint = stage.value("committed_fingerprint", "");
-      record.outputs_digest = stage.value("outputs_digest", "");
       for (const auto& from : stage.value("made_from", nlohmann::json::array()))
         record.made_from.emplace_back(from.at("stage").get<std::string>(), from.at("commit").get<long>());
       for (const auto& from : stage.value("committed_from", nlohmann::json::array()))
@@ -165,7 +148,6 @@ Status Workspace::Save() const {
                                   {"message", r.message},
                                   {"commit", r.commit},
                                   {"committed_fingerprint", r.committed_fingerprint},
-                                  {"outputs_digest", r.outputs_digest},
                                   {"made_from", commits(r.made_from)},
                                   {"committed_from", commits(r.committed_from)}});
   }
@@ -301,15 +283,11 @@ Status Workspace::CommitStage(const std::string& stage, const std::vector<std::s
     if (!fs::exists(staging / output, ec))
       return Status::Internal("stage " + stage + " did not write its output " + output);
   }
-  std::string digest;
-  HF_RETURN_IF_ERROR(DigestOutputs(staging, outputs, &digest));
   for (const auto& output : outputs) HF_RETURN_IF_ERROR(ReplacePath(staging / output, root_ / output));
   HF_RETURN_IF_ERROR(RemoveAll(staging));
   StageRecord* r = Mutable(stage);
   r->status = StageStatus::kDone;
-  if (forced || r->commit == 0 || r->committed_fingerprint != r->fingerprint || r->outputs_digest != digest)
-    r->commit = ++commits_;
-  r->outputs_digest = digest;
+  if (forced || r->commit == 0 || r->committed_fingerprint != r->fingerprint) r->commit = ++commits_;
   r->committed_fingerprint = r->fingerprint;
   r->committed_from = r->made_from;
   r->outputs = outputs;
@@ -415,7 +393,7 @@ Status RunStage(Workspace* workspace, const StageRun& run, const StageBody& body
     return status.WithMessage(message).WithContext(stage);
   }
   result.outputs.push_back(stage + ".ini");
-  return workspace->CommitStage(stage, result.outputs, seconds(), result.message, run.force);
+  return workspace->CommitStage(stage, result.outputs, seconds(), result.message, run.force || !result.repeatable);
 }
 
 }  // namespace headforge

@@ -42,12 +42,10 @@ struct StageRecord {
   // this stage last started: an upstream stage committed again since means
   // these outputs were made from older ones. A stage redone with the
   // fingerprint its outputs already had, from the same upstream outputs (they
-  // were missing, or an attempt in between failed), keeps its number when it
-  // wrote the same bytes (`outputs_digest`) and was not forced; a stage that
-  // does not repeat itself (COLMAP) gets a new one.
+  // were missing, or an attempt in between failed), keeps its number, unless
+  // forced or its outputs are not repeatable (StageResult::repeatable).
   long commit = 0;
   std::string committed_fingerprint;
-  std::string outputs_digest;  // names and contents of the committed outputs
   std::vector<std::pair<std::string, long>> made_from;
   // made_from as it was when the outputs were committed: a later attempt
   // that failed or was interrupted records what it started from in
@@ -101,8 +99,7 @@ class Workspace {
                     bool resumable, fs::path* staging, bool* resumed);
   // Moves each output (relative to the staging folder) into the workspace root,
   // replacing what was there, then marks the stage done, with the next commit
-  // number when `forced`, its fingerprint is not the one its outputs had, or
-  // the outputs' contents differ from the last commit's.
+  // number when `forced` or its fingerprint is not the one its outputs had.
   Status CommitStage(const std::string& stage, const std::vector<std::string>& outputs,
                      double wall_time_s, const std::string& message, bool forced = false);
   // For a stage that is up to date but whose record predates `made_from` or
@@ -153,6 +150,10 @@ struct StageContext {
 struct StageResult {
   std::vector<std::string> outputs;  // relative to the staging folder
   std::string message;               // one-line summary for `status`
+  // False when the same inputs and options can give other outputs (COLMAP's
+  // model differs run to run): committed with a new number even under its
+  // old fingerprint, so what read the earlier outputs is out of date.
+  bool repeatable = true;
 };
 
 using StageBody = std::function<Status(const StageContext& context, StageResult* result)>;

@@ -319,8 +319,8 @@ TEST_F(WorkspaceTest, StageIsOutOfDateWhenAnUpstreamStageRunsAgain) {
   EXPECT_EQ(ws->OutOfDate("track"), "");
 
   // Its outputs deleted, a stage is redone with the same fingerprint from the
-  // same upstream outputs: the same bytes keep its number, other bytes (COLMAP
-  // does not repeat itself) make what read the earlier ones out of date.
+  // same upstream outputs: a repeatable one keeps its number, one that is not
+  // (COLMAP) makes what read its earlier outputs out of date.
   fs::remove(root_ / "calibrate.out");
   EXPECT_FALSE(stage("calibrate", "c", {"ingest"}));
   EXPECT_EQ(ws->OutOfDate("track"), "");
@@ -328,6 +328,7 @@ TEST_F(WorkspaceTest, StageIsOutOfDateWhenAnUpstreamStageRunsAgain) {
   ASSERT_TRUE(RunStage(ws.get(), {"calibrate", "c", "", false, false, {"ingest"}},
                        Body([](const fs::path& staging, StageResult* result) {
                          result->outputs = {"calibrate.out"};
+                         result->repeatable = false;
                          return WriteFileAtomic(staging / "calibrate.out", "another model");
                        }),
                        &skipped)

@@ -32,6 +32,7 @@ class CalibrateJob : public StageJob {
     result->outputs = {"cameras.json"};
     if (fs::exists(context.staging / "colmap")) result->outputs.push_back("colmap");
     result->message = summary.OneLine();
+    result->repeatable = summary.mode != "colmap";  // its threads place the cameras a little differently each run
     return Status::Ok();
   }
 

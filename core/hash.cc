@@ -80,7 +80,8 @@ Status Hasher::AddTreeContents(const fs::path& dir) {
   std::vector<fs::path> files;
   for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::end(it);
        it.increment(ec)) {
-    if (it->is_regular_file()) files.push_back(it->path());
+    std::error_code type_ec;  // a file that vanished or cannot be read is not one to hash
+    if (it->is_regular_file(type_ec)) files.push_back(it->path());
   }
   if (ec) return Status::IoError("cannot list " + dir.string() + ": " + ec.message());
   std::sort(files.begin(), files.end());

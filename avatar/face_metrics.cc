@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "avatar/metrics/face_recognition.h"
+#include "vision/tfjs_weights.h"
 #include "capture/face_detector.h"
 
 namespace headforge {

@@ -1,5 +1,5 @@
 # Every third-party dependency, found from Debian 12 packages (scripts/install_deps.sh
-# installs them). Each layer links only what it uses; LibTorch only in avatar/.
+# installs them). Each layer links only what it uses; LibTorch only in vision/ and avatar/.
 
 find_package(Eigen3 3.3 REQUIRED NO_MODULE)
 find_package(nlohmann_json 3 REQUIRED)
@@ -76,6 +76,15 @@ target_link_libraries(headforge_torch INTERFACE ${TORCH_LIBRARIES} OpenMP::OpenM
 target_include_directories(headforge_torch SYSTEM INTERFACE ${TORCH_INCLUDE_DIRS})
 separate_arguments(_torch_flags UNIX_COMMAND "${TORCH_CXX_FLAGS}")
 target_compile_options(headforge_torch INTERFACE ${_torch_flags})
+
+# One precompiled <torch/torch.h>, reused by every LibTorch target (vision/,
+# avatar/ and their tests).
+add_library(headforge_torch_pch OBJECT ${PROJECT_SOURCE_DIR}/avatar/torch_pch.cc)
+target_link_libraries(headforge_torch_pch PRIVATE headforge_torch headforge_warnings)
+target_precompile_headers(headforge_torch_pch PRIVATE <torch/torch.h>)
+function(headforge_reuse_torch_pch target)
+  target_precompile_headers(${target} REUSE_FROM headforge_torch_pch)
+endfunction()
 
 # Where the dlib landmark model sits on Debian (package libdlib-data).
 set(HEADFORGE_DLIB_LANDMARKS "/usr/share/dlib/shape_predictor_68_face_landmarks.dat"

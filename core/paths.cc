@@ -9,6 +9,11 @@ std::string DefaultDataDir() {
   return HEADFORGE_SHARED_DATA;
 }
 
+std::string DefaultVisionModelsDir() {
+  if (const char* env = std::getenv("HEADFORGE_VISION_MODELS"); env && *env) return env;
+  return HEADFORGE_VISION_MODELS;
+}
+
 std::string DefaultLandmarkModel() { return HEADFORGE_DLIB_LANDMARKS; }
 std::string DefaultColmapExecutable() { return HEADFORGE_COLMAP_EXECUTABLE; }
 std::string HeadForgeVersion() { return HEADFORGE_VERSION; }

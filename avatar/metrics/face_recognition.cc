@@ -2,92 +2,10 @@
 
 #include <torch/torch.h>
 
-#include <cstring>
-
-#include <nlohmann/json.hpp>
-
-#include "core/json_io.h"
 
 namespace headforge {
 
 namespace F = torch::nn::functional;
-
-namespace {
-
-// IEEE half precision to single.
-float HalfToFloat(uint16_t h) {
-  const uint32_t sign = uint32_t(h & 0x8000) << 16, exponent = (h >> 10) & 0x1f, mantissa = h & 0x3ff;
-  float value;
-  if (exponent == 0) {
-    value = std::ldexp(float(mantissa), -24);
-  } else if (exponent == 31) {
-    value = mantissa ? std::numeric_limits<float>::quiet_NaN() : std::numeric_limits<float>::infinity();
-  } else {
-    value = std::ldexp(float(mantissa | 0x400), int(exponent) - 25);
-  }
-  return sign ? -value : value;
-}
-
-}  // namespace
-
-Status ReadTfjsWeights(const fs::path& manifest, std::map<std::string, torch::Tensor>* tensors) {
-  nlohmann::json groups;
-  HF_RETURN_IF_ERROR(ReadJson(manifest, &groups));
-  const auto bad = [&](const std::string& why) {
-    return Status::DataError(manifest.string() + " is not a TensorFlow.js weights manifest: " + why);
-  };
-  tensors->clear();
-  try {
-    for (const nlohmann::json& group : groups) {
-      std::string bytes;
-      for (const nlohmann::json& path : group.at("paths")) {
-        std::string shard;
-        HF_RETURN_IF_ERROR(ReadFileToString(manifest.parent_path() / path.get<std::string>(), &shard));
-        bytes += shard;
-      }
-      size_t offset = 0;
-      for (const nlohmann::json& spec : group.at("weights")) {
-        const std::string name = spec.at("name").get<std::string>();
-        if (spec.at("dtype").get<std::string>() != "float32") return bad(name + " is not float32");
-        const std::vector<int64_t> shape = spec.at("shape").get<std::vector<int64_t>>();
-        int64_t count = 1;
-        for (int64_t d : shape) count *= d;
-        std::string stored = "float32";
-        double scale = 1, min = 0;
-        if (spec.contains("quantization")) {
-          const nlohmann::json& q = spec["quantization"];
-          stored = q.at("dtype").get<std::string>();
-          if (stored != "float16") {
-            scale = q.at("scale").get<double>();
-            min = q.at("min").get<double>();
-          }
-        }
-        const size_t width = stored == "uint8" ? 1 : stored == "uint16" || stored == "float16" ? 2 : 4;
-        if (stored != "float32" && stored != "uint8" && stored != "uint16" && stored != "float16")
-          return bad(name + " is stored as " + stored);
-        if (offset + width * size_t(count) > bytes.size()) return bad("its shards end before " + name);
-        torch::Tensor t = torch::empty({count}, torch::kFloat32);
-        float* out = t.data_ptr<float>();
-        const unsigned char* in = reinterpret_cast<const unsigned char*>(bytes.data()) + offset;
-        for (int64_t i = 0; i < count; ++i) {
-          if (stored == "uint8") {
-            out[i] = float(min + scale * in[i]);
-          } else if (stored == "uint16" || stored == "float16") {
-            const uint16_t q = uint16_t(in[2 * i] | (in[2 * i + 1] << 8));  // little-endian
-            out[i] = stored == "uint16" ? float(min + scale * q) : HalfToFloat(q);
-          } else {
-            std::memcpy(out + i, in + 4 * i, 4);
-          }
-        }
-        offset += width * size_t(count);
-        (*tensors)[name] = t.view(shape);
-      }
-    }
-  } catch (const nlohmann::json::exception& e) {
-    return bad(e.what());
-  }
-  return Status::Ok();
-}
 
 Status FaceRecognitionNetImpl::Create(const std::map<std::string, torch::Tensor>& weights,
                                       std::shared_ptr<FaceRecognitionNetImpl>* net) {

@@ -26,12 +26,6 @@
 
 namespace headforge {
 
-// A TensorFlow.js weights manifest (a JSON list of groups, each naming its
-// shard files and its tensors: name, shape, dtype, and optionally a
-// quantization with dtype uint8 or uint16 and scale and min, value = min +
-// scale * q, or dtype float16) read into float32 tensors by name.
-Status ReadTfjsWeights(const fs::path& manifest, std::map<std::string, torch::Tensor>* tensors);
-
 class FaceRecognitionNetImpl : public torch::nn::Module {
  public:
   // The weights by face-api's names (conv32_down/conv/filters, ..., fc);

@@ -1,5 +1,6 @@
 #include "capture/capture_io.h"
 
+#include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
@@ -73,6 +74,13 @@ nlohmann::json LandmarksJson(const IngestedCamera& cam) {
       entry["box"] = {f.box.x, f.box.y, f.box.width, f.box.height};
       entry["points"] = points;
     }
+    if (!f.mesh.empty()) {
+      nlohmann::json mesh = nlohmann::json::array();
+      for (const cv::Point3f& p : f.mesh)
+        for (float v : {p.x, p.y, p.z}) mesh.push_back(std::round(v * 100.0f) / 100.0f);
+      entry["mesh"] = mesh;
+      entry["mesh_score"] = std::round(f.mesh_score * 1000.0f) / 1000.0f;
+    }
     frames.push_back(entry);
   }
   return frames;
@@ -97,6 +105,8 @@ fs::path IngestedCapture::MaskPath(const std::string& camera, int index) const {
 Status WriteIngestedCapture(const IngestedCapture& capture, const fs::path& dir) {
   nlohmann::json landmarks = {{"version", IngestedCapture::kVersion},
                               {"format", "ibug68"},
+                              {"mesh_format", "MediaPipe face mesh where found: 468 points as x, y (frame pixels) "
+                                              "and z (relative depth, frame pixels, nearer smaller), flattened"},
                               {"coordinates", "pixels of frames/<camera>/<index>.png, pixel centres at integers"},
                               {"cameras", nlohmann::json::object()}};
   nlohmann::json cameras = nlohmann::json::array();
@@ -200,6 +210,14 @@ Status ReadIngestedCapture(const fs::path& workspace, IngestedCapture* capture) 
           frame.detector = l.at("detector").get<std::string>();
           const auto& box = l.at("box");
           frame.box = cv::Rect2f(box[0].get<float>(), box[1].get<float>(), box[2].get<float>(), box[3].get<float>());
+        }
+        if (l.contains("mesh")) {
+          const auto& mesh = l.at("mesh");
+          if (mesh.size() % 3 != 0)
+            return Status::DataError("landmarks.json: a face mesh of " + std::to_string(mesh.size()) + " numbers");
+          for (size_t i = 0; i + 2 < mesh.size(); i += 3)
+            frame.mesh.emplace_back(mesh[i].get<float>(), mesh[i + 1].get<float>(), mesh[i + 2].get<float>());
+          frame.mesh_score = l.value("mesh_score", 0.0f);
         }
         cam.frames.push_back(frame);
       }

@@ -26,6 +26,12 @@ struct IngestedFrame {
   double sharpness = 0.0;                // variance of the Laplacian
   std::string source_file;               // image folders: the file it came from
   std::optional<CropWindow> crop;        // crop mode "frame": this frame's own crop
+  // MediaPipe's face mesh (vision/face_mesh.h) where it found the face: 468
+  // points, x and y in frame pixels, z a relative depth in frame pixels
+  // (nearer is smaller); empty where it was not run or lost the face, the
+  // 68 points then standing alone.
+  std::vector<cv::Point3f> mesh;
+  float mesh_score = 0.0f;               // the network's face probability
 };
 
 struct IngestedCamera {
@@ -38,7 +44,7 @@ struct IngestedCamera {
   // or truncated data, where frames may be missing or garbled.
   int decoder_errors = 0;
   std::string decoder_error;                // the first
-  std::string masks = "grabcut";            // grabcut or user
+  std::string masks = "grabcut";            // what made them: selfie, meet, rvm, grabcut or user
   int width = 0, height = 0;                // frame size
   int source_width = 0, source_height = 0;  // source image size
   bool fixed_crop = true;  // one crop for every frame (crop mode sequence or none)

@@ -11,7 +11,7 @@ cv::Point2f CropWindow::Map(const cv::Point2f& p) const {
                      static_cast<float>((p.y + 0.5 - y0) * scale - 0.5));
 }
 
-cv::Mat CropWindow::Apply(const cv::Mat& source, int interpolation) const {
+cv::Mat CropWindow::Apply(const cv::Mat& source, int interpolation, int border) const {
   // Shrinking first by area averaging avoids aliasing that warpAffine's
   // interpolation alone would leave when the scale is well below one.
   cv::Mat input = source;
@@ -29,8 +29,12 @@ cv::Mat CropWindow::Apply(const cv::Mat& source, int interpolation) const {
   cv::Mat m = (cv::Mat_<double>(2, 3) << ax, 0.0, 0.5 * ax - x0 * scale - 0.5, 0.0, ay,
                0.5 * ay - y0 * scale - 0.5);
   cv::Mat out;
-  cv::warpAffine(input, out, m, output, interpolation, cv::BORDER_CONSTANT, cv::Scalar::all(0));
+  cv::warpAffine(input, out, m, output, interpolation, border, cv::Scalar::all(0));
   return out;
+}
+
+bool CropWindow::Exceeds(cv::Size size) const {
+  return x0 < 0 || y0 < 0 || x0 + width > size.width || y0 + height > size.height;
 }
 
 CropWindow SquareCrop(const cv::Point2d& centre, double side, int resolution) {

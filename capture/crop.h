@@ -21,8 +21,11 @@ struct CropWindow {
   cv::Size output;                   // output image size
 
   cv::Point2f Map(const cv::Point2f& source) const;
-  // Crops and resizes; regions outside the source are black.
-  cv::Mat Apply(const cv::Mat& source, int interpolation) const;
+  // Crops and resizes; regions outside the source are black (or, with
+  // cv::BORDER_REPLICATE, its edge pixels repeated).
+  cv::Mat Apply(const cv::Mat& source, int interpolation, int border = cv::BORDER_CONSTANT) const;
+  // Whether the window reaches outside a source of `size`.
+  bool Exceeds(cv::Size size) const;
 };
 
 // A square crop of side `side` centred at `centre`, scaled to `resolution`.

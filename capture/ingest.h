@@ -12,6 +12,7 @@
 
 #include "capture/face_detector.h"
 #include "capture/face_mask.h"
+#include "capture/matte.h"
 #include "core/fs.h"
 #include "core/hash.h"
 #include "core/options.h"
@@ -55,6 +56,16 @@ struct IngestOptions {
   // A folder of the user's own masks (one image per source frame, sorted by
   // name; a sub-folder per camera name when there are several cameras).
   std::string masks;
+  // The mask of each frame: auto (Robust Video Matting, or GrabCut where the
+  // models are not installed), selfie, meet, rvm or grabcut.
+  std::string matte = "auto";
+  // Folder of the learned models (default: DefaultVisionModelsDir()).
+  std::string vision_models;
+  // MediaPipe's face mesh (468 points) beside the 68 in landmarks.json:
+  // "auto" where the model is installed, "on" (an error without it), "off".
+  std::string face_mesh = "auto";
+  // Below this face probability a frame's mesh is left out.
+  double mesh_min_score = 0.5;
   HeadMaskOptions mask;
   // Per-camera offset in source frames: camera i's frame (j + offsets[i])
   // pairs with the first camera's frame j. Empty: all zero.
@@ -71,6 +82,7 @@ struct IngestOptions {
   int seed = 0;
 
   Status Check() const;
+  MatteOptions Matte() const;
 };
 
 // Binds every field to its "ingest.*" key; `data_dir` fills the model defaults.
@@ -90,8 +102,10 @@ struct IngestSummary {
   int dropped_unselected = 0;  // left out by --select
   int face_lost = 0;         // kept frames (over all cameras) without a detected face
   int with_landmarks = 0;    // kept frames (over all cameras) with landmarks
+  int with_mesh = 0;         // ... and with the face mesh
   int cameras = 0;
   std::string crop;          // the crop used ("auto" resolved)
+  std::string masks;         // what made the masks: selfie, meet, rvm, grabcut or user
   // One line per input video ffmpeg's decoder found damaged or truncated.
   std::vector<std::string> damaged;
   // One line per camera where several faces were seen: which one is followed.

@@ -37,7 +37,7 @@ const std::vector<Command>& Commands() {
        FaceModelCommand},
       {"splat-fit", "Fit a static Gaussian scene to a simulated capture; report held-out PSNR.",
        SplatFitCommand},
-      {"bench", "Measure accuracy against time: bench calibrate, track, train; bench truth-workspace.", BenchCommand},
+      {"bench", "Measure accuracy against time: bench calibrate, track, train, front-end; bench truth-workspace.", BenchCommand},
       {"version", "Print the version and the libraries it was built with.", VersionCommand},
     };
     list.insert(list.end(), tools.begin(), tools.end());

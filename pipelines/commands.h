@@ -68,6 +68,7 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args);
 int FaceModelCommand(const std::vector<std::string>& args);
 int BenchCommand(const std::vector<std::string>& args);
 int BenchTrain(const std::vector<std::string>& args);
+int BenchFrontEnd(const std::vector<std::string>& args);
 int SplatFitCommand(const std::vector<std::string>& args);
 int RenderCommand(const std::vector<std::string>& args);
 int PackCommand(const std::vector<std::string>& args);

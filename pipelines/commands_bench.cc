@@ -26,42 +26,14 @@
 #include "core/paths.h"
 #include "core/rotation.h"
 #include "core/statistics.h"
+#include "pipelines/bench_scene.h"
 #include "pipelines/commands.h"
 #include "pipelines/stage_table.h"
 #include "reconstruction/track_evaluation.h"
 #include "reconstruction/track_stage.h"
 
 namespace headforge {
-namespace {
 
-struct Setting {
-  std::string label;
-  int max_features;
-  std::string matcher;
-  int frame_step;    // moving camera: every n-th frame
-  int instants = 1;  // fixed rig: synchronised instants
-  bool revisit = true;  // one video: match revisited views after the first model
-  std::string camera_model = "SIMPLE_RADIAL";
-  // Fixed rig: the simulator's own cameras as a rig file (calibrate --mode
-  // rig) instead of COLMAP, so that the row measures align alone.
-  bool rig_file = false;
-};
-
-struct Row {
-  std::string scene, label, mode;
-  double seconds = 0;
-  CameraErrors world, head;
-  // When align's surface fit ran: on how many points, and the aligned
-  // rotation error and scale error the landmarks alone gave (-1: no surface fit).
-  int surface_points = 0;
-  double landmarks_only_rotation_deg = -1, landmarks_only_scale_error = -1;
-  bool ok = false;
-  std::string error;
-};
-
-// Simulates `scene` into dir/capture and ingests it into dir/workspace unless
-// both are already there for the same scene file.
-// `identity_seed` > 0 simulates the scene with another random subject.
 Status PrepareScene(const fs::path& scene_file, const fs::path& dir, const FaceModel& model, const std::string& data,
                     int threads, const std::string& crop, int identity_seed, bool simulated_masks,
                     IngestedCapture* capture, nlohmann::json* truth) {
@@ -107,6 +79,33 @@ Status PrepareScene(const fs::path& scene_file, const fs::path& dir, const FaceM
   HF_RETURN_IF_ERROR(ReadIngestedCapture(dir / "workspace", capture));
   return ReadJson(dir / "capture" / "ground_truth.json", truth);
 }
+
+namespace {
+
+struct Setting {
+  std::string label;
+  int max_features;
+  std::string matcher;
+  int frame_step;    // moving camera: every n-th frame
+  int instants = 1;  // fixed rig: synchronised instants
+  bool revisit = true;  // one video: match revisited views after the first model
+  std::string camera_model = "SIMPLE_RADIAL";
+  // Fixed rig: the simulator's own cameras as a rig file (calibrate --mode
+  // rig) instead of COLMAP, so that the row measures align alone.
+  bool rig_file = false;
+};
+
+struct Row {
+  std::string scene, label, mode;
+  double seconds = 0;
+  CameraErrors world, head;
+  // When align's surface fit ran: on how many points, and the aligned
+  // rotation error and scale error the landmarks alone gave (-1: no surface fit).
+  int surface_points = 0;
+  double landmarks_only_rotation_deg = -1, landmarks_only_scale_error = -1;
+  bool ok = false;
+  std::string error;
+};
 
 Row RunSetting(const std::string& scene, const Setting& s, const IngestedCapture& capture, const nlohmann::json& truth,
                const FaceModel& model, const fs::path& dir, int threads) {
@@ -639,11 +638,14 @@ int BenchCommand(const std::vector<std::string>& args) {
   if (!args.empty() && args[0] == "calibrate") return BenchCalibrate(std::vector<std::string>(args.begin() + 1, args.end()));
   if (!args.empty() && args[0] == "track") return BenchTrack(std::vector<std::string>(args.begin() + 1, args.end()));
   if (!args.empty() && args[0] == "train") return BenchTrain(std::vector<std::string>(args.begin() + 1, args.end()));
+  if (!args.empty() && args[0] == "front-end")
+    return BenchFrontEnd(std::vector<std::string>(args.begin() + 1, args.end()));
   if (!args.empty() && args[0] == "truth-workspace")
     return BenchTruthWorkspace(std::vector<std::string>(args.begin() + 1, args.end()));
   std::fprintf(stderr,
-               "Usage: headforge bench calibrate|track|train|truth-workspace [options]\n"
+               "Usage: headforge bench calibrate|track|train|front-end|truth-workspace [options]\n"
                "  calibrate   camera accuracy against time on simulated scenes\n"
+               "  front-end   ingest's masks (and their cost) against the simulator's truth\n"
                "  track       tracking accuracy over many simulated subjects\n"
                "  train       the avatar's ablation on a tracked workspace\n"
                "  truth-workspace  a simulated capture's workspace with the true cameras and\n"

@@ -21,10 +21,12 @@ const std::vector<StageEntry>& StageTable() {
     t[0].usage = "headforge ingest --video FILE|DIR... --workspace DIR [options]";
     t[0].description =
         "Samples frames from one video or image folder per camera, drops blurred frames, detects\n"
-        "the face and its 68 landmarks, crops and resizes around the head, and makes a head mask.";
+        "the face, its 68 landmarks and its 468-point face mesh, crops and resizes around the head,\n"
+        "and masks the person (a matting network, or GrabCut without the installed models).";
     t[0].reads = {"the videos or image folders given with --video"};
     t[0].writes = {"frames/", "masks/", "landmarks.json", "capture.json"};
-    t[0].version = 4;  // 3: capture.json and landmarks.json carry a version; 4: masks from several GrabCut draws
+    t[0].version = 5;  // 3: capture.json and landmarks.json carry a version; 4: masks from several GrabCut draws;
+                       // 5: person mattes, the face mesh in landmarks.json
     t[0].make = MakeIngestJob;
 
     t[1].name = "calibrate";

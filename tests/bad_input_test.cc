@@ -174,6 +174,19 @@ std::vector<BadInput> InputCases() {
   return {
       {"a missing video", [=](const fs::path& d) { return video(d, {"--video", (d / "none.mp4").string()}); }, 1,
        {"not found", "none.mp4"}},
+      {"a missing matte model",
+       [=](const fs::path& d) {
+         fs::create_directories(d / "models");
+         return video(d, {"--video", grid, "--matte", "rvm", "--vision-models", (d / "models").string()});
+       },
+       1, {"rvm.json", "is missing", "install_deps.sh"}},
+      {"a damaged matte model",
+       [=](const fs::path& d) {
+         fs::create_directories(d / "models");
+         WriteText(d / "models" / "rvm.json", "{\"modelTopology\": {\"node\": [");
+         return video(d, {"--video", grid, "--vision-models", (d / "models").string()});
+       },
+       1, {"rvm.json"}},
       {"an empty video file",
        [=](const fs::path& d) {
          WriteText(d / "empty.mp4", "");
@@ -353,6 +366,23 @@ INSTANTIATE_TEST_SUITE_P(Table, BadInputs, ::testing::Range<size_t>(0, Table().s
 // Accepted with a warning: a video damaged after its first frames is
 // ingested as far as it decodes, and the damage is said in the log, in the
 // stage's summary and in capture.json.
+// Accepted with a warning: without the learned models, ingest says so once
+// and masks with GrabCut (capture.json says which).
+TEST(BadInputsAccepted, WithoutTheMatteModelsIngestMasksWithGrabCut) {
+  const fs::path dir = fs::temp_directory_path() / "hf_bad_no_models";
+  fs::remove_all(dir);
+  fs::create_directories(dir / "models");
+  const Result r = Headforge({"ingest", "--video", (kGrid / "bbaf2n.mpg").string(), "--max-frames", "12",
+                              "--vision-models", (dir / "models").string(), "--workspace", (dir / "w").string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("install_deps.sh"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("masking with GrabCut instead"), std::string::npos) << r.err;
+  nlohmann::json capture;
+  ASSERT_TRUE(ReadJson(dir / "w" / "capture.json", &capture).ok());
+  EXPECT_EQ(capture["cameras"][0]["masks"], "grabcut");
+  fs::remove_all(dir);
+}
+
 TEST(BadInputsAccepted, ATruncatedVideoIsIngestedAndTheDamageSaid) {
   const fs::path dir = fs::temp_directory_path() / "hf_bad_truncated";
   fs::remove_all(dir);

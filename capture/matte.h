@@ -1,0 +1,67 @@
+// The masks ingest writes for each output frame: a learned person matte
+// (vision/person_matte.h: MediaPipe's selfie or Meet segmentation, or Robust
+// Video Matting) thresholded at half coverage, or GrabCut seeded from the
+// landmarks (capture/face_mask.h), today's path and the fallback when the
+// models are not installed.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "capture/face_mask.h"
+#include "capture/landmarks.h"
+#include "core/status.h"
+
+namespace headforge {
+
+class PersonMatte;
+
+struct MatteOptions {
+  // "auto" (the default network, or GrabCut with a warning where the models
+  // are not installed), "selfie", "meet", "rvm" (GPL-3.0 weights) or
+  // "grabcut".
+  std::string method = "auto";
+  // Folder of the networks' files (default: DefaultVisionModelsDir()).
+  std::string models_dir;
+  HeadMaskOptions grabcut;
+
+  Status Check() const;
+  // The default network of "auto": Robust Video Matting, whose masks agree
+  // best with the simulator's (bench front-end: mean IoU 0.991 before a
+  // backdrop and 0.993 before a defocused room, against GrabCut's 0.957 and
+  // 0.876 and the selfie network's 0.78, which takes a body below the neck).
+  static constexpr const char* kDefaultNetwork = "rvm";
+};
+
+class FrameMasker {
+ public:
+  // Loads the network `options` names. "auto" without the model files warns
+  // once and masks with GrabCut; a named network's missing or damaged file is
+  // an error that names the install step.
+  static Status Create(const MatteOptions& options, std::unique_ptr<FrameMasker>* masker);
+  ~FrameMasker();
+
+  // What masks: selfie, meet, rvm or grabcut.
+  const std::string& method() const { return method_; }
+  // A recurrent network: frames must come in their video's order, one at a
+  // time (Mask is then not to be called from several threads), and
+  // StartSequence() before each camera.
+  bool sequential() const;
+  void StartSequence();
+
+  // The 8-bit mask (255 on the person, or the head for GrabCut) of an output
+  // frame, and where a network gave it its soft alpha (CV_8U, 0-255) in
+  // `alpha` (empty for GrabCut). `landmarks` (frame pixels) seed GrabCut;
+  // `seed` its random start.
+  cv::Mat Mask(const cv::Mat& frame, const Landmarks68& landmarks, uint64_t seed, cv::Mat* alpha = nullptr);
+
+ private:
+  FrameMasker();
+  std::string method_;
+  HeadMaskOptions grabcut_;
+  std::unique_ptr<PersonMatte> matte_;
+};
+
+}  // namespace headforge

@@ -29,45 +29,57 @@ Status AddLandmarkEmbeddingInputs(const std::vector<std::string>& files, Hasher*
 
 namespace {
 
+// The 68 points of the detector and dlib's predictor on a render (none
+// where no face is found).
+RenderPointDetector Detector68(FaceDetector* faces, const LandmarkPredictor* predictor) {
+  return [faces, predictor](const cv::Mat& image) {
+    const auto found = faces->Detect(image);
+    if (found.empty()) return std::vector<cv::Point2f>();
+    const Landmarks68 lm = predictor->Predict(image, found[0].landmark_box);
+    return std::vector<cv::Point2f>(lm.begin(), lm.end());
+  };
+}
+
 // Renders the mean face by `scene_text`, detects the 68 points in every frame
-// and hands each one that lands on the head to `use` as a head-frame point,
-// with the direction from the head toward the camera.
+// and hands each one that lands on the head to `use`.
 Status ForEachDetectedPoint(const std::string& scene_text, const FaceModel& model, const FaceDetectorOptions& detector,
-                            const std::string& landmark_model, int threads,
-                            const std::function<void(int, const Eigen::Vector3d&, const Eigen::Vector3d&)>& use) {
-  Scene scene;
-  HF_RETURN_IF_ERROR(ParseScene(scene_text, "landmark embedding scene", &scene));
-  std::unique_ptr<Simulator> sim;
-  HF_RETURN_IF_ERROR(Simulator::Create(scene, model, threads, &sim));
+                            const std::string& landmark_model, int threads, const RenderedPointUse& use) {
   std::unique_ptr<FaceDetector> faces;
   HF_RETURN_IF_ERROR(FaceDetector::Create(detector, &faces));
   std::unique_ptr<LandmarkPredictor> predictor;
   HF_RETURN_IF_ERROR(LandmarkPredictor::Load(landmark_model, &predictor));
+  return ForEachRenderedPoint(scene_text, model, threads, Detector68(faces.get(), predictor.get()), use);
+}
+
+}  // namespace
+
+Status ForEachRenderedPoint(const std::string& scene_text, const FaceModel& model, int threads,
+                            const RenderPointDetector& detect, const RenderedPointUse& use) {
+  Scene scene;
+  HF_RETURN_IF_ERROR(ParseScene(scene_text, "landmark embedding scene", &scene));
+  std::unique_ptr<Simulator> sim;
+  HF_RETURN_IF_ERROR(Simulator::Create(scene, model, threads, &sim));
   for (int f = 0; f < sim->num_frames(); ++f) {
     const SimulatedView view = sim->RenderView(f, 0);
-    const auto found = faces->Detect(view.image);
-    if (found.empty()) continue;
-    const Landmarks68 lm = predictor->Predict(view.image, found[0].landmark_box);
+    const std::vector<cv::Point2f> points = detect(view.image);
     const Eigen::Isometry3d head_from_cam =
         sim->StateAt(sim->FrameTime(f)).world_from_head.inverse() * view.camera.cam_from_world.inverse();
-    for (int i = 0; i < 68; ++i) {
-      const int x = static_cast<int>(std::lround(lm[i].x)), y = static_cast<int>(std::lround(lm[i].y));
+    for (size_t i = 0; i < points.size(); ++i) {
+      const int x = static_cast<int>(std::lround(points[i].x)), y = static_cast<int>(std::lround(points[i].y));
       if (x < 0 || y < 0 || x >= view.render.depth.cols || y >= view.render.depth.rows) continue;
       const float z = view.render.depth.at<float>(y, x);
       const int id = view.render.triangle.at<int>(y, x);
       if (z <= 0 || id < 0 || (id >> 24) != 0) continue;  // not on the head
-      const Eigen::Vector3d cam((lm[i].x - view.camera.cx) / view.camera.fx * z,
-                                (lm[i].y - view.camera.cy) / view.camera.fy * z, z);
-      use(i, head_from_cam * cam, head_from_cam.translation());
+      const Eigen::Vector3d cam((points[i].x - view.camera.cx) / view.camera.fx * z,
+                                (points[i].y - view.camera.cy) / view.camera.fy * z, z);
+      use(int(i), head_from_cam * cam, head_from_cam.translation());
     }
   }
   return Status::Ok();
 }
 
-// A subject under one light, the camera 0.65 m in front; the head turns and
-// nods by these amplitudes (degrees) over `frames` frames.
 std::string EmbeddingScene(int frames, double yaw, double yaw_period, double pitch, double pitch_period,
-                           const SubjectLook& look = SubjectLook()) {
+                           const SubjectLook& look) {
   std::string identity = "[0.0]";
   if (look.alpha.size() > 0) {
     identity = "[";
@@ -86,8 +98,6 @@ std::string EmbeddingScene(int frames, double yaw, double yaw_period, double pit
                 pitch_period, look.light.x(), look.light.y(), look.light.z(), look.ambient, look.diffuse);
   return text;
 }
-
-}  // namespace
 
 Status MeasureLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
                                 const std::string& landmark_model, int threads, std::vector<Eigen::Vector3d>* points) {

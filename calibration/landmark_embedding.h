@@ -9,9 +9,12 @@
 // yaw and pitch), for fits whose views see the head from far apart.
 #pragma once
 
-#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <functional>
 #include <string>
 #include <vector>
+
+#include <opencv2/core.hpp>
 
 #include "capture/face_detector.h"
 #include "core/face_model.h"
@@ -68,6 +71,22 @@ struct SubjectLook {
 Status MeasureSubjectLandmarks(const FaceModel& model, const FaceDetectorOptions& detector,
                                const std::string& landmark_model, int threads, const SubjectLook& look,
                                std::vector<Eigen::Vector3d>* points, std::vector<int>* seen);
+
+// The measurements' renders: a scene of one subject under one light, the
+// camera 0.65 m in front, the head turning and nodding by these amplitudes
+// (degrees) over `frames` frames.
+std::string EmbeddingScene(int frames, double yaw, double yaw_period, double pitch, double pitch_period,
+                           const SubjectLook& look = SubjectLook());
+// A detector's points on a render (BGR), in pixels; none where it found no face.
+using RenderPointDetector = std::function<std::vector<cv::Point2f>(const cv::Mat& bgr)>;
+// A found point: its index, its head-frame position (metres) and the
+// camera's centre in the head frame.
+using RenderedPointUse = std::function<void(int, const Eigen::Vector3d&, const Eigen::Vector3d&)>;
+// Renders `scene_text` (the face model) and hands every point `detect` finds
+// that lands on the head to `use`, carried to the head frame through the
+// render's depth and its known pose.
+Status ForEachRenderedPoint(const std::string& scene_text, const FaceModel& model, int threads,
+                            const RenderPointDetector& detect, const RenderedPointUse& use);
 
 // The embedding file when it exists and loads, else the model's landmark vertices.
 LandmarkEmbedding LoadLandmarkEmbedding(const FaceModel& model, const std::string& embedding_path);

@@ -463,6 +463,11 @@ int BenchTrack(const std::vector<std::string>& args) {
   options.Add("bench.json", &json, "Print one JSON document instead of the table.", "json");
   options.Add("bench.out", &out, "Folder for the simulated captures and workspaces (reused).", "out");
   options.Add("bench.seeds", &seeds, "Identity seeds of the subjects (11 is talking_static's own).", "seeds");
+  double mesh_weight = 0.4;
+  options.Add("bench.mesh_weight", &mesh_weight,
+              "A third row per subject: the identity columns and the face mesh at this weight (track's --mesh-weight); "
+              "0 leaves it out.",
+              "mesh-weight");
   const int parsed = ParseOrExit(&options, args, "headforge bench track [--json] [--out DIR] [--seeds A,B,...]",
                                  "Simulates talking_static with each subject, calibrates head-pose cameras and tracks\n"
                                  "it with the plain landmark points and with the points' identity columns, and\n"
@@ -479,8 +484,9 @@ int BenchTrack(const std::vector<std::string>& args) {
   FaceModel model;
   if (Status s = FaceModel::Load(settings.face_model, &model); !s.ok()) return ReportFailure(s);
   const fs::path scene_file = fs::path(HEADFORGE_SOURCE_DIR) / "scenes" / "talking_static.toml";
-  const std::vector<std::pair<std::string, std::string>> embeddings = {{"plain", DefaultLandmarkEmbedding()},
-                                                                       {"identity columns", IdentityLandmarkEmbedding()}};
+  std::vector<std::pair<std::string, std::string>> embeddings = {{"plain", DefaultLandmarkEmbedding()},
+                                                                 {"identity columns", IdentityLandmarkEmbedding()}};
+  if (mesh_weight > 0) embeddings.push_back({"identity columns and the face mesh", IdentityLandmarkEmbedding()});
   if (!json) {
     std::printf("| subject | landmark points | residual (px) | head rotation (deg) | after one constant rotation (deg) "
                 "| that rotation: pitch / yaw / roll (deg) | jawOpen | eyeBlink L / R | mouthSmile L / R | track time |\n");
@@ -508,7 +514,11 @@ int BenchTrack(const std::vector<std::string>& args) {
       TrackStageOptions track;
       track.overlay = false;
       track.landmark_embedding = file;
-      const fs::path track_dir = dir / "runs" / (label == "plain" ? "track_plain" : "track_identity");
+      const bool with_mesh = label.find("mesh") != std::string::npos;
+      track.fit.mesh_weight = with_mesh ? mesh_weight : 0.0;
+      if (!with_mesh) track.mesh_embedding.clear();
+      const fs::path track_dir =
+          dir / "runs" / (label == "plain" ? "track_plain" : with_mesh ? "track_mesh" : "track_identity");
       TrackingErrors score;
       TrackSummary summary;
       const auto start = std::chrono::steady_clock::now();

@@ -2,6 +2,7 @@
 #include <algorithm>
 
 #include "calibration/landmark_embedding.h"
+#include "calibration/mesh_embedding.h"
 #include "capture/simulator.h"
 #include "core/paths.h"
 #include "core/log.h"
@@ -80,7 +81,15 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
               "uses them with one camera.",
               "identity");
   options.Add("embed.subjects", &subjects, "Subjects measured with --identity (at least 10).", "subjects");
-  const int parsed = ParseOrExit(&options, args, "headforge embed-landmarks [--out FILE] [--views | --identity]",
+  bool mesh = false;
+  std::string vision_models = DefaultVisionModelsDir();
+  options.Add("embed.mesh", &mesh,
+              "Instead, measure where MediaPipe's face mesh (468 points, ingest's --face-mesh) sits on the face model "
+              "(120 renders); default file ict_facemesh468_embedding.json, which calibrate and track read.",
+              "mesh");
+  options.Add("embed.vision_models", &vision_models, "Folder of the face mesh's model (facemesh.json).",
+              "vision-models");
+  const int parsed = ParseOrExit(&options, args, "headforge embed-landmarks [--out FILE] [--views | --identity | --mesh]",
                                  "Measures where the landmark detector's 68 points sit on the face model, from\n"
                                  "simulator renders of the mean face (calibration/landmark_embedding.h).");
   if (parsed >= 0) return parsed;
@@ -91,15 +100,31 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
   FaceDetectorOptions detector;
   detector.ultraface_dir = (fs::path(common.data_dir) / "models" / "ultraface").string();
   const int threads = settings.threads;
-  if (views && identity)
+  if (int(views) + int(identity) + int(mesh) > 1)
     return ReportFailure(
-        Status::InvalidArgument("embed-landmarks: --views and --identity measure different files; give one"));
-  const std::string shipped =
-      views ? ViewLandmarkEmbedding() : identity ? IdentityLandmarkEmbedding() : DefaultLandmarkEmbedding();
+        Status::InvalidArgument("embed-landmarks: --views, --identity and --mesh measure different files; give one"));
+  const std::string shipped = views      ? ViewLandmarkEmbedding()
+                              : identity ? IdentityLandmarkEmbedding()
+                              : mesh     ? DefaultMeshEmbedding()
+                                         : DefaultLandmarkEmbedding();
   // A measurement lands beside the user, not over the file that calibrate,
   // align and track read by default: replacing that is a deliberate --out.
   if (out.empty()) out = fs::path(shipped).filename().string();
-  if (identity) {
+  if (mesh) {
+    std::vector<Eigen::Vector3d> points;
+    MeshEmbeddingReport report;
+    if (Status s = MeasureMeshEmbedding(model, detector, DefaultLandmarkModel(), vision_models, threads, &points,
+                                        &report);
+        !s.ok())
+      return ReportFailure(s);
+    if (Status s = WriteMeshEmbedding(out, points); !s.ok()) return ReportFailure(s);
+    char line[256];
+    std::snprintf(line, sizeof(line),
+                  "embed-landmarks: the face mesh on %d renders, %d of 468 points on the head; a point's renders lie "
+                  "%.2f mm from its median (median over the points)",
+                  report.renders, report.points_seen, 1e3 * report.median_spread);
+    HF_LOG(Info) << line;
+  } else if (identity) {
     LandmarkEmbedding embedding;
     IdentityFitReport report;
     if (Status s = MeasureIdentityLandmarkEmbedding(model, detector, DefaultLandmarkModel(), threads, subjects,
@@ -130,6 +155,7 @@ int EmbedLandmarksCommand(const std::vector<std::string>& args) {
     HF_LOG(Info) << "embed-landmarks: the stages use it when given it: "
                  << (views      ? "track --track-landmark-embedding " + out + " (views that surround the head)"
                      : identity ? "track --track-landmark-embedding " + out + " (one camera)"
+                     : mesh     ? "calibrate and track --mesh-embedding " + out
                                 : "calibrate --landmark-embedding " + out + ", align --align-landmark-embedding " + out);
   return kExitOk;
 }

@@ -15,9 +15,12 @@ class TrackJob : public StageJob {
   Status Check() const override { return options_.Check(); }
   Status AddInputs(Hasher* hasher) const override {
     // Empty: one of the shipped files, chosen from the cameras when it runs.
-    if (options_.landmark_embedding.empty())
-      return AddLandmarkEmbeddingInputs({ViewLandmarkEmbedding(), IdentityLandmarkEmbedding()}, hasher);
-    return AddLandmarkEmbeddingInputs({options_.landmark_embedding}, hasher);
+    HF_RETURN_IF_ERROR(AddLandmarkEmbeddingInputs(options_.landmark_embedding.empty()
+                                                      ? std::vector<std::string>{ViewLandmarkEmbedding(),
+                                                                                 IdentityLandmarkEmbedding()}
+                                                      : std::vector<std::string>{options_.landmark_embedding},
+                                                  hasher));
+    return AddMeshEmbeddingInputs(options_.fit.mesh_weight > 0 ? options_.mesh_embedding : "", hasher);
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     IngestedCapture capture;

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "calibration/calibrate.h"
+#include "calibration/mesh_embedding.h"
 #include "core/camera_set.h"
 #include "capture/capture_io.h"
 #include "core/face_model.h"
@@ -23,6 +24,9 @@ struct TrackStageOptions {
   // `grid_min_span_deg` apart in yaw (each view then uses the points as seen
   // from its side), else the shipped points for every view.
   std::string landmark_embedding;
+  // Where the face mesh's 468 points sit on the model (mesh_embedding.h),
+  // for frames where ingest found the mesh when fit.mesh_weight > 0.
+  std::string mesh_embedding = DefaultMeshEmbedding();
   // Views of a frame this far apart in yaw (degrees) surround the head: they
   // take the view grid (above) and `multiview_contour_weight`.
   double grid_min_span_deg = 30.0;

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <map>
 
+#include "calibration/mesh_embedding.h"
 #include "calibration/reprojection_cost.h"
 #include "core/statistics.h"
 
@@ -65,7 +66,7 @@ bool TrackOptions::Check(std::string* why) const {
   }
   if (!(identity_prior >= 0 && expression_sparsity >= 0 && sparsity_scale > 0 && rotation_smoothness >= 0 &&
         translation_smoothness >= 0 && expression_smoothness >= 0 && robust_scale_px > 0 && contour_weight >= 0 &&
-        contour_max_yaw_deg >= 0)) {
+        contour_max_yaw_deg >= 0 && mesh_weight >= 0)) {
     *why = "weights must be zero or positive (scales positive)";
     return false;
   }
@@ -100,6 +101,7 @@ struct SequenceFit {
   const int num_frames;
   const TrackOptions& options;
   LandmarkBasis fit_basis;  // the sequence's basis cut to the fitted identity modes
+  LandmarkBasis mesh_basis;  // the face mesh's, cut alike; empty: no mesh
   std::vector<std::shared_ptr<const LandmarkBasis>> own_basis;  // a view's own, where it has one
   std::vector<double> identity;
   double focal_scale = 1.0;
@@ -131,7 +133,7 @@ Status CheckSequence(const LandmarkBasis& basis, int num_frames, const TrackOpti
 // The bases cut to the fitted identity modes: the sequence's, and each
 // view's own where it has one (shared as it is when it has no more modes);
 // the parameter blocks at their starting values.
-Status PrepareBlocks(const LandmarkBasis& basis, SequenceFit* fit) {
+Status PrepareBlocks(const LandmarkBasis& basis, const LandmarkBasis* mesh_basis, SequenceFit* fit) {
   const int k = fit->options.identity_modes;
   auto truncated = [k](const LandmarkBasis& b) {
     LandmarkBasis t = b;
@@ -140,6 +142,12 @@ Status PrepareBlocks(const LandmarkBasis& basis, SequenceFit* fit) {
     return t;
   };
   fit->fit_basis = truncated(basis);
+  if (mesh_basis && fit->options.mesh_weight > 0) {
+    if (mesh_basis->size() != kMeshEmbeddingPoints || mesh_basis->num_identity < k ||
+        mesh_basis->num_expressions != basis.num_expressions)
+      return Status::InvalidArgument("track: the face mesh's basis does not match the landmarks'");
+    fit->mesh_basis = truncated(*mesh_basis);
+  }
   fit->own_basis.resize(fit->views.size());
   for (size_t v = 0; v < fit->views.size(); ++v) {
     const auto& b = fit->views[v].basis;
@@ -154,6 +162,23 @@ Status PrepareBlocks(const LandmarkBasis& basis, SequenceFit* fit) {
   fit->used.assign(fit->views.size(), false);
   fit->view_blocks.resize(fit->views.size());
   return Status::Ok();
+}
+
+// A robust reprojection residual per point of a view's face mesh, its
+// outline at `oval` (the jaw contour's weight for the view) times mesh_weight.
+void AddMeshResiduals(SequenceFit* fit, size_t v, double oval) {
+  const TrackingView& view = fit->views[v];
+  FrameBlocks& f = fit->frames[size_t(view.frame)];
+  std::vector<bool> on_oval(view.mesh.size(), false);
+  for (int i : MeshOvalPoints()) on_oval[size_t(i)] = true;
+  for (size_t i = 0; i < view.mesh.size(); ++i) {
+    const double weight = fit->options.mesh_weight * (on_oval[i] ? oval : 1.0);
+    if (!(weight > 0) || !view.mesh[i].allFinite()) continue;
+    fit->view_blocks[v].push_back(fit->problem.AddResidualBlock(
+        LandmarkReprojectionCost::Create(fit->mesh_basis, int(i), view.camera, view.mesh[i], weight),
+        new ceres::HuberLoss(fit->options.robust_scale_px), f.rotation, f.translation, fit->identity.data(),
+        f.expression.data(), &fit->focal_scale));
+  }
 }
 
 // A robust reprojection residual per usable landmark of each view. Frames
@@ -197,6 +222,8 @@ Status AddLandmarkResiduals(SequenceFit* fit) {
       f.observed = true;
       ++observations;
     }
+    if (fit->mesh_basis.size() > 0 && view.mesh.size() == size_t(fit->mesh_basis.size()))
+      AddMeshResiduals(fit, v, contour);
   }
   if (observations == 0) {
     return Status::DataError("track: no frame has landmarks; check that ingest found the face (landmarks.json)");
@@ -399,11 +426,11 @@ void InterpolateUnobservedFrames(const SequenceFit& fit, TrackResult* out) {
 }  // namespace
 
 Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>& views, int num_frames,
-                     const TrackOptions& options, TrackResult* result) {
+                     const TrackOptions& options, TrackResult* result, const LandmarkBasis* mesh_basis) {
   HF_RETURN_IF_ERROR(CheckSequence(basis, num_frames, options));
   const auto start = std::chrono::steady_clock::now();
   SequenceFit fit(views, num_frames, options);
-  HF_RETURN_IF_ERROR(PrepareBlocks(basis, &fit));
+  HF_RETURN_IF_ERROR(PrepareBlocks(basis, mesh_basis, &fit));
   HF_RETURN_IF_ERROR(AddLandmarkResiduals(&fit));
   AddFocalLength(&fit);
   AddPriorsAndSmoothness(&fit);

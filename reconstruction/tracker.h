@@ -29,6 +29,9 @@ struct TrackingView {
   // This view's landmarks on the model when they depend on the direction it
   // sees the head from (ViewLandmarkBases); null: the sequence's basis.
   std::shared_ptr<const LandmarkBasis> basis;
+  // The face mesh's 468 points in pixels (ingest's --face-mesh), fitted
+  // against the mesh basis TrackSequence is given; empty: none.
+  std::vector<Eigen::Vector2d> mesh;
 };
 
 struct TrackOptions {
@@ -61,6 +64,17 @@ struct TrackOptions {
   // from the front are missing the contour of the others still counts at the
   // faded weight; 180 keeps every view's contour.
   double contour_max_yaw_deg = 20.0;
+  // Weight of each of the face mesh's 468 points, against 1 for each of the
+  // 68 landmarks, where TrackSequence is given the mesh's basis (the track
+  // stage); its outline (MeshOvalPoints) weighs as the jaw contour does,
+  // times this. 0 (the default) leaves the mesh out. On talking_static the
+  // mesh at 0.4 fits the avatar's training views 1.3 dB better and its novel
+  // views 4-6 dB better (docs/vision.md), but puts the head's rotation 1.84
+  // deg off the truth against 1.33 deg (a constant tilt of the head frame
+  // most of it), raises the 68 points' residual above the low-confidence
+  // flag's 3 px on some frames, fits a multi-view rig worse, and triples
+  // track's time.
+  double mesh_weight = 0.0;
   // The cameras already carry the head's motion (head-pose calibration):
   // hold each frame's head motion at the identity.
   bool fixed_head = false;
@@ -121,9 +135,12 @@ struct TrackResult {
 };
 
 // Frames are 0 .. num_frames-1; `views` may hold several views per frame
-// (multi-view frames are fitted jointly) and none for some.
+// (multi-view frames are fitted jointly) and none for some. `mesh_basis`
+// (468 points: the face mesh's embedding) fits the views' mesh points too;
+// null leaves them out.
 Status TrackSequence(const LandmarkBasis& basis, const std::vector<TrackingView>& views,
-                     int num_frames, const TrackOptions& options, TrackResult* result);
+                     int num_frames, const TrackOptions& options, TrackResult* result,
+                     const LandmarkBasis* mesh_basis = nullptr);
 
 // The head rotation about the camera's vertical axis (degrees): 0 facing the
 // camera.

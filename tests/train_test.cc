@@ -27,6 +27,7 @@
 #include "core/json_io.h"
 #include "core/mesh_renderer.h"
 #include "core/paths.h"
+#include "export/gaussian_ply.h"
 #include "export/mesh_avatar.h"
 #include "export/splat_clip.h"
 #include "tests/run_headforge.h"
@@ -473,6 +474,49 @@ TEST_F(ExportStage, AFullDiskDuringAnExportSaysSoAndKeepsTheEarlierExport) {
   const Result again = Headforge(args);
   ASSERT_EQ(again.code, 0) << again.err;
   EXPECT_TRUE(fs::exists(ws / "export" / "weights" / "weights.safetensors"));
+}
+
+// The Gaussians of the exported gaussians.ply whose centre lies, through a
+// frame's camera, outside that frame's mask in every frame: what no mask
+// shows the person at, which a viewer turning the avatar would show
+// floating (below the chin, before training pruned them). As a fraction of
+// all.
+double UnseenFraction(const fs::path& ws) {
+  GaussianCloud cloud;
+  EXPECT_TRUE(ReadGaussianPly(ws / "export" / "gaussians.ply", &cloud).ok());
+  CameraSet cameras;
+  EXPECT_TRUE(CameraSet::Read(ws / "cameras_head.json", &cameras).ok());
+  const size_t n = cloud.size();
+  std::vector<bool> seen(n, false);
+  for (const CameraView& view : cameras.views) {
+    const CameraIntrinsics* in = cameras.FindCamera(view.camera);
+    if (!view.registered || !in) continue;
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06d.png", view.frame);
+    const cv::Mat mask = cv::imread((ws / "masks" / view.camera / name).string(), cv::IMREAD_GRAYSCALE);
+    EXPECT_FALSE(mask.empty()) << name;
+    if (mask.empty()) continue;
+    for (size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d p =
+          view.cam_from_world * Eigen::Vector3d(cloud.means[3 * i], cloud.means[3 * i + 1], cloud.means[3 * i + 2]);
+      if (p.z() <= 0.01) continue;
+      const int u = int(std::lround(in->fx * p.x() / p.z() + in->cx));
+      const int v = int(std::lround((in->fy > 0 ? in->fy : in->fx) * p.y() / p.z() + in->cy));
+      if (u >= 0 && v >= 0 && u < mask.cols && v < mask.rows && mask.at<uchar>(v, u) > 127) seen[i] = true;
+    }
+  }
+  return n ? double(std::count(seen.begin(), seen.end(), false)) / n : 0.0;
+}
+
+// Training removes the Gaussians no training view shows over the person;
+// the export (the neutral pose: no expression, frame 0's head pose) then
+// holds almost none outside every frame's mask (a few cross the edge as the
+// pose changes).
+TEST_F(ExportStage, TheExportedGaussiansLieWhereTheMasksShowThePerson) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const double unseen = UnseenFraction(reference_);
+  std::printf("exported Gaussians outside every frame's mask: %.2f %%\n", 100 * unseen);
+  EXPECT_LT(unseen, 0.01);
 }
 
 TEST_F(ExportStage, WritesEveryFormatAndEachReadsBack) {

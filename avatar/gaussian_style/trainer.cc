@@ -417,8 +417,41 @@ std::vector<ViewScores> EvaluateAvatar(GaussianStyleAvatar& avatar, const Avatar
   return scores;
 }
 
+int64_t PruneUnseenGaussians(GaussianStyleAvatar& avatar, const AvatarDataset& data) {
+  torch::NoGradGuard no_grad;
+  GaussianParams& p = avatar.gaussians.params;
+  const int64_t n = p.size();
+  if (n == 0 || data.train.empty()) return 0;
+  const torch::Device device = p.means.device();
+  torch::Tensor seen = torch::zeros({n}, torch::TensorOptions().dtype(torch::kBool).device(device));
+  for (const AvatarView& view : data.train) {
+    const PosedGaussians posed = avatar.Pose(data, view.condition, view.frame, avatar.deform);
+    const SplatCamera& c = view.view;
+    const torch::Tensor rt = torch::tensor(std::vector<double>(c.cam_from_world.begin(), c.cam_from_world.end()))
+                                 .view({3, 4})
+                                 .to(torch::kFloat32)
+                                 .to(device);
+    const torch::Tensor cam = posed.means.matmul(rt.slice(1, 0, 3).t()) + rt.select(1, 3);
+    const torch::Tensor z = cam.select(1, 2);
+    const torch::Tensor u = (c.fx * cam.select(1, 0) / z + c.cx).round();
+    const torch::Tensor v = (c.fy * cam.select(1, 1) / z + c.cy).round();
+    const torch::Tensor inside = (z > 0.01) & (u >= 0) & (u < c.width) & (v >= 0) & (v < c.height);
+    const torch::Tensor index = (v.clamp(0, c.height - 1) * c.width + u.clamp(0, c.width - 1)).to(torch::kLong);
+    const torch::Tensor mask = view.mask.to(device).reshape({-1}) > 0.5;
+    seen |= inside & mask.index_select(0, index);
+  }
+  const torch::Tensor keep = seen.nonzero().view({-1});
+  const int64_t pruned = n - keep.numel();
+  if (pruned == 0) return 0;
+  for (torch::Tensor* t : p.All()) *t = t->detach().index_select(0, keep).requires_grad_(true);
+  if (avatar.gaussians.binding.defined()) avatar.gaussians.binding = avatar.gaussians.binding.index_select(0, keep);
+  return pruned;
+}
+
 Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,
                     const fs::path& out_dir, const nlohmann::json& extra, TrainSummary* summary) {
+  if (const int64_t pruned = PruneUnseenGaussians(avatar, data); pruned > 0)
+    HF_LOG(Info) << "train: " << pruned << " Gaussians no training view shows over the person removed";
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "held_out"));
   const std::vector<ViewScores> scores = EvaluateAvatar(avatar, data, 1, out_dir / "held_out");
   const ViewScores mean = MeanScores(scores);

@@ -105,6 +105,12 @@ std::vector<ViewScores> EvaluateAvatar(GaussianStyleAvatar& avatar, const Avatar
                                        const fs::path& write_dir, bool training_views = false);
 // The held-out views' scores as eval.json (with `extra` merged in), the
 // model file, and the summary's figures.
+// Removes the Gaussians whose centre no training view shows over the person
+// (outside every view's mask, or its frame): nothing in training looked at
+// them, and a viewer turning the avatar would show them (a cloud below the
+// chin). Posed as each view poses them; returns how many went.
+int64_t PruneUnseenGaussians(GaussianStyleAvatar& avatar, const AvatarDataset& data);
+
 Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,
                     const fs::path& out_dir, const nlohmann::json& extra, TrainSummary* summary);
 

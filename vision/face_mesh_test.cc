@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
@@ -118,6 +119,59 @@ TEST(FaceMeshNetwork, FindsARealFaceAndFollowsItWhenTheImageTurns) {
   EXPECT_LT(errors[errors.size() / 2], 0.03 * face * 0.8) << "median " << errors[errors.size() / 2] << " px";
 }
 
+// Hard cases: where there is no face (noise, a plain wall) the network's
+// face probability stays low, so ingest leaves the frame's mesh out and the
+// 68 points carry on; a face at the edge of the frame (half of its square
+// outside, black there) and a small one (40 px between brow and chin) are
+// still found and laid out as a face, and every point comes back finite.
+TEST(FaceMeshNetwork, HardCasesStayFiniteAndNoFaceIsRefused) {
+  std::unique_ptr<FaceMesh> mesh;
+  ASSERT_TRUE(FaceMesh::Load(HEADFORGE_HUMAN_MODELS, &mesh).ok());
+  FaceRegion region;
+  region.centre = cv::Point2d(150, 150);
+  region.side = 200;
+  cv::Mat noise(300, 300, CV_8UC3);
+  cv::randu(noise, cv::Scalar::all(0), cv::Scalar::all(255));
+  const cv::Mat wall(300, 300, CV_8UC3, cv::Scalar(170, 180, 190));
+  for (const cv::Mat& image : {noise, wall}) {
+    const FaceMeshResult r = mesh->Refine(image, region);
+    EXPECT_LT(r.score, 0.5f);
+    for (const cv::Point3f& p : r.points) EXPECT_TRUE(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z));
+  }
+  const cv::Mat frame = GridFrame();
+  FaceRegion start;
+  start.centre = cv::Point2d(frame.cols / 2.0, frame.rows / 2.0);
+  start.side = 200;
+  const FaceMeshResult found = mesh->Refine(frame, mesh->Refine(frame, start).region);
+  ASSERT_GT(found.score, 0.9f);
+  auto face_like = [](const FaceMeshResult& r) {
+    const auto& p = r.points;
+    return p[33].x < p[263].x && p[1].y > p[33].y && p[152].y > p[1].y && p[10].y < p[33].y;
+  };
+  // At the edge: the frame shifted so that the face's centre sits 20 px from the left.
+  const double dx = 20 - found.region.centre.x;
+  cv::Mat edge;
+  const cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, dx, 0, 1, 0);
+  cv::warpAffine(frame, edge, shift, frame.size());
+  FaceRegion moved = found.region;
+  moved.centre.x += dx;
+  const FaceMeshResult at_edge = mesh->Refine(edge, moved);
+  EXPECT_GT(at_edge.score, 0.5f);
+  EXPECT_TRUE(face_like(at_edge));
+  // Small: the frame shrunk until the face is about 40 px tall.
+  const double face =
+      cv::norm(cv::Point2f(found.points[152].x - found.points[10].x, found.points[152].y - found.points[10].y));
+  const double scale = 40.0 / face;
+  cv::Mat small;
+  cv::resize(frame, small, cv::Size(), scale, scale, cv::INTER_AREA);
+  FaceRegion shrunk = found.region;
+  shrunk.centre *= scale;
+  shrunk.side *= scale;
+  const FaceMeshResult tiny = mesh->Refine(small, shrunk);
+  std::printf("face probability: at the edge %.3f, 40 px tall %.3f\n", at_edge.score, tiny.score);
+  for (const cv::Point3f& p : tiny.points) EXPECT_TRUE(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z));
+  if (tiny.score >= 0.5f) EXPECT_TRUE(face_like(tiny));
+}
 #endif  // HEADFORGE_HUMAN_MODELS
 
 }  // namespace

@@ -211,6 +211,10 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
          "gaussian-style: steps of stage 3, the StyleGAN decoder that turns the splatted 32-channel features into "
          "the image (0: none; the image is the splatted RGB).",
          "decoder-steps");
+  o->Add("train.decoder_max_minutes", &t->decoder_max_minutes,
+         "gaussian-style: stop stage 3 after this many minutes (0: no limit). Its own limit: --max-minutes stops "
+         "stages 1-2, and stage 3's phases are long (its prior first).",
+         "decoder-max-minutes");
   o->Add("train.prior_steps", &t->prior_steps,
          "gaussian-style stage 3: steps training the decoder's generator on the training frames (a personal prior in "
          "place of pretrained FFHQ weights) before PTI.",

@@ -110,6 +110,7 @@ struct TrainOptions {
   // feature-matching weights, ADA, full-tune (no PTI, the generator trained
   // too) and generator weights to start from instead of the prior.
   int decoder_steps = 0;
+  double decoder_max_minutes = 0;  // stage 3's own wall-clock limit (0: none)
   int prior_steps = 1000;
   int pti_steps = 200;
   int pti_frames = 4;

@@ -8,6 +8,7 @@
 
 #include "avatar/avatar_train.h"
 #include "avatar/train/device.h"
+#include "avatar/train_loop_options.h"
 
 namespace headforge {
 namespace {
@@ -34,6 +35,7 @@ nlohmann::json ToJson(const TrainOptions& options) {
   j["mask_skin"] = options.mask_skin;
   j["pose_lr"] = options.pose_lr;
   j["mapping_latents"] = options.mapping_latents;
+  j["decoder_max_minutes"] = options.decoder_max_minutes;
   return j;
 }
 
@@ -44,6 +46,7 @@ TrainOptions TrainOptionsFromJson(const nlohmann::json& j) {
   options.mask_skin = j.value("mask_skin", options.mask_skin);
   options.pose_lr = j.value("pose_lr", options.pose_lr);
   options.mapping_latents = j.value("mapping_latents", options.mapping_latents);
+  options.decoder_max_minutes = j.value("decoder_max_minutes", options.decoder_max_minutes);
   return options;
 }
 
@@ -55,6 +58,8 @@ Status TrainOptions::Check() const {
   if (resolution < 16 || resolution > 4096) return Status::InvalidArgument("train: --resolution must be in [16, 4096]");
   if (steps < 1) return Status::InvalidArgument("train: --steps must be at least 1");
   if (!(max_minutes >= 0)) return Status::InvalidArgument("train: --max-minutes must be zero or positive");
+  if (!(decoder_max_minutes >= 0))
+    return Status::InvalidArgument("train: --decoder-max-minutes must be zero or positive");
   if (!(canonical_fraction >= 0 && canonical_fraction <= 1))
     return Status::InvalidArgument("train: --canonical-fraction must be in [0, 1]");
   if (!(latent_dropout >= 0 && latent_dropout <= 1))
@@ -140,6 +145,18 @@ std::string TrainSummary::OneLine() const {
                 steps, seconds, resumed.c_str(), count.c_str(), test_views, psnr_masked, ssim_masked, psnr_full,
                 ssim_full);
   return note.empty() ? std::string(text) : std::string(text) + "; " + note;
+}
+
+LoopOptions TrainLoopOptions(const TrainOptions& options, const std::string& label, int steps) {
+  LoopOptions loop;
+  loop.label = label;
+  loop.steps = steps;
+  loop.max_minutes = options.max_minutes;
+  loop.log_every = options.log_every;
+  loop.eval_every = options.eval_every;
+  loop.preview_every = options.preview_every;
+  loop.checkpoint_every = options.checkpoint_every;
+  return loop;
 }
 
 }  // namespace headforge

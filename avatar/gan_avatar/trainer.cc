@@ -14,18 +14,22 @@
 #include <cstdio>
 #include <map>
 #include <sstream>
+#include <utility>
 
 #include "avatar/gan_avatar/avatar_io.h"
-#include "avatar/gaussian_style/trainer.h"
 #include "avatar/nn/augment.h"
 #include "avatar/nn/discriminator.h"
 #include "avatar/nn/functional.h"
 #include "avatar/train/adam.h"
+#include "avatar/train/adversarial.h"
 #include "avatar/train/checkpoint.h"
 #include "avatar/train/device.h"
 #include "avatar/train/gan_watch.h"
 #include "avatar/train/image_file.h"
 #include "avatar/train/loop.h"
+#include "avatar/train/view_camera.h"
+#include "avatar/train/view_scores.h"
+#include "avatar/train_loop_options.h"
 #include "core/interrupt.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -50,14 +54,7 @@ constexpr double kWAverageRate = 0.01;
 // Adam's step for the warm-up's per-frame latents.
 constexpr double kCodeLearningRate = 1e-2;
 
-struct GanState {
-  int step = 0;
-  double loss_g = 0, loss_d = 0, r1 = 0, real_accuracy = 0, fake_accuracy = 0, recon_l1 = 0;
-  int64_t count = 0, r1_count = 0;
-  double seconds = 0;
-};
-
-class GanTrainer {
+class GanTrainer : public LoopTrainer {
  public:
   GanTrainer(const TrainOptions& options, const AvatarDataset& data, torch::Device device)
       : options_(options), data_(data), device_(device), gen_(at::detail::createCPUGenerator(options.seed)),
@@ -86,12 +83,23 @@ class GanTrainer {
   Status Finish(const fs::path& out_dir, TrainSummary* summary);
   int step() const { return state_.step; }
 
+  // The GAN loop's side (loop.h).
+  void Step(int step, RunningStats* stats) override;
+  std::string DivergenceAdvice() const override {
+    return "lower --lr-network and --lr-discriminator or raise --r1-gamma";
+  }
+  void Describe(int step, nlohmann::json* line) override;
+  bool Evaluate(int step, nlohmann::json* line) override;
+  Status Preview(int step) override { return WritePreview(out_dir_ / "previews", step); }
+  Status Save(const LoopState& state) override { return SaveCheckpoint(checkpoint_, state); }
+  std::string TakeWarning() override { return std::exchange(warning_, std::string()); }
+
  private:
-  void Step(int step);
+  class MappingLoop;
   // The reconstruction loss of a batch of training views: each view's frame
   // from its own camera with a latent of its frame's own (L1 on the image
   // and on the raw render).
-  torch::Tensor ReconstructionLoss();
+  torch::Tensor ReconstructionLoss(RunningStats* stats);
   bool reconstructing(int step) const { return step <= options_.reconstruction_steps; }
   // The discriminator's input: the image and the raw render brought to its size.
   torch::Tensor DualImage(const torch::Tensor& image, const torch::Tensor& raw) const {
@@ -105,7 +113,7 @@ class GanTrainer {
   // The training view seen most nearly from the front.
   const AvatarView& FrontalView() const;
   Status WritePreview(const fs::path& dir, int step);
-  Status SaveCheckpoint(const fs::path& path, size_t stats_lines) const;
+  Status SaveCheckpoint(const fs::path& path, const LoopState& state) const;
   Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
   SplatCamera RenderCamera(const AvatarView& view) const { return view.view.Downscaled(double(data_.width) / render_w_); }
   torch::Tensor RenderMean(const std::vector<SplatCamera>& cameras);
@@ -132,8 +140,8 @@ class GanTrainer {
   nlohmann::json expression_check_;       // CheckMappedExpressions' figures, for eval.json
   torch::Tensor reals_, conditions_;      // [N, 3, H, W] over the background; [N, 16]
   int render_w_ = 0, render_h_ = 0;
-  GanState state_;
-  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  LoopState state_;
+  fs::path out_dir_, checkpoint_;
 };
 
 Status GanTrainer::Start(const fs::path& checkpoint, StatsLog* stats) {
@@ -174,7 +182,7 @@ Status GanTrainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   return Status::Ok();
 }
 
-torch::Tensor GanTrainer::ReconstructionLoss() {
+torch::Tensor GanTrainer::ReconstructionLoss(RunningStats* stats) {
   const int64_t batch = options_.batch, views = int64_t(data_.train.size());
   const torch::Tensor index = torch::randint(views, {batch}, gen_, torch::kLong);
   std::vector<SplatCamera> cameras;
@@ -196,16 +204,17 @@ torch::Tensor GanTrainer::ReconstructionLoss() {
     torch::NoGradGuard no_grad;
     avatar_.w_average.lerp_(w.detach().mean(0), kWAverageRate);
   }
-  state_.recon_l1 += l1.item<double>();
+  stats->Add("recon_l1", l1.item<double>());
   return l1;
 }
 
-void GanTrainer::Step(int step) {
+void GanTrainer::Step(int step, RunningStats* stats) {
+  if (step == options_.reconstruction_steps + 1 && options_.reconstruction_steps > 0)
+    HF_LOG(Info) << "train: gan-avatar: adversarial training from step " << step;
   if (reconstructing(step)) {
-    ReconstructionLoss().backward();
+    ReconstructionLoss(stats).backward();
     adam_g_.Step();
     adam_g_.ZeroGrad();
-    ++state_.count;
     return;
   }
   const int64_t batch = options_.batch, views = int64_t(data_.train.size());
@@ -227,48 +236,52 @@ void GanTrainer::Step(int step) {
   const int since = step - options_.reconstruction_steps;
   const double ramp = options_.adversarial_ramp > 0 ? std::min(1.0, double(since) / options_.adversarial_ramp) : 1.0;
   torch::Tensor total = ramp * loss_g;
-  if (options_.recon_weight > 0) total = total + options_.recon_weight * ReconstructionLoss();
+  if (options_.recon_weight > 0) total = total + options_.recon_weight * ReconstructionLoss(stats);
   total.backward();
   adam_g_.Step();
   adam_g_.ZeroGrad();
   adam_d_.ZeroGrad();
 
   // Discriminator: the same renders (detached) as fake, a batch of frames as real.
+  DiscriminatorBatch d;
   const torch::Tensor real = reals_.index_select(0, real_index.to(device_));
-  const torch::Tensor real_raw = nn::ResizeBilinear(real, render_h_, render_w_);
-  const torch::Tensor real_c = conditions_.index_select(0, real_index.to(device_));
-  const torch::Tensor fake_logits = discriminator_->forward(nn::Augment(fake_dual.detach(), p, 6, gen_), fake_c);
-  const bool r1_now = options_.r1_gamma > 0 && step % options_.r1_every == 0;
-  torch::Tensor real_in = nn::Augment(DualImage(real, real_raw), p, 6, gen_);
-  if (r1_now) real_in = real_in.detach().requires_grad_(true);
-  const torch::Tensor real_logits = discriminator_->forward(real_in, real_c);
-  torch::Tensor loss_d = F::softplus(fake_logits).mean() + F::softplus(-real_logits).mean();
-  if (r1_now) {
-    // Lazy R1 (StyleGAN2): every r1_every steps, scaled by it.
-    const torch::Tensor grad =
-        torch::autograd::grad({real_logits.sum()}, {real_in}, {}, /*retain_graph=*/true, /*create_graph=*/true)[0];
-    const torch::Tensor r1 = grad.pow(2).sum({1, 2, 3}).mean();
-    loss_d = loss_d + 0.5 * options_.r1_gamma * options_.r1_every * r1;
-    state_.r1 += r1.item<double>();
-    ++state_.r1_count;
-  }
-  loss_d.backward();
-  adam_d_.Step();
-  adam_d_.ZeroGrad();
+  d.real = DualImage(real, nn::ResizeBilinear(real, render_h_, render_w_));
+  d.fake = fake_dual;
+  d.real_condition = conditions_.index_select(0, real_index.to(device_));
+  d.fake_condition = fake_c;
+  d.colour_channels = 6;
+  d.augment_p = p;
+  const DiscriminatorUpdate u =
+      UpdateDiscriminator(*discriminator_, adam_d_, ada_, d, {options_.r1_gamma, options_.r1_every}, step, gen_);
   adam_g_.ZeroGrad();
-  ada_.Observe(real_logits);
   {
     torch::NoGradGuard no_grad;
     avatar_.w_average.lerp_(w.detach().mean(0), kWAverageRate);
   }
-  state_.loss_g += loss_g.item<double>();
-  state_.loss_d += loss_d.item<double>();
-  const double real_accuracy = (real_logits > 0).to(torch::kFloat64).mean().item<double>();
-  const double fake_accuracy = (fake_logits < 0).to(torch::kFloat64).mean().item<double>();
-  state_.real_accuracy += real_accuracy;
-  state_.fake_accuracy += fake_accuracy;
-  if (watch_.Observe(real_accuracy, fake_accuracy)) warning_ = watch_.Warning("the gan-avatar model");
-  ++state_.count;
+  if (u.has_r1) stats->Add("r1", u.r1);
+  stats->Add("loss_g", loss_g.item<double>());
+  stats->Add("loss_d", u.loss);
+  stats->Add("d_real_accuracy", u.real_accuracy);
+  stats->Add("d_fake_accuracy", u.fake_accuracy);
+  if (watch_.Observe(u.real_accuracy, u.fake_accuracy)) warning_ = watch_.Warning("the gan-avatar model");
+}
+
+void GanTrainer::Describe(int step, nlohmann::json* line) {
+  (*line)["phase"] = reconstructing(step) ? "reconstruction" : "adversarial";
+  (*line)["augment_p"] = ada_.p();
+  (*line)["ada_rt"] = ada_.rt();
+  // Every line names every figure (zero where the phase has none), as the report and tests read them.
+  for (const char* key : {"recon_l1", "loss_g", "loss_d", "r1", "d_real_accuracy", "d_fake_accuracy"})
+    if (!line->contains(key)) (*line)[key] = 0.0;
+}
+
+bool GanTrainer::Evaluate(int step, nlohmann::json* line) {
+  const ViewScores s = MeanScores(Evaluate({}, 5));
+  (*line)["test_psnr_masked"] = s.psnr_masked;
+  (*line)["test_ssim_masked"] = s.ssim_masked;
+  HF_LOG(Info) << "train: step " << step << ", held-out PSNR of the mean latent " << s.psnr_masked
+               << " dB over the head (every 5th view), augmentation p " << ada_.p();
+  return true;
 }
 
 torch::Tensor GanTrainer::RenderMean(const std::vector<SplatCamera>& cameras) {
@@ -347,9 +360,9 @@ Status GanTrainer::WritePreview(const fs::path& dir, int step) {
   return WriteTensorImage(dir / name, torch::cat({top, bottom}, 1));
 }
 
-Status GanTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
+Status GanTrainer::SaveCheckpoint(const fs::path& path, const LoopState& state) const {
   Checkpoint c;
-  c.Put("step", int64_t(state_.step));
+  state.Save(&c);
   c.PutModule("generator.", *avatar_.generator);
   c.PutModule("discriminator.", *discriminator_);
   adam_g_.Save("adam_g.", &c);
@@ -358,11 +371,7 @@ Status GanTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) cons
   c.Put("w_average", avatar_.w_average);
   c.Put("frame_codes", frame_codes_);
   c.Put("generator_state", gen_.get_state());
-  c.Put("sums", torch::tensor({state_.loss_g, state_.loss_d, state_.r1, state_.real_accuracy, state_.fake_accuracy,
-                               double(state_.count), double(state_.r1_count), state_.recon_l1, double(watch_.run())},
-                              torch::kFloat64));
-  c.Put("seconds", state_.seconds + SecondsSince(start_));
-  c.Put("stats_lines", int64_t(stats_lines));
+  c.Put("collapse_run", int64_t(watch_.run()));
   return c.Save(path);
 }
 
@@ -370,26 +379,16 @@ Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   Checkpoint c;
   HF_RETURN_IF_ERROR(Checkpoint::Load(path, &c));
   const Status damaged = Status::DataError(path.string() + " is not this training's checkpoint; delete it to start over");
-  int64_t step = 0, lines = 0;
-  torch::Tensor generator_state, ada, sums;
-  if (!c.Get("step", &step) || !c.Get("generator_state", &generator_state) || !c.Get("stats_lines", &lines) ||
-      !c.Get("ada", &ada) || !c.Get("sums", &sums) || sums.numel() < 9 || !c.Get("seconds", &state_.seconds) ||
-      !c.Get("w_average", &avatar_.w_average))
+  int64_t collapse_run = 0;
+  torch::Tensor generator_state, ada;
+  if (!state_.Load(c) || !c.Get("generator_state", &generator_state) || !c.Get("ada", &ada) ||
+      !c.Get("collapse_run", &collapse_run) || !c.Get("w_average", &avatar_.w_average))
     return damaged;
   if (!c.GetModule("generator.", avatar_.generator.get()) || !c.GetModule("discriminator.", discriminator_.get()))
     return damaged;
   if (!adam_g_.Load("adam_g.", c) || !adam_d_.Load("adam_d.", c)) return damaged;
   ada_.Restore(std::vector<double>(ada.data_ptr<double>(), ada.data_ptr<double>() + ada.numel()));
-  const double* s = sums.data_ptr<double>();
-  state_.loss_g = s[0];
-  state_.loss_d = s[1];
-  state_.r1 = s[2];
-  state_.real_accuracy = s[3];
-  state_.fake_accuracy = s[4];
-  state_.count = int64_t(s[5]);
-  state_.r1_count = int64_t(s[6]);
-  state_.recon_l1 = s[7];
-  watch_.set_run(int(s[8]));
+  watch_.set_run(int(collapse_run));
   {
     torch::NoGradGuard no_grad;
     torch::Tensor codes;
@@ -398,9 +397,8 @@ Status GanTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   }
   avatar_.w_average = avatar_.w_average.to(device_);
   gen_.set_state(generator_state);
-  state_.step = int(step);
-  HF_LOG(Info) << "train: resuming from the checkpoint at step " << step;
-  return stats->Truncate(size_t(lines));
+  HF_LOG(Info) << "train: resuming from the checkpoint at step " << state_.step;
+  return stats->Truncate(state_.stats_lines);
 }
 
 Status GanTrainer::ImportGenerator(const fs::path& dir) {
@@ -443,75 +441,18 @@ Status GanTrainer::ImportGenerator(const fs::path& dir) {
 }
 
 Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
-  auto elapsed = [&] { return state_.seconds + SecondsSince(start_); };
   if (!options_.generator_from.empty()) return Status::Ok();  // the GAN was trained elsewhere
-  progress->Start("train: gan-avatar", options_.steps);
-  progress->Resume(state_.step);
-  if (options_.max_minutes > 0) progress->LimitTime(60.0 * options_.max_minutes - state_.seconds);
-  for (int step = state_.step + 1; step <= options_.steps; ++step) {
-    Step(step);
-    if (step == options_.reconstruction_steps + 1 && options_.reconstruction_steps > 0)
-      HF_LOG(Info) << "train: gan-avatar: adversarial training from step " << step;
-    if (!std::isfinite(state_.loss_g) || !std::isfinite(state_.loss_d) || !std::isfinite(state_.recon_l1)) {
-      progress->Finish("diverged");
-      return Status::Internal("train: the GAN's losses became non-finite at step " + std::to_string(step) +
-                              "; lower --lr-network and --lr-discriminator or raise --r1-gamma (a changed option "
-                              "starts training over)");
-    }
-    if (!warning_.empty()) {
-      HF_LOG(Warning) << "train: step " << step << ": " << warning_;
-      stats->Append(nlohmann::json{{"step", step}, {"warning", warning_}}.dump());
-      warning_.clear();
-    }
-    state_.step = step;
-    progress->Advance();
-    const bool out_of_time = options_.max_minutes > 0 && elapsed() > 60.0 * options_.max_minutes;
-    const bool last = step == options_.steps || out_of_time;
-    if (step % options_.log_every == 0 || last) {
-      const double n = double(std::max<int64_t>(state_.count, 1));
-      stats->Append(nlohmann::json{{"step", step},
-                                   {"phase", reconstructing(step) ? "reconstruction" : "adversarial"},
-                                   {"recon_l1", state_.recon_l1 / n},
-                                   {"loss_g", state_.loss_g / n},
-                                   {"loss_d", state_.loss_d / n},
-                                   {"r1", state_.r1 / double(std::max<int64_t>(state_.r1_count, 1))},
-                                   {"d_real_accuracy", state_.real_accuracy / n},
-                                   {"d_fake_accuracy", state_.fake_accuracy / n},
-                                   {"augment_p", ada_.p()},
-                                   {"ada_rt", ada_.rt()},
-                                   {"seconds", elapsed()}}
-                        .dump());
-      GanState next;
-      next.step = state_.step;
-      next.seconds = state_.seconds;
-      state_ = next;
-    }
-    if (!last && options_.eval_every > 0 && step % options_.eval_every == 0) {
-      const ViewScores s = MeanScores(Evaluate({}, 5));
-      stats->Append(nlohmann::json{{"step", step}, {"test_psnr_masked", s.psnr_masked},
-                                   {"test_ssim_masked", s.ssim_masked}, {"seconds", elapsed()}}
-                        .dump());
-      HF_LOG(Info) << "train: step " << step << ", held-out PSNR of the mean latent " << s.psnr_masked
-                   << " dB over the head (every 5th view), augmentation p " << ada_.p();
-    }
-    if (options_.preview_every > 0 && step % options_.preview_every == 0)
-      HF_RETURN_IF_ERROR(WritePreview(out_dir / "previews", step));
-    if (out_of_time) {
-      HF_LOG(Info) << "train: time limit of " << options_.max_minutes << " min reached at step " << step;
-      break;
-    }
-    HF_RETURN_IF_ERROR(CheckpointOrStop("training", step, options_.steps, last, options_.checkpoint_every,
-                                        [&] { return SaveCheckpoint(checkpoint, stats->size()); }, progress));
-  }
+  out_dir_ = out_dir;
+  checkpoint_ = checkpoint;
+  HF_RETURN_IF_ERROR(RunLoop(TrainLoopOptions(options_, "train: gan-avatar", options_.steps), this, &state_, stats,
+                             progress));
   progress->Finish(std::to_string(state_.step) + " steps");
   // The reconstruction loss fits each training frame's latent, in the
   // warm-up and wherever it is kept beside the adversarial loss.
   codes_trained_ = state_.step > 0 && (options_.reconstruction_steps > 0 || options_.recon_weight > 0);
   // The GAN is done: a kill during the expression mapping resumes here.
-  HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, stats->size()));
-  state_.seconds = elapsed();
-  start_ = std::chrono::steady_clock::now();
-  return Status::Ok();
+  state_.stats_lines = stats->size();
+  return SaveCheckpoint(checkpoint, state_);
 }
 
 torch::Tensor GanTrainer::TrainingFrames() const {
@@ -542,6 +483,52 @@ torch::Tensor GanTrainer::MappingCodes(at::Generator& random) const {
                << (samples > count ? ", then blends of two" : "");
   return torch::stack(rows);
 }
+
+// The expression mapping's steps: expressions of a batch of the GAN's
+// renders to their latents (or, with --mapping-loss image, to the renders).
+class GanTrainer::MappingLoop : public LoopTrainer {
+ public:
+  MappingLoop(GanTrainer& trainer, const torch::Tensor& expressions, const torch::Tensor& w,
+              const torch::Tensor& images, at::Generator& random, Adam* adam)
+      : t_(trainer), expressions_(expressions), w_(w), images_(images), random_(random), adam_(adam) {}
+
+  void Step(int step, RunningStats* stats) override {
+    const int64_t count = expressions_.size(0), batch = std::min<int64_t>(t_.options_.batch, count);
+    const torch::Tensor index = torch::randint(count, {batch}, random_, torch::kLong).to(t_.device_);
+    const torch::Tensor w = t_.avatar_.mapping->forward(expressions_.index_select(0, index));
+    torch::Tensor loss;
+    if (t_.options_.mapping_loss == "latent") {
+      loss = (w - w_.index_select(0, index)).pow(2).mean();
+    } else {
+      const SplatCamera camera = t_.RenderCamera(t_.FrontalView());
+      const torch::Tensor render = t_.avatar_.generator
+                                       ->Render(w, std::vector<SplatCamera>(size_t(batch), camera), t_.data_.width,
+                                                t_.data_.height, kBackground, nullptr)
+                                       .image;
+      loss = (render - images_.index_select(0, index)).abs().mean();
+    }
+    loss.backward();
+    adam_->Step();
+    adam_->ZeroGrad();
+    t_.mapping_loss_ = loss.item<double>();
+    stats->Add("mapping_loss", t_.mapping_loss_);
+  }
+  std::string DivergenceAdvice() const override { return "try --mapping-loss latent"; }
+  bool Evaluate(int step, nlohmann::json* line) override {
+    const ViewScores s = MeanScores(t_.Evaluate({}, 5));
+    (*line)["test_psnr_masked"] = s.psnr_masked;
+    (*line)["test_ssim_masked"] = s.ssim_masked;
+    HF_LOG(Info) << "train: expression mapping step " << step << ", held-out PSNR " << s.psnr_masked
+                 << " dB over the head (every 5th view)";
+    return true;
+  }
+
+ private:
+  GanTrainer& t_;
+  torch::Tensor expressions_, w_, images_;
+  at::Generator& random_;
+  Adam* adam_;
+};
 
 Status GanTrainer::TrainMapping(const ImageTracker& track_images, StatsLog* stats, Progress* progress) {
   if (options_.mapping_steps == 0) return Status::Ok();
@@ -590,50 +577,17 @@ Status GanTrainer::TrainMapping(const ImageTracker& track_images, StatsLog* stat
   for (torch::Tensor& t : params) adam.Add(&t, 1e-3, false);
   const torch::Tensor e_all = samples_.expressions.to(device_), w_all = samples_.w.to(device_),
                       images = samples_.images.to(device_);
-  const int64_t count = e_all.size(0), batch = std::min<int64_t>(options_.batch, count);
-  progress->Start("train: gan-avatar expression mapping", options_.mapping_steps);
-  double sum = 0;
-  int summed = 0;
-  for (int step = 1; step <= options_.mapping_steps; ++step) {
-    const torch::Tensor index = torch::randint(count, {batch}, random, torch::kLong).to(device_);
-    const torch::Tensor w = avatar_.mapping->forward(e_all.index_select(0, index));
-    torch::Tensor loss;
-    if (options_.mapping_loss == "latent") {
-      loss = (w - w_all.index_select(0, index)).pow(2).mean();
-    } else {
-      const torch::Tensor render =
-          avatar_.generator->Render(w, std::vector<SplatCamera>(size_t(batch), camera), data_.width, data_.height,
-                             kBackground, nullptr)
-              .image;
-      loss = (render - images.index_select(0, index)).abs().mean();
-    }
-    loss.backward();
-    adam.Step();
-    adam.ZeroGrad();
-    mapping_loss_ = loss.item<double>();
-    if (!std::isfinite(mapping_loss_))
-      return Status::Internal("train: the expression mapping's loss became non-finite at its step " +
-                              std::to_string(step));
-    sum += mapping_loss_;
-    ++summed;
-    if (step % options_.log_every == 0 || step == options_.mapping_steps) {
-      stats->Append(nlohmann::json{{"mapping_step", step},
-                                   {"mapping_loss", sum / summed},
-                                   {"mapping_loss_kind", options_.mapping_loss},
-                                   {"seconds", state_.seconds + SecondsSince(start)}}
-                        .dump());
-      sum = 0;
-      summed = 0;
-    }
-    progress->Advance();
-    if (InterruptRequested()) {
-      progress->Finish("interrupted");
-      return Status::Interrupted("train: the expression mapping stopped at its step " + std::to_string(step) + " of " +
-                                 std::to_string(options_.mapping_steps) +
-                                 "; the GAN is kept: run the same command again to train the mapping from it");
-    }
-  }
-  progress->Finish(std::to_string(options_.mapping_steps) + " steps");
+  MappingLoop mapping(*this, e_all, w_all, images, random, &adam);
+  LoopOptions loop = TrainLoopOptions(options_, "train: gan-avatar expression mapping", options_.mapping_steps);
+  loop.step_key = "mapping_step";
+  loop.tags = {{"mapping_loss_kind", options_.mapping_loss}};
+  loop.checkpoint_every = 0;  // a few minutes at most: an interrupt keeps the GAN and starts the mapping over
+  loop.resume_hint = "the GAN is kept: run the same command again to train the mapping from it";
+  loop.what = "the expression mapping";
+  loop.clock_offset = state_.seconds + SecondsSince(start);
+  LoopState state;
+  HF_RETURN_IF_ERROR(RunLoop(loop, &mapping, &state, stats, progress));
+  progress->Finish(std::to_string(state.step) + " steps");
   state_.seconds += SecondsSince(start);
   return Status::Ok();
 }
@@ -761,8 +715,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   nlohmann::json views = nlohmann::json::array();
   std::map<std::string, std::vector<ViewScores>> by_camera;
   for (const ViewScores& s : scores) {
-    views.push_back({{"frame", s.frame}, {"camera", s.camera}, {"psnr_masked", s.psnr_masked},
-                     {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full}, {"ssim", s.ssim_full}});
+    views.push_back(ScoresJson(s));
     by_camera[s.camera].push_back(s);
   }
   nlohmann::json cameras = nlohmann::json::object();
@@ -776,8 +729,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
       {"latent", avatar_.mapping ? "the expression mapping (" + options_.mapping_loss +
                                  " loss) of each frame's tracked expression"
                           : std::string("the running mean of w (no expression mapping)")},
-      {"mean", {{"psnr_masked", mean.psnr_masked}, {"ssim_masked", mean.ssim_masked}, {"psnr", mean.psnr_full},
-                {"ssim", mean.ssim_full}}},
+      {"mean", ScoresJson(mean, false)},
       {"by_camera", cameras},
       {"mean_latent", {{"psnr_masked", average.psnr_masked}, {"ssim_masked", average.ssim_masked}}},
       {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},

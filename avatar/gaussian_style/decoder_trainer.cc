@@ -18,6 +18,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <utility>
 
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/metrics/image_metrics.h"
@@ -26,10 +27,12 @@
 #include "avatar/nn/functional.h"
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/adam.h"
+#include "avatar/train/adversarial.h"
 #include "avatar/train/checkpoint.h"
 #include "avatar/train/gan_watch.h"
 #include "avatar/train/image_file.h"
 #include "avatar/train/loop.h"
+#include "avatar/train_loop_options.h"
 #include "core/log.h"
 
 namespace headforge {
@@ -81,7 +84,7 @@ void SetTrainable(const std::vector<torch::Tensor>& params, bool on) {
   for (torch::Tensor t : params) t.requires_grad_(on);
 }
 
-class DecoderTrainer {
+class DecoderTrainer : public LoopTrainer {
  public:
   DecoderTrainer(const TrainOptions& options, const AvatarDataset& data, GaussianStyleAvatar* avatar)
       : options_(options), data_(data), avatar_(avatar),
@@ -98,7 +101,17 @@ class DecoderTrainer {
 
   Status Start(const fs::path& checkpoint, const fs::path& stage2_checkpoint, StatsLog* stats);
   Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
-  double seconds() const { return seconds_ + SecondsSince(start_); }
+  double seconds() const { return state_.seconds; }
+
+  // The loop's side (loop.h).
+  void Step(int step, RunningStats* stats) override;
+  std::string DivergenceAdvice() const override { return "lower --lr-network or --adversarial-weight"; }
+  void Describe(int step, nlohmann::json* line) override;
+  bool Boundary(int step) const override { return step == total_ || PhaseOf(step + 1) != PhaseOf(step); }
+  bool Evaluate(int step, nlohmann::json* line) override;
+  Status Preview(int step) override { return WritePreview(out_dir_ / "previews", step); }
+  Status Save(const LoopState& state) override { return SaveCheckpoint(checkpoint_, state); }
+  std::string TakeWarning() override { return std::exchange(warning_, std::string()); }
 
  private:
   Phase PhaseOf(int step) const {
@@ -109,15 +122,16 @@ class DecoderTrainer {
   }
   torch::Tensor Target(const AvatarView& view) const;  // [1, 3, S, S], the head over grey
   torch::Tensor UvMap(const AvatarView& view) const;   // [1, 3, S, S]: u, v, covered in [-1, 1]
-  double PriorStep(int step);
-  double InvertOrTune(bool tune);
-  double FuseStep(int step);
+  void PriorStep(int step, RunningStats* stats);
+  void InvertOrTune(bool tune, RunningStats* stats);
+  void FuseStep(int step, RunningStats* stats);
   // The discriminator's step on `real` and `fake` (detached), with lazy R1;
   // its accuracies go to the stats and to `watch`.
-  double DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, nn::AdaController& ada, CollapseWatch& watch,
-                           const std::string& what, const torch::Tensor& real, const torch::Tensor& fake, int step);
+  void DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, nn::AdaController& ada, CollapseWatch& watch,
+                         const std::string& what, const torch::Tensor& real, const torch::Tensor& fake, int step,
+                         RunningStats* stats);
   void ChoosePtiFrames();
-  Status SaveCheckpoint(const fs::path& path, size_t stats_lines) const;
+  Status SaveCheckpoint(const fs::path& path, const LoopState& state) const;
   Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
   Status WritePreview(const fs::path& dir, int step);
 
@@ -136,12 +150,9 @@ class DecoderTrainer {
   nn::AdaController ada_prior_, ada_fuse_;
   CollapseWatch prior_watch_, fuse_watch_;
   std::string warning_;                  // a collapse warning to log at the end of the step
-  int step_ = 0;
+  LoopState state_;
   torch::Tensor order_;
-  double loss_sum_ = 0, d_sum_ = 0, l1_sum_ = 0, real_accuracy_sum_ = 0, fake_accuracy_sum_ = 0;
-  int64_t count_ = 0, d_count_ = 0;
-  double seconds_ = 0;
-  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  fs::path out_dir_, checkpoint_;
 };
 
 torch::Tensor DecoderTrainer::Target(const AvatarView& view) const {
@@ -237,41 +248,30 @@ Status DecoderTrainer::Start(const fs::path& checkpoint, const fs::path& stage2_
   } else {
     // Stage 3's first checkpoint replaces stages 1-2's: from here a resumed
     // run starts at stage 3.
-    HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, stats->size()));
+    state_.stats_lines = stats->size();
+    HF_RETURN_IF_ERROR(SaveCheckpoint(checkpoint, state_));
   }
   fs::remove(stage2_checkpoint, ec);
   return Status::Ok();
 }
 
-double DecoderTrainer::DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, nn::AdaController& ada,
-                                         CollapseWatch& watch, const std::string& what, const torch::Tensor& real,
-                                         const torch::Tensor& fake, int step) {
-  const double p = options_.decoder_ada ? ada.p() : 0.0;
-  const torch::Tensor fake_logits = d.forward(nn::Augment(fake.detach(), p, 3, gen_));
-  const bool r1_now = options_.r1_gamma > 0 && step % options_.r1_every == 0;
-  torch::Tensor real_in = nn::Augment(real.detach(), p, 3, gen_);
-  if (r1_now) real_in = real_in.detach().requires_grad_(true);
-  const torch::Tensor real_logits = d.forward(real_in);
-  torch::Tensor loss = F::softplus(fake_logits).mean() + F::softplus(-real_logits).mean();
-  if (r1_now) {
-    const torch::Tensor grad =
-        torch::autograd::grad({real_logits.sum()}, {real_in}, {}, /*retain_graph=*/true, /*create_graph=*/true)[0];
-    loss = loss + 0.5 * options_.r1_gamma * options_.r1_every * grad.pow(2).sum({1, 2, 3}).mean();
-  }
-  loss.backward();
-  adam.Step();
-  adam.ZeroGrad();
-  ada.Observe(real_logits);
-  const double real_accuracy = (real_logits > 0).to(torch::kFloat64).mean().item<double>();
-  const double fake_accuracy = (fake_logits < 0).to(torch::kFloat64).mean().item<double>();
-  real_accuracy_sum_ += real_accuracy;
-  fake_accuracy_sum_ += fake_accuracy;
-  ++d_count_;
-  if (watch.Observe(real_accuracy, fake_accuracy)) warning_ = watch.Warning(what);
-  return loss.item<double>();
+void DecoderTrainer::DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, nn::AdaController& ada,
+                                       CollapseWatch& watch, const std::string& what, const torch::Tensor& real,
+                                       const torch::Tensor& fake, int step, RunningStats* stats) {
+  DiscriminatorBatch batch;
+  batch.real = real;
+  batch.fake = fake;
+  batch.colour_channels = 3;
+  batch.augment_p = options_.decoder_ada ? ada.p() : 0.0;
+  const DiscriminatorUpdate u =
+      UpdateDiscriminator(d, adam, ada, batch, {options_.r1_gamma, options_.r1_every}, step, gen_);
+  stats->Add("d_real_accuracy", u.real_accuracy);
+  stats->Add("d_fake_accuracy", u.fake_accuracy);
+  if (watch.Observe(u.real_accuracy, u.fake_accuracy)) warning_ = watch.Warning(what);
+  stats->Add("loss_d", u.loss);
 }
 
-double DecoderTrainer::PriorStep(int step) {
+void DecoderTrainer::PriorStep(int step, RunningStats* stats) {
   StyleDecoderImpl& decoder = *avatar_->decoder;
   const int64_t batch = options_.batch;
   const torch::Tensor z = torch::randn({batch, decoder.options().generator.z_dim}, gen_).to(device_);
@@ -288,12 +288,12 @@ double DecoderTrainer::PriorStep(int step) {
   adam_prior_g_.Step();
   adam_prior_g_.ZeroGrad();
   adam_prior_d_.ZeroGrad();
-  d_sum_ += DiscriminatorStep(*prior_d_, adam_prior_d_, ada_prior_, prior_watch_, "stage 3's prior", real, fake, step);
+  DiscriminatorStep(*prior_d_, adam_prior_d_, ada_prior_, prior_watch_, "stage 3's prior", real, fake, step, stats);
   adam_prior_g_.ZeroGrad();
-  return loss_g.item<double>();
+  stats->Add("loss", loss_g.item<double>());
 }
 
-double DecoderTrainer::InvertOrTune(bool tune) {
+void DecoderTrainer::InvertOrTune(bool tune, RunningStats* stats) {
   StyleDecoderImpl& decoder = *avatar_->decoder;
   std::vector<torch::Tensor> targets;
   for (int64_t i : pti_views_) targets.push_back(Target(data_.train[size_t(i)]));
@@ -308,11 +308,11 @@ double DecoderTrainer::InvertOrTune(bool tune) {
   adam.Step();
   adam.ZeroGrad();
   adam_prior_d_.ZeroGrad();
-  l1_sum_ += l1.item<double>();
-  return loss.item<double>();
+  stats->Add("l1", l1.item<double>());
+  stats->Add("loss", loss.item<double>());
 }
 
-double DecoderTrainer::FuseStep(int step) {
+void DecoderTrainer::FuseStep(int step, RunningStats* stats) {
   StyleDecoderImpl& decoder = *avatar_->decoder;
   const int64_t views = int64_t(usable_.size());
   const int64_t slot = (step - tune_end_ - 1) % views;
@@ -342,17 +342,17 @@ double DecoderTrainer::FuseStep(int step) {
     if (options_.perceptual_weight > 0) loss = loss + options_.perceptual_weight * FeatureMatching(*fuse_d_, fake, real);
   }
   const double value = loss.item<double>();
-  if (!std::isfinite(value)) return value;
+  stats->Add("loss", value);
+  if (!std::isfinite(value)) return;
   loss.backward();
   adam_fuse_.Step();
   adam_fuse_.ZeroGrad();
   if (adversarial) {
     adam_fuse_d_.ZeroGrad();
-    d_sum_ += DiscriminatorStep(*fuse_d_, adam_fuse_d_, ada_fuse_, fuse_watch_, "stage 3's fusion", real, fake, step);
+    DiscriminatorStep(*fuse_d_, adam_fuse_d_, ada_fuse_, fuse_watch_, "stage 3's fusion", real, fake, step, stats);
     adam_fuse_.ZeroGrad();
   }
-  l1_sum_ += l1.item<double>();
-  return value;
+  stats->Add("l1", l1.item<double>());
 }
 
 Status DecoderTrainer::WritePreview(const fs::path& dir, int step) {
@@ -387,9 +387,9 @@ Status DecoderTrainer::WritePreview(const fs::path& dir, int step) {
   return WriteTensorImage(dir / name, image);
 }
 
-Status DecoderTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
+Status DecoderTrainer::SaveCheckpoint(const fs::path& path, const LoopState& state) const {
   Checkpoint c;
-  c.Put("step", int64_t(step_));
+  state.Save(&c);
   c.PutModule("model.", *avatar_->model);
   c.PutModule("decoder.", *avatar_->decoder);
   c.PutModule("prior_d.", *prior_d_);
@@ -405,15 +405,7 @@ Status DecoderTrainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) 
   c.Put("ada_fuse", torch::tensor(ada_fuse_.State(), torch::kFloat64));
   c.Put("generator", gen_.get_state());
   c.Put("order", order_);
-  c.Put("loss_sum", loss_sum_);
-  c.Put("d_sum", d_sum_);
-  c.Put("l1_sum", l1_sum_);
-  c.Put("count", count_);
-  c.Put("discriminator_sums", torch::tensor({real_accuracy_sum_, fake_accuracy_sum_, double(d_count_),
-                                             double(prior_watch_.run()), double(fuse_watch_.run())},
-                                            torch::kFloat64));
-  c.Put("seconds", seconds());
-  c.Put("stats_lines", int64_t(stats_lines));
+  c.Put("collapse_runs", torch::tensor({double(prior_watch_.run()), double(fuse_watch_.run())}, torch::kFloat64));
   return c.Save(path);
 }
 
@@ -422,13 +414,10 @@ Status DecoderTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   HF_RETURN_IF_ERROR(Checkpoint::Load(path, &c));
   const Status damaged =
       Status::DataError(path.string() + " is not this stage 3's checkpoint; delete it to start stage 3 over");
-  int64_t step = 0, lines = 0;
-  torch::Tensor generator, ada_prior, ada_fuse, pti_w, d_sums;
-  if (!c.Get("step", &step) || !c.Get("generator", &generator) || !c.Get("stats_lines", &lines) ||
-      !c.Get("pti_w", &pti_w) || !c.Get("ada_prior", &ada_prior) || !c.Get("ada_fuse", &ada_fuse) ||
-      !c.Get("loss_sum", &loss_sum_) || !c.Get("d_sum", &d_sum_) || !c.Get("l1_sum", &l1_sum_) ||
-      !c.Get("count", &count_) || !c.Get("seconds", &seconds_) || !pti_w.sizes().equals(pti_w_.sizes()) ||
-      !c.Get("discriminator_sums", &d_sums) || d_sums.numel() != 5)
+  torch::Tensor generator, ada_prior, ada_fuse, pti_w, runs;
+  if (!state_.Load(c) || !c.Get("generator", &generator) || !c.Get("pti_w", &pti_w) ||
+      !c.Get("ada_prior", &ada_prior) || !c.Get("ada_fuse", &ada_fuse) || !pti_w.sizes().equals(pti_w_.sizes()) ||
+      !c.Get("collapse_runs", &runs) || runs.numel() != 2)
     return damaged;
   if (!c.GetModule("model.", avatar_->model.get()) || !c.GetModule("decoder.", avatar_->decoder.get()) ||
       !c.GetModule("prior_d.", prior_d_.get()) || !c.GetModule("fuse_d.", fuse_d_.get()))
@@ -446,87 +435,77 @@ Status DecoderTrainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   };
   ada_prior_.Restore(values(ada_prior));
   ada_fuse_.Restore(values(ada_fuse));
-  const std::vector<double> d = values(d_sums);
-  real_accuracy_sum_ = d[0];
-  fake_accuracy_sum_ = d[1];
-  d_count_ = int64_t(d[2]);
-  prior_watch_.set_run(int(d[3]));
-  fuse_watch_.set_run(int(d[4]));
+  const std::vector<double> run = values(runs);
+  prior_watch_.set_run(int(run[0]));
+  fuse_watch_.set_run(int(run[1]));
   gen_.set_state(generator);
   if (!c.Get("order", &order_)) order_ = torch::Tensor();
-  step_ = int(step);
-  if (step_ > 0) HF_LOG(Info) << "train: resuming stage 3 from its checkpoint at step " << step_ << " of " << total_;
-  return stats->Truncate(size_t(lines));
+  if (state_.step > 0)
+    HF_LOG(Info) << "train: resuming stage 3 from its checkpoint at step " << state_.step << " of " << total_;
+  return stats->Truncate(state_.stats_lines);
+}
+
+void DecoderTrainer::Step(int step, RunningStats* stats) {
+  StyleDecoderImpl& decoder = *avatar_->decoder;
+  const Phase phase = PhaseOf(step);
+  // Only the phase's own parameters take gradients.
+  SetTrainable(generator_params_, phase == Phase::kPrior || phase == Phase::kTune ||
+                                      (phase == Phase::kFuse && options_.full_tune));
+  if (phase == Phase::kFuse && step == tune_end_ + 1) {
+    torch::NoGradGuard no_grad;
+    decoder.w.copy_(pti_w_.mean(0, true));  // PTI's latents, or the mean latent without PTI
+  }
+  switch (phase) {
+    case Phase::kPrior: PriorStep(step, stats); break;
+    case Phase::kInvert: InvertOrTune(false, stats); break;
+    case Phase::kTune: InvertOrTune(true, stats); break;
+    case Phase::kFuse: FuseStep(step, stats); break;
+  }
+}
+
+void DecoderTrainer::Describe(int step, nlohmann::json* line) {
+  const Phase phase = PhaseOf(step);
+  (*line)["phase"] = PhaseName(phase);
+  (*line)["augment_p"] = phase == Phase::kPrior ? ada_prior_.p() : ada_fuse_.p();
+  for (const char* key : {"loss_d", "l1"})  // zero where the phase has none
+    if (!line->contains(key)) (*line)[key] = 0.0;
+}
+
+bool DecoderTrainer::Evaluate(int step, nlohmann::json* line) {
+  // Held out as the avatar draws them once fusion trains the decoder on the
+  // splats; the prior and PTI phases draw nothing of the avatar yet.
+  if (PhaseOf(step) != Phase::kFuse) return false;
+  StyleDecoderImpl& decoder = *avatar_->decoder;
+  decoder.eval();
+  const ViewScores s = MeanScores(EvaluateAvatar(*avatar_, data_, 5, {}));
+  decoder.train();
+  (*line)["test_psnr_masked"] = s.psnr_masked;
+  (*line)["test_ssim_masked"] = s.ssim_masked;
+  HF_LOG(Info) << "train: stage 3 step " << step << ", held-out PSNR " << s.psnr_masked
+               << " dB over the head (every 5th view)";
+  return true;
 }
 
 Status DecoderTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats,
                              Progress* progress) {
-  StyleDecoderImpl& decoder = *avatar_->decoder;
+  out_dir_ = out_dir;
+  checkpoint_ = checkpoint;
   HF_LOG(Info) << "train: stage 3, the StyleGAN decoder at " << side_ << "x" << side_ << ": "
                << prior_end_ << " prior steps, " << (invert_end_ - prior_end_) << " + " << (tune_end_ - invert_end_)
                << " PTI steps on " << pti_views_.size() << " extreme-pose frames, " << options_.decoder_steps
                << " fusion steps" << (options_.full_tune ? " (full-tune: the generator trained too)" : "");
-  progress->Start("train: stage 3", total_);
-  progress->Resume(step_);
-  for (int step = step_ + 1; step <= total_; ++step) {
-    const Phase phase = PhaseOf(step);
-    // Only the phase's own parameters take gradients.
-    SetTrainable(generator_params_, phase == Phase::kPrior || phase == Phase::kTune ||
-                                        (phase == Phase::kFuse && options_.full_tune));
-    if (phase == Phase::kFuse && step == tune_end_ + 1) {
-      torch::NoGradGuard no_grad;
-      decoder.w.copy_(pti_w_.mean(0, true));  // PTI's latents, or the mean latent without PTI
-    }
-    double loss = 0;
-    switch (phase) {
-      case Phase::kPrior: loss = PriorStep(step); break;
-      case Phase::kInvert: loss = InvertOrTune(false); break;
-      case Phase::kTune: loss = InvertOrTune(true); break;
-      case Phase::kFuse: loss = FuseStep(step); break;
-    }
-    if (!std::isfinite(loss)) {
-      progress->Finish("diverged");
-      return Status::Internal("train: stage 3's loss became " + std::to_string(loss) + " at step " +
-                              std::to_string(step) + " (" + PhaseName(phase) +
-                              "); lower --lr-network or --adversarial-weight (a changed option starts training over)");
-    }
-    loss_sum_ += loss;
-    ++count_;
-    step_ = step;
-    if (!warning_.empty()) {
-      HF_LOG(Warning) << "train: step " << step << ": " << warning_;
-      stats->Append(nlohmann::json{{"step", step}, {"stage", 3}, {"warning", warning_}}.dump());
-      warning_.clear();
-    }
-    progress->Advance();
-    const bool last = step == total_;
-    const bool phase_end = last || PhaseOf(step + 1) != phase;
-    if (step % options_.log_every == 0 || phase_end) {
-      const double n = double(std::max<int64_t>(count_, 1)), nd = double(std::max<int64_t>(d_count_, 1));
-      nlohmann::json line = {{"step", step},
-                             {"stage", 3},
-                             {"phase", PhaseName(phase)},
-                             {"loss", loss_sum_ / n},
-                             {"loss_d", d_sum_ / n},
-                             {"l1", l1_sum_ / n},
-                             {"augment_p", phase == Phase::kPrior ? ada_prior_.p() : ada_fuse_.p()},
-                             {"seconds", seconds()}};
-      if (d_count_ > 0) {
-        line["d_real_accuracy"] = real_accuracy_sum_ / nd;
-        line["d_fake_accuracy"] = fake_accuracy_sum_ / nd;
-      }
-      stats->Append(line.dump());
-      loss_sum_ = d_sum_ = l1_sum_ = real_accuracy_sum_ = fake_accuracy_sum_ = 0;
-      count_ = d_count_ = 0;
-    }
-    if (phase_end || (options_.preview_every > 0 && step % options_.preview_every == 0))
-      HF_RETURN_IF_ERROR(WritePreview(out_dir / "previews", step));
-    HF_RETURN_IF_ERROR(CheckpointOrStop("stage 3", step, total_, last, options_.checkpoint_every,
-                                        [&] { return SaveCheckpoint(checkpoint, stats->size()); }, progress));
-  }
+  LoopOptions loop = TrainLoopOptions(options_, "train: stage 3", total_);
+  loop.what = "stage 3";
+  loop.max_minutes = options_.decoder_max_minutes;
+  loop.tags = {{"stage", 3}};
+  HF_RETURN_IF_ERROR(RunLoop(loop, this, &state_, stats, progress));
+  if (state_.step < total_)
+    HF_LOG(Warning) << "train: stage 3 stopped at the time limit in its " << PhaseName(PhaseOf(state_.step))
+                    << " phase (step " << state_.step << " of " << total_
+                    << "); give more --decoder-max-minutes or fewer --decoder-steps for a fully trained decoder";
   SetTrainable(generator_params_, false);
-  decoder.eval();
-  progress->Finish(std::to_string(total_) + " steps");
+  avatar_->decoder->eval();
+  progress->Finish(std::to_string(state_.step) + " steps");
   return Status::Ok();
 }
 

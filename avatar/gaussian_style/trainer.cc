@@ -17,6 +17,7 @@
 #include "avatar/train/device.h"
 #include "avatar/train/image_file.h"
 #include "avatar/train/loop.h"
+#include "avatar/train_loop_options.h"
 #include "core/json_io.h"
 #include "core/log.h"
 
@@ -49,17 +50,9 @@ torch::Tensor RegionCrops(const torch::Tensor& image, const AvatarView& view) {
   return F::grid_sample(batch, grid, F::GridSampleFuncOptions().mode(torch::kBilinear).align_corners(false));
 }
 
-struct TrainState {
-  int step = 0;             // steps done
-  torch::Tensor order;      // the current pass's view order
-  double loss_sum = 0, l1_sum = 0, region_sum = 0;
-  int64_t loss_count = 0;
-  double seconds = 0;       // training time of earlier attempts
-};
-
 const char* const kRowNames[] = {"means", "quats", "log_scales", "opacity_logits", "features"};
 
-class Trainer {
+class Trainer : public LoopTrainer {
  public:
   Trainer(const TrainOptions& options, const AvatarDataset& data, torch::Device device)
       : options_(options), data_(data), device_(device), gen_(at::detail::createCPUGenerator(options.seed)) {
@@ -73,10 +66,17 @@ class Trainer {
   int step() const { return state_.step; }
   const GaussianStyleAvatar& avatar() const { return avatar_; }
 
+  // The loop's side (loop.h).
+  void Step(int step, RunningStats* stats) override;
+  std::string DivergenceAdvice() const override { return "lower --lr-network or --lr-means"; }
+  void Describe(int step, nlohmann::json* line) override;
+  bool Evaluate(int step, nlohmann::json* line) override;
+  Status Preview(int step) override { return WritePreview(out_dir_ / "previews", step); }
+  Status Save(const LoopState& state) override { return SaveCheckpoint(checkpoint_, state); }
+
  private:
-  double Step(int step);
   void Densify(int step);
-  Status SaveCheckpoint(const fs::path& path, size_t stats_lines) const;
+  Status SaveCheckpoint(const fs::path& path, const LoopState& state) const;
   Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
   Status WritePreview(const fs::path& dir, int step);
   bool deform_now(int step) const { return options_.deform && step > stage1_steps_; }
@@ -90,8 +90,9 @@ class Trainer {
   std::vector<torch::Tensor> network_;  // the networks' parameters, in the optimiser after the rows
   Adam adam_;
   std::unique_ptr<DensifyStrategy> densify_;
-  TrainState state_;
-  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  LoopState state_;
+  torch::Tensor order_;  // the current pass's view order
+  fs::path out_dir_, checkpoint_;
   std::vector<torch::Tensor> images_, masks_;  // the training views' on the device
   std::vector<int64_t> usable_;  // the training views whose tracking is reliable
   double lr_means_ = 0;  // the means' first learning rate; it decays to 1% over the steps
@@ -163,11 +164,14 @@ Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   return Status::Ok();
 }
 
-double Trainer::Step(int step) {
+void Trainer::Step(int step, RunningStats* stats) {
+  if (step == stage1_steps_ + 1 && options_.deform)
+    HF_LOG(Info) << "train: stage 2 (deformation" << (options_.region_weight > 0 ? ", region loss" : "")
+                 << ") from step " << step;
   const int64_t views = int64_t(usable_.size());
   const int64_t slot = (step - 1) % views;
-  if (slot == 0) state_.order = torch::randperm(views, gen_);
-  const int64_t index = usable_[size_t(state_.order[slot].item<int64_t>())];
+  if (slot == 0) order_ = torch::randperm(views, gen_);
+  const int64_t index = usable_[size_t(order_[slot].item<int64_t>())];
   const AvatarView& view = data_.train[size_t(index)];
   adam_.SetLr(0, lr_means_ * std::pow(0.01, double(step) / options_.steps));
   const bool stage2 = deform_now(step);
@@ -193,17 +197,40 @@ double Trainer::Step(int step) {
     region = r.item<double>();
   }
   const double value = loss.item<double>();
-  if (!std::isfinite(value)) return value;
+  stats->Add("loss", value);
+  if (!std::isfinite(value)) return;
   loss.backward();
   densify_->AfterBackward(out.means2d.grad(), out.radii, view.view.width, view.view.height);
   adam_.Step();
   adam_.ZeroGrad();
   Densify(step);
-  state_.loss_sum += value;
-  state_.l1_sum += l1.item<double>();
-  state_.region_sum += region;
-  ++state_.loss_count;
-  return value;
+  stats->Add("l1", l1.item<double>());
+  stats->Add("region_l1", region);
+}
+
+void Trainer::Describe(int step, nlohmann::json* line) {
+  (*line)["stage"] = deform_now(step) ? 2 : 1;
+  (*line)["gaussians"] = avatar_.gaussians.params.size();
+  if (pose_corrections_.defined()) {
+    // The corrections' median size: degrees of rotation, millimetres of translation.
+    torch::NoGradGuard no_grad;
+    const torch::Tensor c = pose_corrections_.detach().cpu();
+    (*line)["pose_rotation_deg"] = c.slice(1, 0, 3).norm(2, 1).median().item<double>() * 180 / M_PI;
+    (*line)["pose_translation_mm"] = c.slice(1, 3, 6).norm(2, 1).median().item<double>() * 1000;
+  }
+}
+
+bool Trainer::Evaluate(int step, nlohmann::json* line) {
+  const bool deform = avatar_.deform;
+  avatar_.deform = deform_now(step);
+  const ViewScores s = MeanScores(EvaluateAvatar(avatar_, data_, 5, {}));
+  avatar_.deform = deform;
+  (*line)["test_psnr_masked"] = s.psnr_masked;
+  (*line)["test_ssim_masked"] = s.ssim_masked;
+  (*line)["gaussians"] = avatar_.gaussians.params.size();
+  HF_LOG(Info) << "train: step " << step << ", " << avatar_.gaussians.params.size() << " Gaussians, held-out PSNR "
+               << s.psnr_masked << " dB over the head (every 5th view)";
+  return true;
 }
 
 void Trainer::Densify(int step) {
@@ -238,9 +265,9 @@ Status Trainer::WritePreview(const fs::path& dir, int step) {
   return WriteTensorImage(dir / name, torch::cat({render, target}, 2));
 }
 
-Status Trainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
+Status Trainer::SaveCheckpoint(const fs::path& path, const LoopState& state) const {
   Checkpoint c;
-  c.Put("step", int64_t(state_.step));
+  state.Save(&c);
   GaussianParams p = avatar_.gaussians.params;
   const auto rows = p.All();
   for (size_t i = 0; i < rows.size(); ++i) c.Put(std::string("gaussians.") + kRowNames[i], *rows[i]);
@@ -250,13 +277,7 @@ Status Trainer::SaveCheckpoint(const fs::path& path, size_t stats_lines) const {
   adam_.Save("adam.", &c);
   densify_->SaveState("densify.", &c);
   c.Put("generator", gen_.get_state());
-  c.Put("order", state_.order);
-  c.Put("loss_sum", state_.loss_sum);
-  c.Put("l1_sum", state_.l1_sum);
-  c.Put("region_sum", state_.region_sum);
-  c.Put("loss_count", state_.loss_count);
-  c.Put("seconds", state_.seconds + SecondsSince(start_));
-  c.Put("stats_lines", int64_t(stats_lines));
+  c.Put("order", order_);
   return c.Save(path);
 }
 
@@ -264,13 +285,8 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   Checkpoint c;
   HF_RETURN_IF_ERROR(Checkpoint::Load(path, &c));
   const Status damaged = Status::DataError(path.string() + " is not this training's checkpoint; delete it to start over");
-  int64_t step = 0, lines = 0;
   torch::Tensor generator;
-  if (!c.Get("step", &step) || !c.Get("generator", &generator) || !c.Get("stats_lines", &lines) ||
-      !c.Get("loss_sum", &state_.loss_sum) || !c.Get("l1_sum", &state_.l1_sum) ||
-      !c.Get("region_sum", &state_.region_sum) || !c.Get("loss_count", &state_.loss_count) ||
-      !c.Get("seconds", &state_.seconds))
-    return damaged;
+  if (!state_.Load(c) || !c.Get("generator", &generator)) return damaged;
   GaussianParams& p = avatar_.gaussians.params;
   const auto rows = p.All();
   for (size_t i = 0; i < rows.size(); ++i) {
@@ -290,82 +306,18 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   if (!adam_.Load("adam.", c)) return damaged;
   densify_->LoadState("densify.", c);
   gen_.set_state(generator);
-  if (!c.Get("order", &state_.order)) state_.order = torch::Tensor();
-  state_.step = int(step);
-  HF_LOG(Info) << "train: resuming from the checkpoint at step " << step << " (" << p.size() << " Gaussians)";
-  return stats->Truncate(size_t(lines));
+  if (!c.Get("order", &order_)) order_ = torch::Tensor();
+  HF_LOG(Info) << "train: resuming from the checkpoint at step " << state_.step << " (" << p.size() << " Gaussians)";
+  return stats->Truncate(state_.stats_lines);
 }
 
 Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
-  auto elapsed = [&] { return state_.seconds + SecondsSince(start_); };
-  std::string label = "train: gaussian-style";
-  if (options_.max_minutes > 0) {
-    char limit[96];
-    std::snprintf(limit, sizeof(limit), " (%d steps or %g min, whichever comes first)", options_.steps,
-                  options_.max_minutes);
-    label += limit;
-  }
-  progress->Start(label, options_.steps);
-  progress->Resume(state_.step);
-  if (options_.max_minutes > 0) progress->LimitTime(60.0 * options_.max_minutes - state_.seconds);
-  for (int step = state_.step + 1; step <= options_.steps; ++step) {
-    if (step == stage1_steps_ + 1 && options_.deform)
-      HF_LOG(Info) << "train: stage 2 (deformation" << (options_.region_weight > 0 ? ", region loss" : "")
-                   << ") from step " << step;
-    const double loss = Step(step);
-    if (!std::isfinite(loss)) {
-      progress->Finish("diverged");
-      return Status::Internal("train: the loss became " + std::to_string(loss) + " at step " + std::to_string(step) +
-                              "; lower --lr-network or --lr-means (a changed option starts training over)");
-    }
-    state_.step = step;
-    progress->Advance();
-    const bool out_of_time = options_.max_minutes > 0 && elapsed() > 60.0 * options_.max_minutes;
-    const bool last = step == options_.steps || out_of_time;
-    if (step % options_.log_every == 0 || last) {
-      const double n = double(std::max<int64_t>(state_.loss_count, 1));
-      nlohmann::json line = {{"step", step},
-                             {"stage", deform_now(step) ? 2 : 1},
-                             {"loss", state_.loss_sum / n},
-                             {"l1", state_.l1_sum / n},
-                             {"region_l1", state_.region_sum / n},
-                             {"gaussians", avatar_.gaussians.params.size()},
-                             {"seconds", elapsed()}};
-      if (pose_corrections_.defined()) {
-        // The corrections' median size: degrees of rotation, millimetres of translation.
-        torch::NoGradGuard no_grad;
-        const torch::Tensor c = pose_corrections_.detach().cpu();
-        line["pose_rotation_deg"] = c.slice(1, 0, 3).norm(2, 1).median().item<double>() * 180 / M_PI;
-        line["pose_translation_mm"] = c.slice(1, 3, 6).norm(2, 1).median().item<double>() * 1000;
-      }
-      stats->Append(line.dump());
-      state_.loss_sum = state_.l1_sum = state_.region_sum = 0;
-      state_.loss_count = 0;
-    }
-    if (!last && options_.eval_every > 0 && step % options_.eval_every == 0) {
-      const bool deform = avatar_.deform;
-      avatar_.deform = deform_now(step);
-      const ViewScores s = MeanScores(EvaluateAvatar(avatar_, data_, 5, {}));
-      avatar_.deform = deform;
-      stats->Append(nlohmann::json{{"step", step}, {"test_psnr_masked", s.psnr_masked}, {"test_ssim_masked", s.ssim_masked},
-                                   {"gaussians", avatar_.gaussians.params.size()}, {"seconds", elapsed()}}
-                        .dump());
-      HF_LOG(Info) << "train: step " << step << ", " << avatar_.gaussians.params.size()
-                   << " Gaussians, held-out PSNR " << s.psnr_masked << " dB over the head (every 5th view)";
-    }
-    if (options_.preview_every > 0 && step % options_.preview_every == 0)
-      HF_RETURN_IF_ERROR(WritePreview(out_dir / "previews", step));
-    if (out_of_time) {
-      HF_LOG(Info) << "train: time limit of " << options_.max_minutes << " min reached at step " << step;
-      break;
-    }
-    HF_RETURN_IF_ERROR(CheckpointOrStop("training", step, options_.steps, last, options_.checkpoint_every,
-                                        [&] { return SaveCheckpoint(checkpoint, stats->size()); }, progress));
-  }
+  out_dir_ = out_dir;
+  checkpoint_ = checkpoint;
+  const LoopOptions loop = TrainLoopOptions(options_, "train: gaussian-style", options_.steps);
+  HF_RETURN_IF_ERROR(RunLoop(loop, this, &state_, stats, progress));
   progress->Finish(std::to_string(state_.step) + " steps, " + std::to_string(avatar_.gaussians.params.size()) +
                    " Gaussians");
-  state_.seconds = elapsed();
-  start_ = std::chrono::steady_clock::now();
   avatar_.deform = deform_now(state_.step);
   return Status::Ok();
 }
@@ -463,19 +415,13 @@ Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, co
   // held-out frames bring that training never saw.
   const ViewScores fitted = MeanScores(EvaluateAvatar(avatar, data, 10, {}, true));
   nlohmann::json views = nlohmann::json::array();
-  for (const ViewScores& s : scores)
-    views.push_back({{"frame", s.frame}, {"camera", s.camera}, {"psnr_masked", s.psnr_masked},
-                     {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full}, {"ssim", s.ssim_full},
-                     {"l1_masked", s.l1_masked}, {"sharpness", s.sharpness}, {"sharpness_truth", s.sharpness_truth},
-                     {"sd", s.sd}});
+  for (const ViewScores& s : scores) views.push_back(ScoresJson(s));
   nlohmann::json eval = {
       {"held_out_frames", data.HeldOutText()},
       {"background", kEvalBackground},
       {"latent_frame", 0},
       {"decoder", bool(avatar.decoder)},
-      {"mean", {{"psnr_masked", mean.psnr_masked}, {"ssim_masked", mean.ssim_masked}, {"psnr", mean.psnr_full},
-                {"ssim", mean.ssim_full}, {"l1_masked", mean.l1_masked}, {"sharpness", mean.sharpness},
-                {"sharpness_truth", mean.sharpness_truth}, {"sd", mean.sd}}},
+      {"mean", ScoresJson(mean, false)},
       {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
       // Posing and drawing one held-out view, its image back on the CPU,
       // on the training device (the first view, warming up, left out).

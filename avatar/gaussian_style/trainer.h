@@ -14,6 +14,7 @@
 #include "avatar/gaussian_style/decoder.h"
 #include "avatar/gaussian_style/model.h"
 #include "avatar/train/dataset.h"
+#include "avatar/train/view_scores.h"
 #include "core/face_model.h"
 #include "core/stats_log.h"
 
@@ -55,31 +56,6 @@ Status InitGaussians(const AvatarDataset& data, const TrainOptions& options,
 
 // The RGB render [3, H, W] of `view`'s camera over `background` [3].
 torch::Tensor RenderRgb(const PosedGaussians& posed, const SplatCamera& camera, const torch::Tensor& background);
-
-struct ViewScores {
-  int frame = 0;
-  std::string camera;
-  double psnr_masked = 0, ssim_masked = 0, psnr_full = 0, ssim_full = 0, l1_masked = 0;
-  // Mean gradient magnitude over the head (grey levels per pixel, x 255) of
-  // the render and of the frame; SD = render's - frame's (negative: blurrier).
-  double sharpness = 0, sharpness_truth = 0, sd = 0;
-  bool has_head = true;  // false: the mask is empty and the masked figures mean nothing
-  // Posing and drawing the view, its image back on the CPU (EvaluateAvatar).
-  double render_ms = 0;
-};
-// `render` [3, H, W] against `image` [3, H, W] on `mask` [1, H, W], the
-// image's background set to `background` [3] (the render's own).
-ViewScores ScoreRender(const torch::Tensor& render, const torch::Tensor& image, const torch::Tensor& mask,
-                       const torch::Tensor& background);
-// render | image (grey `background` outside `mask`) | error x 4, side by
-// side: [3, H, 3W], for the images a person checks.
-torch::Tensor ComparisonStrip(const torch::Tensor& render, const torch::Tensor& image, const torch::Tensor& mask,
-                              double background);
-// Means over views; the masked figures over the views with a head.
-ViewScores MeanScores(const std::vector<ViewScores>& scores);
-// The held-out views' mean scores (`views` of them) and the training views'
-// masked PSNR into `summary`.
-void SetSummaryScores(const ViewScores& held_out, int views, const ViewScores& training_views, TrainSummary* summary);
 
 // The model file (model.pt + config.json in `dir`).
 Status SaveAvatar(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,

@@ -25,6 +25,18 @@ void Checkpoint::Put(const std::string& name, const torch::Tensor& tensor) {
 void Checkpoint::Put(const std::string& name, int64_t value) { integers_[name] = value; }
 void Checkpoint::Put(const std::string& name, double value) { reals_[name] = value; }
 
+void Checkpoint::PutText(const std::string& name, const std::string& text) {
+  tensors_[name] = torch::tensor(std::vector<uint8_t>(text.begin(), text.end()), torch::kUInt8);
+}
+
+bool Checkpoint::GetText(const std::string& name, std::string* text) const {
+  const auto it = tensors_.find(name);
+  if (it == tensors_.end() || it->second.scalar_type() != torch::kUInt8) return false;
+  const torch::Tensor bytes = it->second.contiguous();
+  text->assign(reinterpret_cast<const char*>(bytes.data_ptr<uint8_t>()), size_t(bytes.numel()));
+  return true;
+}
+
 void Checkpoint::PutModule(const std::string& prefix, const torch::nn::Module& module) {
   for (const auto& item : module.named_parameters()) Put(prefix + item.key(), item.value());
 }

@@ -23,11 +23,14 @@ class Checkpoint {
   void Put(const std::string& name, const torch::Tensor& tensor);
   void Put(const std::string& name, int64_t value);
   void Put(const std::string& name, double value);
+  // Text, stored as a tensor of its bytes.
+  void PutText(const std::string& name, const std::string& text);
 
   // False when the name was not stored (or holds another kind of value).
   bool Get(const std::string& name, torch::Tensor* tensor) const;
   bool Get(const std::string& name, int64_t* value) const;
   bool Get(const std::string& name, double* value) const;
+  bool GetText(const std::string& name, std::string* text) const;
 
   // Every parameter of `module` as prefix + its name; and back, copied into
   // the module's own tensors (false when one is missing or of another shape).

@@ -93,47 +93,31 @@ torch::Tensor RenderFitted(const GaussianParams& params, const SplatCamera& came
 
 namespace {
 
-// Everything of a fit that a checkpoint holds besides the parameters.
-struct FitState {
-  int step = 0;               // steps done
-  torch::Tensor order;        // the current pass's view order
-  double loss_sum = 0, l1_sum = 0;
-  int64_t loss_count = 0;
-  double seconds = 0;         // fitting time before this attempt
-};
-
 const char* const kParamNames[] = {"means", "quats", "log_scales", "opacity_logits", "colour_logits"};
 
 Status SaveFitCheckpoint(const fs::path& path, GaussianParams& p, const Adam& adam,
-                         const DensifyStrategy& densify, const at::Generator& gen, const FitState& state,
-                         size_t stats_lines) {
+                         const DensifyStrategy& densify, const at::Generator& gen, const torch::Tensor& order,
+                         const LoopState& state) {
   Checkpoint c;
-  c.Put("step", int64_t(state.step));
+  state.Save(&c);
   const auto params = p.All();
   for (size_t i = 0; i < params.size(); ++i) c.Put(kParamNames[i], *params[i]);
   adam.Save("adam.", &c);
   densify.SaveState("densify.", &c);
   c.Put("generator", gen.get_state());
-  c.Put("order", state.order);
-  c.Put("loss_sum", state.loss_sum);
-  c.Put("l1_sum", state.l1_sum);
-  c.Put("loss_count", state.loss_count);
-  c.Put("seconds", state.seconds);
-  c.Put("stats_lines", int64_t(stats_lines));
+  c.Put("order", order);
   return c.Save(path);
 }
 
 // Restores what SaveFitCheckpoint wrote; `stats` is cut back to the lines the
 // checkpoint had seen.
 Status LoadFitCheckpoint(const fs::path& path, torch::Device device, GaussianParams* p, Adam* adam,
-                         DensifyStrategy* densify, at::Generator* gen, FitState* state, StatsLog* stats) {
+                         DensifyStrategy* densify, at::Generator* gen, torch::Tensor* order, LoopState* state,
+                         StatsLog* stats) {
   Checkpoint c;
   HF_RETURN_IF_ERROR(Checkpoint::Load(path, &c));
-  int64_t step = 0, stats_lines = 0;
   torch::Tensor generator;
-  bool ok = c.Get("step", &step) && c.Get("generator", &generator) && c.Get("stats_lines", &stats_lines) &&
-            c.Get("loss_sum", &state->loss_sum) && c.Get("l1_sum", &state->l1_sum) &&
-            c.Get("loss_count", &state->loss_count) && c.Get("seconds", &state->seconds);
+  bool ok = state->Load(c) && c.Get("generator", &generator);
   const auto params = p->All();
   for (size_t i = 0; ok && i < params.size(); ++i) {
     ok = c.Get(kParamNames[i], params[i]);
@@ -143,9 +127,8 @@ Status LoadFitCheckpoint(const fs::path& path, torch::Device device, GaussianPar
     return Status::DataError(path.string() + " is not a splat-fit checkpoint; delete it to start over");
   densify->LoadState("densify.", c);
   gen->set_state(generator);
-  if (!c.Get("order", &state->order)) state->order = torch::Tensor();
-  state->step = int(step);
-  return stats->Truncate(size_t(stats_lines));
+  if (!c.Get("order", order)) *order = torch::Tensor();
+  return stats->Truncate(state->stats_lines);
 }
 
 }  // namespace
@@ -170,22 +153,17 @@ void InitialiseGaussians(const InitPoints& init, double init_opacity, torch::Dev
 // One step on `view`: render, the L1 + SSIM loss, its gradient, Adam, then
 // densification's plan (clone, split, prune, opacity reset) carried out on
 // the Gaussians and the optimiser's moments.
-Status FitStep(const SplatFitOptions& options, const PosedImage& view, const SplatRenderOptions& render_options,
-               int step, GaussianParams* p, Adam* adam, DensifyStrategy* densify, double* loss_value,
-               double* l1_value) {
+void FitStep(const SplatFitOptions& options, const PosedImage& view, const SplatRenderOptions& render_options,
+             int step, GaussianParams* p, Adam* adam, DensifyStrategy* densify, RunningStats* stats) {
   const auto out = RenderGaussians(p->means, p->quats, p->log_scales, torch::sigmoid(p->opacity_logits),
                                    torch::sigmoid(p->colour_logits), {}, view.camera, render_options);
   out.means2d.retain_grad();
   const torch::Tensor l1 = (out.image - view.image).abs().mean();
   const torch::Tensor loss =
       (1 - options.ssim_weight) * l1 + options.ssim_weight * (1 - Ssim(out.image, view.image));
-  *loss_value = loss.item<double>();
-  if (!std::isfinite(*loss_value)) {
-    return Status::Internal("splat-fit: the loss became " + std::to_string(*loss_value) + " at step " +
-                            std::to_string(step) +
-                            "; lower the learning rates (--lr-means, --lr-scales) or start from "
-                            "smaller Gaussians");
-  }
+  const double value = loss.item<double>();
+  stats->Add("loss", value);
+  if (!std::isfinite(value)) return;
   loss.backward();
   densify->AfterBackward(out.means2d.grad(), out.radii, view.camera.width, view.camera.height);
   adam->Step();
@@ -202,9 +180,55 @@ Status FitStep(const SplatFitOptions& options, const PosedImage& view, const Spl
     adam->ResetMoments(3);
   }
   if (!plan.summary.empty()) HF_LOG(Debug) << "splat-fit step " << step << ": " << plan.summary;
-  *l1_value = l1.item<double>();
-  return Status::Ok();
+  stats->Add("l1", l1.item<double>());
 }
+
+// splat-fit's side of the training loop.
+class FitLoop : public LoopTrainer {
+ public:
+  FitLoop(const SplatFitOptions& options, const std::vector<PosedImage>& train, const std::vector<PosedImage>& test,
+          GaussianParams* p, Adam* adam, DensifyStrategy* densify, at::Generator* gen)
+      : options_(options), train_(train), test_(test), p_(p), adam_(adam), densify_(densify), gen_(gen) {
+    render_.splat = options.splat;
+  }
+  void Step(int step, RunningStats* stats) override {
+    const int64_t slot = (step - 1) % int64_t(train_.size());
+    if (slot == 0) order = torch::randperm(int64_t(train_.size()), *gen_);
+    const PosedImage& view = train_[size_t(order[slot].item<int64_t>())];
+    const double extent = options_.densify.scene_extent;
+    adam_->SetLr(0, options_.lr_means * extent * std::pow(0.01, double(step) / options_.iterations));
+    FitStep(options_, view, render_, step, p_, adam_, densify_, stats);
+  }
+  std::string DivergenceAdvice() const override {
+    return "lower the learning rates (--lr-means, --lr-scales) or start from smaller Gaussians";
+  }
+  void Describe(int, nlohmann::json* line) override { (*line)["gaussians"] = p_->size(); }
+  bool Evaluate(int step, nlohmann::json* line) override {
+    if (test_.empty()) return false;
+    const Evaluation e = headforge::Evaluate(*p_, test_, options_.splat);
+    (*line)["test_psnr"] = e.psnr;
+    (*line)["test_ssim"] = e.ssim;
+    (*line)["gaussians"] = p_->size();
+    HF_LOG(Info) << "splat-fit: step " << step << ", " << p_->size() << " Gaussians, held-out PSNR " << e.psnr
+                 << " dB";
+    return true;
+  }
+  Status Save(const LoopState& state) override {
+    return SaveFitCheckpoint(options_.checkpoint_path, *p_, *adam_, *densify_, *gen_, order, state);
+  }
+
+  torch::Tensor order;  // the current pass's view order
+
+ private:
+  const SplatFitOptions& options_;
+  const std::vector<PosedImage>& train_;
+  const std::vector<PosedImage>& test_;
+  GaussianParams* p_;
+  Adam* adam_;
+  DensifyStrategy* densify_;
+  at::Generator* gen_;
+  SplatRenderOptions render_;
+};
 
 }  // namespace
 
@@ -221,7 +245,6 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
   HF_RETURN_IF_ERROR(ParseSplatFitDevice(options.device, &device));
   const std::vector<PosedImage> train_views = OnDevice(train, device);
   const std::vector<PosedImage> test_views = OnDevice(test, device);
-  const auto t0 = std::chrono::steady_clock::now();
   GaussianParams& p = result->params;
   InitialiseGaussians(init, options.init_opacity, device, &p);
   const double extent = options.densify.scene_extent;
@@ -233,82 +256,29 @@ Status FitSplats(const SplatFitOptions& options, const std::vector<PosedImage>& 
   adam.Add(&p.colour_logits, options.lr_colours, true);
   const auto densify = MakeDefaultDensify(options.densify);
   auto gen = at::detail::createCPUGenerator(options.seed);
-  FitState state;
+  FitLoop fit(options, train_views, test_views, &p, &adam, densify.get(), &gen);
+  LoopState state;
   const fs::path checkpoint = options.checkpoint_path;
   std::error_code ec;
   if (!checkpoint.empty() && fs::exists(checkpoint, ec)) {
-    HF_RETURN_IF_ERROR(LoadFitCheckpoint(checkpoint, device, &p, &adam, densify.get(), &gen, &state, stats));
+    HF_RETURN_IF_ERROR(
+        LoadFitCheckpoint(checkpoint, device, &p, &adam, densify.get(), &gen, &fit.order, &state, stats));
     HF_LOG(Info) << "splat-fit: resuming from the checkpoint at step " << state.step << " (" << p.size()
                  << " Gaussians)";
   }
-  auto elapsed = [&] { return state.seconds + SecondsSince(t0); };
-  auto save = [&](int step) {
-    FitState now = state;
-    now.step = step;
-    now.seconds = elapsed();
-    return SaveFitCheckpoint(checkpoint, p, adam, *densify, gen, now, stats->size());
-  };
-
-  SplatRenderOptions render_options;
-  render_options.splat = options.splat;
-  progress->Start("splat-fit", options.iterations);
-  progress->Resume(state.step);
   result->resumed_from = state.step;
-  int step = 0;
-  for (step = state.step + 1; step <= options.iterations; ++step) {
-    const int64_t slot = (step - 1) % int64_t(train.size());
-    if (slot == 0) state.order = torch::randperm(int64_t(train.size()), gen);
-    const PosedImage& view = train_views[state.order[slot].item<int64_t>()];
-    adam.SetLr(0, options.lr_means * extent * std::pow(0.01, double(step) / options.iterations));
-
-    double loss_value = 0, l1_value = 0;
-    if (Status s = FitStep(options, view, render_options, step, &p, &adam, densify.get(), &loss_value, &l1_value);
-        !s.ok()) {
-      progress->Finish("diverged");
-      return s;
-    }
-    state.loss_sum += loss_value;
-    state.l1_sum += l1_value;
-    ++state.loss_count;
-    progress->Advance();
-    const bool out_of_time = options.max_minutes > 0 && elapsed() > 60.0 * options.max_minutes;
-    const bool last = step == options.iterations || out_of_time;
-    if (step % options.log_every == 0 || last) {
-      stats->Append(nlohmann::json{{"step", step},
-                                   {"loss", state.loss_sum / state.loss_count},
-                                   {"l1", state.l1_sum / state.loss_count},
-                                   {"gaussians", p.size()},
-                                   {"seconds", elapsed()}}
-                        .dump());
-      state.loss_sum = state.l1_sum = 0;
-      state.loss_count = 0;
-    }
-    if (!last && options.eval_every > 0 && step % options.eval_every == 0 && !test.empty()) {
-      const Evaluation e = Evaluate(p, test_views, options.splat);
-      stats->Append(nlohmann::json{{"step", step}, {"test_psnr", e.psnr}, {"test_ssim", e.ssim},
-                                   {"gaussians", p.size()}, {"seconds", elapsed()}}
-                        .dump());
-      HF_LOG(Info) << "splat-fit: step " << step << ", " << p.size()
-                   << " Gaussians, held-out PSNR " << e.psnr << " dB";
-    }
-    if (out_of_time) {
-      HF_LOG(Info) << "splat-fit: time limit of " << options.max_minutes << " min reached at step "
-                   << step;
-      break;
-    }
-    const bool stop = InterruptRequested();
-    if (!checkpoint.empty() && !last && (stop || step % options.checkpoint_every == 0))
-      HF_RETURN_IF_ERROR(save(step));
-    if (stop) {
-      progress->Finish("interrupted");
-      return Status::Interrupted(
-          "splat-fit stopped at step " + std::to_string(step) + " of " + std::to_string(options.iterations) +
-          (checkpoint.empty() ? " (no checkpoint kept)"
-                              : "; the checkpoint is saved: run the same command again to resume"));
-    }
-  }
-  result->steps = std::min(step, options.iterations);
-  result->train_seconds = elapsed();
+  LoopOptions loop;
+  loop.label = "splat-fit";
+  loop.what = "splat-fit";
+  loop.steps = options.iterations;
+  loop.max_minutes = options.max_minutes;
+  loop.log_every = options.log_every;
+  loop.eval_every = options.eval_every;
+  loop.checkpoint_every = checkpoint.empty() ? 0 : options.checkpoint_every;
+  if (checkpoint.empty()) loop.resume_hint = "no checkpoint kept";
+  HF_RETURN_IF_ERROR(RunLoop(loop, &fit, &state, stats, progress));
+  result->steps = state.step;
+  result->train_seconds = state.seconds;
   progress->Finish(std::to_string(result->steps) + " steps, " + std::to_string(p.size()) +
                    " Gaussians");
   if (!test.empty()) {

@@ -19,6 +19,7 @@
 #include "avatar/gan_avatar/avatar_io.h"
 #include "avatar/model_folder.h"
 #include "avatar/gaussian_style/trainer.h"
+#include "avatar/model_table.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/device.h"
 #include "avatar/train/tensor_image.h"
@@ -66,7 +67,7 @@ struct DrawableAvatar {
 Status LoadDrawableAvatar(const fs::path& workspace, fs::path model_dir, const std::string& face_model,
                           torch::Device device, int resolution, bool images, double background, DrawableAvatar* a) {
   if (model_dir.empty()) model_dir = LatestModelFolder(workspace);
-  if (model_dir.empty()) model_dir = workspace / "models" / "gaussian_style";
+  if (model_dir.empty()) model_dir = kGaussianStyle.Dir(workspace);
   a->loading.images = images;
   if (IsGanAvatarFolder(model_dir)) {
     // The gan-avatar model: the tracked expression through its mapping.

@@ -5,6 +5,7 @@
 #include "avatar/gan_avatar/render_expressions.h"
 #include "avatar/gan_avatar/trainer.h"
 #include "avatar/gaussian_style/trainer.h"
+#include "avatar/model_table.h"
 #include "avatar/train/dataset_pack.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/loop.h"
@@ -80,11 +81,12 @@ int PresetFrameBudget(const std::string& preset) {
 }
 
 void AddTrainOptions(OptionSet* o, TrainOptions* t) {
+  std::string models;
+  for (const AvatarModel& m : kAvatarModels) models += " " + m.Name() + ": " + std::string(m.summary) + ".";
   o->Add("train.model", &t->model,
-         "Avatar model: gaussian-style (Gaussians driven by the tracked expressions) or gan-avatar (a 3D GAN of the "
-         "subject trained on frames and cameras alone, driven through an expression mapping); the train stage's "
-         "auto chooses gan-avatar for several cameras or views spread 120 degrees or more round the head (a 360-degree "
-         "or multi-view capture), else gaussian-style.",
+         "Avatar model." + models + " The train stage's auto chooses " + kGanAvatar.Name() +
+             " for several cameras or views spread 120 degrees or more round the head (a 360-degree or multi-view "
+             "capture), else " + kGaussianStyle.Name() + ".",
          "model");
   o->Add("train.preset", &t->preset,
          "draft (2 CPU cores, 256 px, within 15 min), standard (one GPU, 512 px), high (the paper's scale); it sets "
@@ -258,7 +260,7 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* t) {
   auto fill = [&](const char* key, auto* field, auto value) {
     if (!parsed.WasGiven(key)) *field = value;
   };
-  if (t->model == "gan-avatar") {
+  if (kGanAvatar.Is(t->model)) {
     const GanPreset* preset = nullptr;
     for (const GanPreset& p : kGanPresets)
       if (t->preset == p.name) preset = &p;
@@ -338,14 +340,14 @@ Status ChooseModel(const fs::path& workspace, std::string* model, std::string* w
   char text[160];
   if (cameras.cameras.size() > 1) {
     std::snprintf(text, sizeof(text), "%zu cameras: a multi-view capture", cameras.cameras.size());
-    *model = "gan-avatar";
+    *model = kGanAvatar.Name();
   } else if (cameras.WalksRoundTheHead()) {
     std::snprintf(text, sizeof(text), "one camera whose views spread %.0f deg round the head", spread);
-    *model = "gan-avatar";
+    *model = kGanAvatar.Name();
   } else {
     std::snprintf(text, sizeof(text), "one camera, its views within %.0f deg of one another (%s cameras)", spread,
                   cameras.mode.c_str());
-    *model = "gaussian-style";
+    *model = kGaussianStyle.Name();
   }
   *why = text;
   return Status::Ok();
@@ -362,10 +364,10 @@ Status LoadTrainingData(const TrainOptions& options, const fs::path& workspace, 
   loading.holdout = options.holdout;
   loading.holdout_order = options.holdout_order;
   loading.holdout_cameras = options.holdout_cameras;
-  loading.mask = options.MaskFor(options.model);
+  loading.mask = options.MaskFor(*FindAvatarModel(options.model));
   loading.mask_hair = options.mask_hair;
   loading.mask_skin = options.mask_skin;
-  if (options.model == "gaussian-style" && options.decoder_steps > 0 && options.adversarial_weight > 0)
+  if (kGaussianStyle.Is(options.model) && options.decoder_steps > 0 && options.adversarial_weight > 0)
     loading.uv_map_side = options.decoder_resolution > 0 ? options.decoder_resolution : options.resolution;
   HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, data).WithContext("train"));
   HF_LOG(Info) << "train: " << data->train.size() << " training and " << data->test.size() << " held-out views at "
@@ -384,7 +386,7 @@ Status AdoptRecordedOptions(const TrainOptions& options, TrainOptions* resolved)
   nlohmann::json config;
   HF_RETURN_IF_ERROR(ReadJson(dir / "config.json", &config)
                          .WithContext("train: --generator-from takes the folder headforge-train (or train) wrote"));
-  if (config.value("model", "") != "gan-avatar" || !config.contains("options"))
+  if (!kGanAvatar.Is(config.value("model", "")) || !config.contains("options"))
     return Status::InvalidArgument("train: --generator-from " + dir.string() +
                                    " holds no gan-avatar training of this version (its config.json records no "
                                    "options); train it again with this version's headforge-train");
@@ -420,7 +422,7 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
   if (!options.generator_from.empty()) HF_RETURN_IF_ERROR(AdoptRecordedOptions(options, &resolved));
   AvatarDataset data;
   HF_RETURN_IF_ERROR(LoadTrainingData(resolved, workspace, model, &data));
-  if (resolved.model != "gan-avatar") return TrainGaussianStyleRun(resolved, data, out_dir, progress, summary);
+  if (!kGanAvatar.Is(resolved.model)) return TrainGaussianStyleRun(resolved, data, out_dir, progress, summary);
   if (resolved.landmark_model.empty()) resolved.landmark_model = DefaultLandmarkModel();
   TrackingFile tracking;
   HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", &tracking));

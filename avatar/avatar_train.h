@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "avatar/model_table.h"
 #include "core/fs.h"
 #include "core/options.h"
 #include "core/progress.h"
@@ -23,7 +24,7 @@ namespace headforge {
 constexpr int kFewestTrainingFrames = 8;
 
 struct TrainOptions {
-  std::string model = "gaussian-style";
+  std::string model{kGaussianStyle.name};
   // draft: two CPU cores, about 15 minutes; standard: one GPU; high: the
   // paper's scale. A preset fills only the options not given; the models
   // have presets of their own.
@@ -58,8 +59,8 @@ struct TrainOptions {
   // 0 keeps the tracked poses. Held-out views keep theirs.
   double pose_lr = 0;
   // The mask `model` trains with under these options: ingest or mesh.
-  std::string MaskFor(const std::string& model_name) const {
-    return mask != "auto" ? mask : model_name == "gaussian-style" ? "mesh" : "ingest";
+  std::string MaskFor(const AvatarModel& model_entry) const {
+    return mask != "auto" ? mask : std::string(model_entry.default_mask);
   }
   int init_gaussians = 20000;   // sampled on the tracked mesh
   int64_t max_gaussians = 40000;

@@ -1,12 +1,14 @@
 #include "avatar/model_folder.h"
 
+#include "avatar/model_table.h"
+
 namespace headforge {
 
 fs::path LatestModelFolder(const fs::path& workspace) {
   fs::path latest;
   fs::file_time_type newest{};
-  for (const char* folder : {"gaussian_style", "gan_avatar"}) {
-    const fs::path dir = workspace / "models" / folder;
+  for (const AvatarModel& model : kAvatarModels) {
+    const fs::path dir = model.Dir(workspace);
     std::error_code ec;
     const auto written = fs::last_write_time(dir / "config.json", ec);
     if (ec) continue;

@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "avatar/avatar_train.h"
+#include "avatar/model_table.h"
 #include "avatar/train/device.h"
 #include "avatar/train_loop_options.h"
 
@@ -53,8 +54,8 @@ TrainOptions TrainOptionsFromJson(const nlohmann::json& j) {
 Status TrainOptions::Check() const {
   torch::Device parsed = torch::kCPU;
   HF_RETURN_IF_ERROR(ParseDevice("train", device, &parsed));
-  if (model != "gaussian-style" && model != "gan-avatar")
-    return Status::InvalidArgument("train: --model must be gaussian-style or gan-avatar, not '" + model + "'");
+  if (!FindAvatarModel(model))
+    return Status::InvalidArgument("train: --model must be " + AvatarModelNames() + ", not '" + model + "'");
   if (resolution < 16 || resolution > 4096) return Status::InvalidArgument("train: --resolution must be in [16, 4096]");
   if (steps < 1) return Status::InvalidArgument("train: --steps must be at least 1");
   if (!(max_minutes >= 0)) return Status::InvalidArgument("train: --max-minutes must be zero or positive");
@@ -85,7 +86,7 @@ Status TrainOptions::Check() const {
   if (triplane_resolution < 8 || (triplane_resolution & (triplane_resolution - 1)) != 0)
     return Status::InvalidArgument("train: --triplane-resolution must be a power of two of at least 8");
   if (latent_dim < 1) return Status::InvalidArgument("train: --latent-dim must be positive");
-  if (model == "gan-avatar") {
+  if (kGanAvatar.Is(model)) {
     if (render_resolution < 4 || render_resolution > resolution ||
         resolution % render_resolution != 0 || !IsPowerOfTwo(resolution / render_resolution))
       return Status::InvalidArgument("train: --render-resolution must divide --resolution by a power of two (" +
@@ -113,7 +114,7 @@ Status TrainOptions::Check() const {
   } else if (!generator_from.empty()) {
     return Status::InvalidArgument("train: --generator-from is for the gan-avatar model (--model gan-avatar)");
   }
-  if (model == "gaussian-style" && decoder_steps > 0) {
+  if (kGaussianStyle.Is(model) && decoder_steps > 0) {
     const int side = decoder_resolution > 0 ? decoder_resolution : resolution;
     if (side < 8 || !IsPowerOfTwo(side))
       return Status::InvalidArgument("train: the decoder's side (--decoder-resolution, else --resolution) must be a "

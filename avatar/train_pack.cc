@@ -6,6 +6,7 @@
 #include "avatar/avatar_train.h"
 #include "avatar/gan_avatar/trainer.h"
 #include "avatar/gaussian_style/trainer.h"
+#include "avatar/model_table.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/dataset_pack.h"
 #include "avatar/train/image_file.h"
@@ -72,7 +73,7 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
   if (!ImageFilesWritten())
     HF_LOG(Info) << "train: this build writes no images (previews, held_out/): headforge render --held-out "
                     "--side-by-side draws them once the model is in its workspace";
-  if (options.model == "gaussian-style") return TrainGaussianStyleRun(options, data, out_dir, progress, summary);
+  if (kGaussianStyle.Is(options.model)) return TrainGaussianStyleRun(options, data, out_dir, progress, summary);
   if (!options.generator_from.empty())
     return Status::InvalidArgument("--set generator_from: a pack trains the GAN itself; --generator-from is headforge "
                                    "train's, on the workspace");

@@ -11,6 +11,7 @@
 #include "avatar/avatar_render.h"
 #include "avatar/face_metrics.h"
 #include "avatar/model_folder.h"
+#include "avatar/model_table.h"
 #include "core/camera_set.h"
 #include "core/face_model.h"
 #include "core/json_io.h"
@@ -36,7 +37,7 @@ bool Wants(const ExportOptions& options, const std::string& format) {
 // A gan-avatar model trained in `dir` (its config.json names the model).
 bool IsTrainedGan(const fs::path& dir) {
   nlohmann::json config;
-  return ReadJson(dir / "config.json", &config).ok() && config.value("model", "") == "gan-avatar";
+  return ReadJson(dir / "config.json", &config).ok() && kGanAvatar.Is(config.value("model", ""));
 }
 
 Status RenderVideo(const fs::path& workspace, const std::string& face_model, AvatarRenderOptions render,
@@ -114,8 +115,8 @@ Status ExportOptions::Check() const {
   if (!(orbit_deg >= 0 && orbit_deg <= 180)) return Status::InvalidArgument("export: --orbit-deg must lie in [0, 180]");
   if (splat_frame < -1) return Status::InvalidArgument("export: --splat-frame is a frame number, or -1 for the neutral pose");
   HF_RETURN_IF_ERROR(CheckClipFormat(clip_format));
-  if (model != "auto" && model != "gaussian-style" && model != "gan-avatar")
-    return Status::InvalidArgument("export: --model must be auto, gaussian-style or gan-avatar, not '" + model + "'");
+  if (model != "auto" && !FindAvatarModel(model))
+    return Status::InvalidArgument("export: --model must be auto, " + AvatarModelNames() + ", not '" + model + "'");
   return Status::Ok();
 }
 
@@ -199,11 +200,11 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
   const auto start = std::chrono::steady_clock::now();
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
   // The model the Gaussians, weights and videos come from.
-  const fs::path gaussian_dir = workspace / "models" / "gaussian_style", gan_dir = workspace / "models" / "gan_avatar";
+  const fs::path gaussian_dir = kGaussianStyle.Dir(workspace), gan_dir = kGanAvatar.Dir(workspace);
   std::error_code ec;
   const bool gaussian_trained = fs::exists(gaussian_dir / "config.json", ec), gan_trained = IsTrainedGan(gan_dir);
   // auto: the model trained last (a workspace may hold both).
-  const bool gan = options.model == "gan-avatar" ||
+  const bool gan = kGanAvatar.Is(options.model) ||
                    (options.model == "auto" && gan_trained && LatestModelFolder(workspace) == gan_dir);
   const fs::path model_dir = gan ? gan_dir : gaussian_dir;
   const bool trained = gan ? gan_trained : gaussian_trained;
@@ -224,9 +225,11 @@ Status RunExport(const ExportOptions& requested, const fs::path& workspace, cons
   const bool needs_model = ExportNeedsModel(options);
   if (needs_model && !trained)
     return Status::NotFound("no trained avatar in " + model_dir.string() + " (run headforge train" +
-                            (gan ? " --model gan-avatar" : "") + " first, or export --formats mesh report alone)");
+                            (gan ? " --model " + kGanAvatar.Name() : std::string()) +
+                            " first, or export --formats mesh report alone)");
   if (needs_model)
-    HF_LOG(Info) << "export: the " << (gan ? "gan-avatar" : "gaussian-style") << " model in " << model_dir.string();
+    HF_LOG(Info) << "export: the " << (gan ? kGanAvatar.name : kGaussianStyle.name) << " model in "
+                 << model_dir.string();
   ExportSummary out;
   if (Wants(options, "mesh")) {
     FaceModel model;

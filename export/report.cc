@@ -11,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "avatar/model_folder.h"
+#include "avatar/model_table.h"
 #include "capture/capture_io.h"
 #include "core/camera_set.h"
 #include "core/json_io.h"
@@ -363,7 +364,7 @@ Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const Rep
   if (nlohmann::json tracking = TrackingData(workspace); !tracking.is_null()) data["tracking"] = tracking;
   // The model trained last (the one export takes).
   const fs::path latest = LatestModelFolder(workspace);
-  const fs::path model = latest.empty() ? workspace / "models" / "gaussian_style" : latest;
+  const fs::path model = latest.empty() ? kGaussianStyle.Dir(workspace) : latest;
   nlohmann::json eval;
   const bool trained = ReadJson(model / "eval.json", &eval).ok();
   if (trained)
@@ -443,7 +444,7 @@ Status WriteReport(const fs::path& workspace, const fs::path& out_dir, const Rep
     });
     for (const nlohmann::json& r : rows)
       html += "<tr><td>" + HtmlEscape(r.value("what", r.value("variant", std::string("?")))) + "</td><td>" +
-              HtmlEscape(r.value("model", std::string("gaussian-style"))) + "</td><td class=\"num\">" +
+              HtmlEscape(r.value("model", kGaussianStyle.Name())) + "</td><td class=\"num\">" +
               std::to_string(r.value("steps", 0)) + "</td><td class=\"num\">" +
               Number(r.value("seconds", 0.0) / 60, 1) + " min</td><td class=\"num\">" +
               Number(r.value("psnr_masked", 0.0), 2) + " dB / " + Number(r.value("ssim_masked", 0.0), 3) +

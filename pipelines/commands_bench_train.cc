@@ -11,6 +11,7 @@
 
 #include "avatar/avatar_render.h"
 #include "avatar/avatar_train.h"
+#include "avatar/model_table.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "pipelines/commands.h"
@@ -133,15 +134,16 @@ int BenchTrain(const std::vector<std::string>& args) {
   if (!options.WasGiven("bench.variants")) {
     if (!ladder.empty()) {
       variants.clear();
-    } else if (train.model == "gan-avatar") {
+    } else if (kGanAvatar.Is(train.model)) {
       variants = {"full"};  // the ablation is the gaussian-style model's
     }
   }
-  if (train.model == "gan-avatar")
+  if (kGanAvatar.Is(train.model))
     for (const std::string& name : variants)
       if (name != "full")
-        return ReportFailure(Status::InvalidArgument("--variants: '" + name +
-                                                     "' is a gaussian-style variant; the gan-avatar model has 'full' and --ladder"));
+        return ReportFailure(Status::InvalidArgument("--variants: '" + name + "' is a " + kGaussianStyle.Name() +
+                                                     " variant; the " + kGanAvatar.Name() +
+                                                     " model has 'full' and --ladder"));
   // Each variant and rung: its folder's name, its row's label and its options.
   struct Job {
     std::string name, what;
@@ -176,9 +178,9 @@ int BenchTrain(const std::vector<std::string>& args) {
       job.options.steps = rung.steps;
       job.options.max_minutes = 0;
       if (rung.gaussians) {
-        if (train.model == "gan-avatar")
-          return ReportFailure(Status::InvalidArgument("--ladder: '" + text + "' gives a Gaussian count, which the "
-                                                       "gan-avatar model has not"));
+        if (kGanAvatar.Is(train.model))
+          return ReportFailure(Status::InvalidArgument("--ladder: '" + text + "' gives a Gaussian count, which the " +
+                                                       kGanAvatar.Name() + " model has not"));
         job.options.max_gaussians = rung.gaussians;
         job.options.init_gaussians = std::min<int64_t>(job.options.init_gaussians, rung.gaussians);
       }
@@ -191,7 +193,7 @@ int BenchTrain(const std::vector<std::string>& args) {
   const fs::path root = out.empty() ? fs::path(common.workspace) / "bench_train" : fs::path(out);
   // The two models' rungs share names (draft, ladder_500): each model keeps
   // its own folders, so that a ladder of one does not retrain over the other's.
-  if (train.model == "gan-avatar")
+  if (kGanAvatar.Is(train.model))
     for (Job& job : jobs) job.name = "gan_" + job.name;
   if (!json) {
     std::printf("| variant | steps | training time | Gaussians | held-out PSNR / SSIM, head | held-out PSNR / SSIM, frame "

@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "avatar/avatar_train.h"
+#include "avatar/model_table.h"
 #include "core/log.h"
 #include "pipelines/commands.h"
 
@@ -43,8 +44,9 @@ int PackCommand(const std::vector<std::string>& args) {
   HF_LOG(Info) << "pack: " << out << " (" << static_cast<int>(mib + 0.5) << " MiB) for " << train.model << " ("
                << train.preset << ", " << train.resolution << " px, on " << train.device
                << "); train it with headforge-train " << out << " --out DIR"
-               << (train.model == "gan-avatar" ? ", then headforge train --model gan-avatar --generator-from DIR here"
-                                                : "");
+               << (kGanAvatar.Is(train.model)
+                       ? ", then headforge train --model " + kGanAvatar.Name() + " --generator-from DIR here"
+                       : std::string());
   return kExitOk;
 }
 

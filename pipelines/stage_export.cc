@@ -1,4 +1,5 @@
 // The export stage's job: the trained avatar in the formats other tools open, into export/.
+#include "avatar/model_table.h"
 #include "core/hash.h"
 #include "core/log.h"
 #include "core/options.h"
@@ -26,8 +27,9 @@ class ExportJob : public StageJob {
   // training again makes export run again. Whole: a model trained again
   // has the same size, and may differ in a few of its bytes.
   Status AddInputs(Hasher* hasher) const override {
-    for (const char* folder : {"gaussian_style", "gan_avatar"}) {
-      const fs::path model = fs::path(workspace_) / "models" / folder;
+    for (const AvatarModel& entry : kAvatarModels) {
+      const std::string folder(entry.folder);
+      const fs::path model = entry.Dir(workspace_);
       for (const char* file : {"config.json", "model.pt"}) {
         hasher->Add(std::string(folder) + "/" + file);
         if (fs::exists(model / file)) {

@@ -2,6 +2,7 @@
 // into models/<model>/. Its --model defaults to auto: the model is chosen
 // from the aligned cameras when the stage runs (ChooseModel), and said.
 #include "avatar/avatar_train.h"
+#include "avatar/model_table.h"
 #include "core/log.h"
 #include "pipelines/stage_jobs.h"
 
@@ -15,10 +16,10 @@ class TrainJob : public StageJob {
   void Resolve(const StageSettings&, const OptionSet& parsed) override {
     // Each model's preset differs: resolve both now, while `parsed` says
     // which options were given, and pick one when the cameras are known.
-    for (const char* model : {"gaussian-style", "gan-avatar"}) {
-      if (options_.model != "auto" && options_.model != model) continue;
+    for (const AvatarModel& model : kAvatarModels) {
+      if (options_.model != "auto" && !model.Is(options_.model)) continue;
       TrainOptions resolved = options_;
-      resolved.model = model;
+      resolved.model = model.Name();
       if (Status s = ApplyTrainPreset(parsed, &resolved); !s.ok() && preset_.ok()) preset_ = s;
       resolved_.push_back(resolved);
     }
@@ -53,8 +54,8 @@ class TrainJob : public StageJob {
     if (Status s = options->Check(); !s.ok())
       return s.WithContext("--model auto chose " + model + " (" + why + "); give --model to choose");
     HF_LOG(Info) << "train: " << model << " (" << (options_.model == "auto" ? "--model auto: " : "") << why
-                 << (options_.model == "auto" ? "; --model gaussian-style or gan-avatar chooses" : "") << ")";
-    const std::string folder = model == "gan-avatar" ? "gan_avatar" : "gaussian_style";
+                 << (options_.model == "auto" ? "; --model " + AvatarModelNames() + " chooses" : "") << ")";
+    const std::string folder(FindAvatarModel(model)->folder);
     TrainSummary summary;
     HF_RETURN_IF_ERROR(RunTrain(*options, env.workspace->root(), env.settings->face_model,
                                 context.staging / "models" / folder, env.progress, &summary));

@@ -4,6 +4,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "avatar/model_table.h"
 #include "avatar/train/checkpoint.h"
 #include "core/json_io.h"
 
@@ -11,7 +12,7 @@ namespace headforge {
 
 bool IsGanAvatarFolder(const fs::path& dir) {
   nlohmann::json config;
-  return ReadJson(dir / "config.json", &config).ok() && config.value("model", "") == "gan-avatar";
+  return ReadJson(dir / "config.json", &config).ok() && kGanAvatar.Is(config.value("model", ""));
 }
 
 Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avatar) {
@@ -19,7 +20,7 @@ Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avata
   HF_RETURN_IF_ERROR(ReadJson(dir / "config.json", &config));
   const Status damaged = Status::DataError(dir.string() + " does not hold a gan-avatar model this version reads; "
                                                           "run headforge train --model gan-avatar again");
-  if (config.value("model", "") != "gan-avatar" || config.value("version", 0) != 1) return damaged;
+  if (!kGanAvatar.Is(config.value("model", "")) || config.value("version", 0) != 1) return damaged;
   GanAvatarOptions arch;
   try {
     config.at("architecture").get_to(arch);
@@ -77,7 +78,7 @@ Status ExportGanAvatarWeights(const fs::path& model_dir, const nlohmann::json& e
                       "kept)"},
       {"trained_frames", "the frames (rows of frame_codes) the warm-up trained; the others' rows are untrained"}};
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
-  HF_RETURN_IF_ERROR(weights.SaveSafetensors(out_dir / "weights.safetensors", {{"format", "pt"}, {"model", "gan-avatar"}}));
+  HF_RETURN_IF_ERROR(weights.SaveSafetensors(out_dir / "weights.safetensors", {{"format", "pt"}, {"model", kGanAvatar.Name()}}));
   return WriteJsonAtomic(out_dir / "config.json", config, 2);
 }
 

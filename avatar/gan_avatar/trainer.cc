@@ -17,6 +17,8 @@
 #include <utility>
 
 #include "avatar/gan_avatar/avatar_io.h"
+#include "avatar/gan_avatar/gan_trainer.h"
+#include "avatar/model_table.h"
 #include "avatar/nn/augment.h"
 #include "avatar/nn/discriminator.h"
 #include "avatar/nn/functional.h"
@@ -36,113 +38,9 @@
 #include "core/stats_log.h"
 
 namespace headforge {
-namespace {
+namespace gan_training {
 
 namespace F = torch::nn::functional;
-
-// The background of the real images (outside their masks) and of the
-// renders (where the volume is transparent); also the evaluation's.
-constexpr double kBackground = 0.5;
-constexpr int64_t kRenderBatch = 8;  // renders drawn at once outside training
-// A blendshape the frames read back with this correlation to their tracked
-// weights is one the landmark reading sees at the model's resolution.
-constexpr double kReadableCorrelation = 0.5;
-// Padding of the head's box round the tracked mesh, metres (hair).
-constexpr double kBoxPadding = 0.04;
-// The running mean of w follows the batches' with this weight.
-constexpr double kWAverageRate = 0.01;
-// Adam's step for the warm-up's per-frame latents.
-constexpr double kCodeLearningRate = 1e-2;
-
-class GanTrainer : public LoopTrainer {
- public:
-  GanTrainer(const TrainOptions& options, const AvatarDataset& data, torch::Device device)
-      : options_(options), data_(data), device_(device), gen_(at::detail::createCPUGenerator(options.seed)),
-        adam_g_(0.0, 0.99), adam_d_(0.0, 0.99), ada_(options.ada_target), watch_(options.collapse_steps) {}
-
-  Status Start(const fs::path& checkpoint, StatsLog* stats);
-  // The generator of a finished training (options.generator_from) in place
-  // of this one's; Train then trains no GAN.
-  Status ImportGenerator(const fs::path& dir);
-  Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
-  Status TrainMapping(const ImageTracker& track_images, StatsLog* stats, Progress* progress);
-  // Whether the mapping's renders show the expressions that drive them: the
-  // reliably tracked frames of the camera the mapping learnt from (training
-  // and held out alike: the mapping learnt from the GAN's renders, never from
-  // a frame) drive it with their tracked expressions, the renders are read
-  // back by the landmark model and tracker, beside one render of the mean
-  // latent (a mapping that ignored its input) and the frames themselves at
-  // the model's resolution (what the reading can show at that size).
-  Status CheckMappedExpressions(const ImageTracker& track_images, Progress* progress);
-  // The latents z the mapping's renders come from ([mapping_samples,
-  // z_dim]), or undefined for random ones (drawn batch by batch from `random`).
-  torch::Tensor MappingCodes(at::Generator& random) const;
-  // The training views' frames, ascending, once each: the rows of
-  // frame_codes_ the reconstruction loss fits.
-  torch::Tensor TrainingFrames() const;
-  Status Finish(const fs::path& out_dir, TrainSummary* summary);
-  int step() const { return state_.step; }
-
-  // The GAN loop's side (loop.h).
-  void Step(int step, RunningStats* stats) override;
-  std::string DivergenceAdvice() const override {
-    return "lower --lr-network and --lr-discriminator or raise --r1-gamma";
-  }
-  void Describe(int step, nlohmann::json* line) override;
-  bool Evaluate(int step, nlohmann::json* line) override;
-  Status Preview(int step) override { return WritePreview(out_dir_ / "previews", step); }
-  Status Save(const LoopState& state) override { return SaveCheckpoint(checkpoint_, state); }
-  std::string TakeWarning() override { return std::exchange(warning_, std::string()); }
-
- private:
-  class MappingLoop;
-  // The reconstruction loss of a batch of training views: each view's frame
-  // from its own camera with a latent of its frame's own (L1 on the image
-  // and on the raw render).
-  torch::Tensor ReconstructionLoss(RunningStats* stats);
-  bool reconstructing(int step) const { return step <= options_.reconstruction_steps; }
-  // The discriminator's input: the image and the raw render brought to its size.
-  torch::Tensor DualImage(const torch::Tensor& image, const torch::Tensor& raw) const {
-    return torch::cat({image, nn::ResizeBilinear(raw, image.size(2), image.size(3))}, 1);
-  }
-  // Held-out views (or every `stride`-th training view) driven by their
-  // tracked expressions through the mapping, or with the mean latent before
-  // there is one or when `mean_latent`.
-  std::vector<ViewScores> Evaluate(const fs::path& write_dir, int stride, bool mean_latent = false,
-                                   bool training_views = false);
-  // The training view seen most nearly from the front.
-  const AvatarView& FrontalView() const;
-  Status WritePreview(const fs::path& dir, int step);
-  Status SaveCheckpoint(const fs::path& path, const LoopState& state) const;
-  Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
-  SplatCamera RenderCamera(const AvatarView& view) const { return view.view.Downscaled(double(data_.width) / render_w_); }
-  torch::Tensor RenderMean(const std::vector<SplatCamera>& cameras);
-  // Renders of the latents `w` ([M, w_dim]) from `camera` at the output
-  // size, a batch at a time: [M, 3, H, W] on the CPU, in [0, 1].
-  torch::Tensor RenderLatents(const torch::Tensor& w, const SplatCamera& camera);
-
-  TrainOptions options_;
-  const AvatarDataset& data_;
-  torch::Device device_;
-  at::Generator gen_;
-  GanAvatarOptions arch_;
-  GanAvatar avatar_;  // the generator, the mapping (after the GAN) and the mean latent, as render draws them
-  nn::Discriminator discriminator_{nullptr};
-  std::vector<torch::Tensor> g_params_, d_params_;
-  Adam adam_g_, adam_d_;
-  nn::AdaController ada_;
-  CollapseWatch watch_;
-  std::string warning_;                   // a collapse warning to log at the end of the step
-  torch::Tensor frame_codes_;             // [frames, z_dim]: the warm-up's latent per frame
-  bool codes_trained_ = false;            // the training frames' rows of frame_codes_ were fitted
-  double mapping_loss_ = 0;               // the mapping's last loss
-  RenderExpressions samples_;
-  nlohmann::json expression_check_;       // CheckMappedExpressions' figures, for eval.json
-  torch::Tensor reals_, conditions_;      // [N, 3, H, W] over the background; [N, 16]
-  int render_w_ = 0, render_h_ = 0;
-  LoopState state_;
-  fs::path out_dir_, checkpoint_;
-};
 
 Status GanTrainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   GanRenderSize(options_, data_, &render_w_, &render_h_);
@@ -455,255 +353,6 @@ Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, St
   return SaveCheckpoint(checkpoint, state_);
 }
 
-torch::Tensor GanTrainer::TrainingFrames() const {
-  std::vector<int64_t> frames;
-  for (const AvatarView& v : data_.train) frames.push_back(v.frame);
-  std::sort(frames.begin(), frames.end());
-  frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
-  return torch::tensor(frames, torch::kLong);
-}
-
-torch::Tensor GanTrainer::MappingCodes(at::Generator& random) const {
-  if (options_.mapping_latents != "frames") return torch::Tensor();
-  const torch::Tensor trained = frame_codes_.detach().cpu().index_select(0, TrainingFrames());
-  const int64_t count = trained.size(0), samples = options_.mapping_samples;
-  // Each training frame's latent once (evenly chosen where the samples are
-  // fewer), then blends of two frames' latents (expressions between them).
-  std::vector<torch::Tensor> rows;
-  const int64_t once = std::min(count, samples);
-  for (int64_t k = 0; k < once; ++k) rows.push_back(trained[k * count / once]);
-  for (int64_t k = count; k < samples; ++k) {
-    const int64_t a = torch::randint(count, {1}, random).item<int64_t>();
-    const int64_t b = torch::randint(count, {1}, random).item<int64_t>();
-    const double t = torch::rand({1}, random).item<double>();
-    rows.push_back(torch::lerp(trained[a], trained[b], t));
-  }
-  HF_LOG(Info) << "train: gan-avatar: the expression mapping's " << samples << " renders come from the warm-up's "
-               << "latents of " << once << " of the " << count << " training frames"
-               << (samples > count ? ", then blends of two" : "");
-  return torch::stack(rows);
-}
-
-// The expression mapping's steps: expressions of a batch of the GAN's
-// renders to their latents (or, with --mapping-loss image, to the renders).
-class GanTrainer::MappingLoop : public LoopTrainer {
- public:
-  MappingLoop(GanTrainer& trainer, const torch::Tensor& expressions, const torch::Tensor& w,
-              const torch::Tensor& images, at::Generator& random, Adam* adam)
-      : t_(trainer), expressions_(expressions), w_(w), images_(images), random_(random), adam_(adam) {}
-
-  void Step(int step, RunningStats* stats) override {
-    const int64_t count = expressions_.size(0), batch = std::min<int64_t>(t_.options_.batch, count);
-    const torch::Tensor index = torch::randint(count, {batch}, random_, torch::kLong).to(t_.device_);
-    const torch::Tensor w = t_.avatar_.mapping->forward(expressions_.index_select(0, index));
-    torch::Tensor loss;
-    if (t_.options_.mapping_loss == "latent") {
-      loss = (w - w_.index_select(0, index)).pow(2).mean();
-    } else {
-      const SplatCamera camera = t_.RenderCamera(t_.FrontalView());
-      const torch::Tensor render = t_.avatar_.generator
-                                       ->Render(w, std::vector<SplatCamera>(size_t(batch), camera), t_.data_.width,
-                                                t_.data_.height, kBackground, nullptr)
-                                       .image;
-      loss = (render - images_.index_select(0, index)).abs().mean();
-    }
-    loss.backward();
-    adam_->Step();
-    adam_->ZeroGrad();
-    t_.mapping_loss_ = loss.item<double>();
-    stats->Add("mapping_loss", t_.mapping_loss_);
-  }
-  std::string DivergenceAdvice() const override { return "try --mapping-loss latent"; }
-  bool Evaluate(int step, nlohmann::json* line) override {
-    const ViewScores s = MeanScores(t_.Evaluate({}, 5));
-    (*line)["test_psnr_masked"] = s.psnr_masked;
-    (*line)["test_ssim_masked"] = s.ssim_masked;
-    HF_LOG(Info) << "train: expression mapping step " << step << ", held-out PSNR " << s.psnr_masked
-                 << " dB over the head (every 5th view)";
-    return true;
-  }
-
- private:
-  GanTrainer& t_;
-  torch::Tensor expressions_, w_, images_;
-  at::Generator& random_;
-  Adam* adam_;
-};
-
-Status GanTrainer::TrainMapping(const ImageTracker& track_images, StatsLog* stats, Progress* progress) {
-  if (options_.mapping_steps == 0) return Status::Ok();
-  if (!track_images) {
-    HF_LOG(Info) << "train: gan-avatar: no expression mapping in this build (its tracker needs the full one); the "
-                    "model draws every frame with the mean latent until headforge train --generator-from adds it";
-    return Status::Ok();
-  }
-  if (options_.mapping_latents == "frames" && !codes_trained_)  // TrainOptions::Check and ImportGenerator refuse it first
-    return Status::Internal("train: --mapping-latents frames without the training frames' latents");
-  const auto start = std::chrono::steady_clock::now();
-  for (torch::Tensor& p : g_params_) p.requires_grad_(false);  // the generator is frozen
-  const SplatCamera camera = RenderCamera(FrontalView());
-  // Its own random stream: the same renders whether the GAN was trained here
-  // or imported (--generator-from).
-  at::Generator random = at::detail::createCPUGenerator(uint64_t(options_.seed) + 13);
-  const int64_t samples = options_.mapping_samples;
-  const torch::Tensor codes = MappingCodes(random);
-  std::vector<torch::Tensor> ws, renders;
-  progress->Start("train: gan-avatar renders for the expression mapping", samples);
-  {
-    torch::NoGradGuard no_grad;
-    for (int64_t first = 0; first < samples; first += kRenderBatch) {
-      const int64_t n = std::min<int64_t>(kRenderBatch, samples - first);
-      const torch::Tensor z =
-          codes.defined() ? codes.narrow(0, first, n) : torch::randn({n, arch_.z_dim}, random);
-      ws.push_back(avatar_.generator->Map(z.to(device_)));
-      renders.push_back(RenderLatents(ws.back(), camera));
-      progress->Advance(n);
-      if (InterruptRequested()) {
-        progress->Finish("interrupted");
-        return Status::Interrupted("train: stopped while rendering the expression mapping's samples; the GAN is "
-                                   "kept: run the same command again to go on from it");
-      }
-    }
-  }
-  progress->Finish(std::to_string(samples) + " renders");
-  HF_RETURN_IF_ERROR(track_images(torch::cat(renders), {camera}, progress, &samples_));
-  samples_.w = torch::cat(ws).cpu().index_select(0, samples_.index);
-  const int64_t expressions = samples_.expressions.size(1);
-  torch::manual_seed(uint64_t(options_.seed) + 11);
-  avatar_.mapping = ExpressionMapping(expressions, arch_.w_dim);
-  avatar_.mapping->to(device_);
-  std::vector<torch::Tensor> params = avatar_.mapping->parameters();
-  Adam adam;
-  for (torch::Tensor& t : params) adam.Add(&t, 1e-3, false);
-  const torch::Tensor e_all = samples_.expressions.to(device_), w_all = samples_.w.to(device_),
-                      images = samples_.images.to(device_);
-  MappingLoop mapping(*this, e_all, w_all, images, random, &adam);
-  LoopOptions loop = TrainLoopOptions(options_, "train: gan-avatar expression mapping", options_.mapping_steps);
-  loop.step_key = "mapping_step";
-  loop.tags = {{"mapping_loss_kind", options_.mapping_loss}};
-  loop.checkpoint_every = 0;  // a few minutes at most: an interrupt keeps the GAN and starts the mapping over
-  loop.resume_hint = "the GAN is kept: run the same command again to train the mapping from it";
-  loop.what = "the expression mapping";
-  loop.clock_offset = state_.seconds + SecondsSince(start);
-  LoopState state;
-  HF_RETURN_IF_ERROR(RunLoop(loop, &mapping, &state, stats, progress));
-  progress->Finish(std::to_string(state.step) + " steps");
-  state_.seconds += SecondsSince(start);
-  return Status::Ok();
-}
-
-Status GanTrainer::CheckMappedExpressions(const ImageTracker& track_images, Progress* progress) {
-  if (!avatar_.mapping || !track_images) return Status::Ok();
-  torch::NoGradGuard no_grad;
-  const int64_t expressions = samples_.expressions.size(1);
-  // The frames of the camera the mapping learnt from, at most as many as its
-  // own renders, evenly through the capture.
-  const AvatarView& frontal = FrontalView();
-  std::map<int, const AvatarView*> by_frame;
-  for (const std::vector<AvatarView>* list : {&data_.train, &data_.test})
-    for (const AvatarView& v : *list)
-      if (v.camera == frontal.camera && !v.unreliable) by_frame.emplace(v.frame, &v);
-  std::vector<const AvatarView*> all, chosen;
-  for (const auto& [frame, v] : by_frame) all.push_back(v);
-  const size_t count = std::min(all.size(), size_t(std::max(options_.mapping_samples, 2)));
-  for (size_t k = 0; k < count; ++k) chosen.push_back(all[k * all.size() / count]);
-  if (chosen.size() < 2) return Status::Ok();
-  std::vector<torch::Tensor> rows, frames;
-  std::vector<SplatCamera> cameras;
-  for (const AvatarView* v : chosen) {
-    rows.push_back(v->condition.narrow(0, 0, expressions).to(torch::kFloat32));
-    frames.push_back(v->image * v->mask + kBackground * (1 - v->mask));
-    cameras.push_back(RenderCamera(*v));
-  }
-  const torch::Tensor driving = torch::stack(rows);
-  const int64_t n = driving.size(0);
-  // The mapping's renders from its camera, the mean latent's last.
-  const torch::Tensor w =
-      torch::cat({avatar_.mapping->forward(driving.to(device_)), avatar_.w_average.unsqueeze(0).to(device_)}, 0);
-  const SplatCamera camera = RenderCamera(frontal);
-  // A measurement: a reading that fails is said and the model kept (only a
-  // stop request stops the stage).
-  Status status = Status::Ok();
-  auto failed = [&](Status read) {
-    if (read.ok()) return false;
-    if (read.code() == Status::Code::kInterrupted) status = read;
-    else
-      HF_LOG(Warning) << "train: gan-avatar: could not read back the mapping's renders or the frames ("
-                      << read.message() << "); eval.json has no expression_agreement";
-    return true;
-  };
-  RenderExpressions rendered, seen;
-  if (failed(track_images(RenderLatents(w, camera), {camera}, progress, &rendered))) return status;
-  // The frames themselves, at the same size over the same background, each
-  // from its own camera: what the tracker can read back at this size.
-  if (failed(track_images(torch::stack(frames), cameras, progress, &seen))) return status;
-  // Rows both readings fitted (where_seen: each frame's row in `seen`, or -1).
-  torch::Tensor where_seen = torch::full({n + 1}, -1, torch::kLong);
-  where_seen.index_put_({seen.index}, torch::arange(seen.index.size(0)));
-  const torch::Tensor both = (rendered.index < n) & (where_seen.index_select(0, rendered.index) >= 0);
-  if (!(rendered.index == n).any().item<bool>() || both.sum().item<int64_t>() < 2) {
-    HF_LOG(Warning) << "train: gan-avatar: too few of the mapping's renders tracked to say whether they show their "
-                       "expressions";
-    return Status::Ok();
-  }
-  const torch::Tensor kept = rendered.index.index({both});
-  const torch::Tensor baseline = rendered.expressions.index({rendered.index == n}).squeeze(0);
-  const torch::Tensor truth = driving.index_select(0, kept);
-  const int all_shapes = int(expressions);
-  const ExpressionAgreement a =
-      CompareExpressions(truth, rendered.expressions.index({both}), baseline, data_.expression_names, all_shapes);
-  const ExpressionAgreement f =
-      CompareExpressions(truth, seen.expressions.index_select(0, where_seen.index_select(0, kept)), baseline,
-                         data_.expression_names, all_shapes);
-  // The blendshapes the frames themselves read back (correlation 0.5 or
-  // more: the reading sees them at this size), the most varying first.
-  nlohmann::json shapes = nlohmann::json::array();
-  std::string line;
-  double readable_correlation = 0, readable_frames_correlation = 0;
-  int readable = 0;
-  // How much each blendshape varies over the mapping's own renders (read
-  // back): what it could learn.
-  const torch::Tensor sample_spread = samples_.expressions.to(torch::kFloat64).std(0, /*unbiased=*/false);
-  for (size_t k = 0; k < a.blendshapes.size(); ++k) {
-    const ExpressionAgreement::Blendshape &b = a.blendshapes[k], &g = f.blendshapes[k];
-    if (g.correlation < kReadableCorrelation) continue;
-    readable_correlation += b.correlation;
-    readable_frames_correlation += g.correlation;
-    if (++readable > 5) continue;
-    shapes.push_back({{"name", b.name}, {"driving_std", b.driving_std}, {"error", b.error},
-                      {"correlation", b.correlation}, {"mean_latent_error", b.baseline_error},
-                      {"frames_error", g.error}, {"frames_correlation", g.correlation},
-                      {"samples_std", sample_spread[b.column].item<double>()}});
-    char text[128];
-    std::snprintf(text, sizeof(text), "%s%s r = %.2f (frames %.2f)", line.empty() ? "" : ", ", b.name.c_str(),
-                  b.correlation, g.correlation);
-    line += text;
-  }
-  expression_check_ = {
-      {"what", "frames of " + frontal.camera + " (reliably tracked; at most --mapping-samples, evenly spread) "
-               "driving the mapping with their tracked expressions, rendered from the mapping's camera and read "
-               "back by the landmark model and tracker, beside one render of the mean latent and the frames "
-               "themselves at the model's resolution read back the same way"},
-      {"frames", a.frames},
-      {"of", n},
-      {"error", a.error},
-      {"mean_latent_error", a.baseline_error},
-      {"frames_error", f.error},
-      {"readable_blendshapes", readable},
-      {"readable_mean_correlation", readable > 0 ? readable_correlation / readable : 0.0},
-      {"readable_frames_mean_correlation", readable > 0 ? readable_frames_correlation / readable : 0.0},
-      {"renders_flagged", rendered.flagged},
-      {"renders_median_residual_px", rendered.median_residual_px},
-      {"frames_flagged", seen.flagged},
-      {"frames_median_residual_px", seen.median_residual_px},
-      {"blendshapes", shapes}};
-  HF_LOG(Info) << "train: gan-avatar: the mapping's renders of " << a.frames << " frames read back within " << a.error
-               << " of their expressions (mean absolute weight; the mean latent " << a.baseline_error
-               << ", the frames themselves at this size " << f.error << "); of the " << readable
-               << " blendshapes the frames read back, the most varying: " << (line.empty() ? "none" : line);
-  return Status::Ok();
-}
-
 Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "held_out"));
   const std::vector<ViewScores> scores = Evaluate(out_dir / "held_out", 1);
@@ -751,7 +400,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   }
   HF_RETURN_IF_ERROR(model.Save(out_dir / "model.pt"));
   const nlohmann::json config = {
-      {"model", "gan-avatar"},
+      {"model", kGanAvatar.name},
       {"version", 1},
       {"architecture", arch_},
       {"expression_mapping", {{"expressions", data_.expression_names}, {"hidden", 256}, {"layers", 2},
@@ -763,7 +412,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
       {"training", {{"steps", state_.step}, {"batch", options_.batch}, {"seconds", state_.seconds},
                     {"seed", options_.seed}, {"preset", options_.preset}, {"holdout", options_.holdout},
                     {"holdout_order", options_.holdout_order}, {"holdout_cameras", options_.holdout_cameras},
-                    {"mask", options_.MaskFor("gan-avatar")}, {"mask_hair", options_.mask_hair},
+                    {"mask", options_.MaskFor(kGanAvatar)}, {"mask_hair", options_.mask_hair},
                     {"mask_skin", options_.mask_skin},
                     {"generator_from", options_.generator_from}}},
       {"options", ToJson(options_)}};
@@ -774,7 +423,10 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   return Status::Ok();
 }
 
-}  // namespace
+}  // namespace gan_training
+
+using gan_training::GanTrainer;
+using gan_training::kBoxPadding;
 
 void GanRenderSize(const TrainOptions& options, const AvatarDataset& data, int* width, int* height) {
   const double factor = double(options.render_resolution) / std::max(data.width, data.height);

@@ -8,6 +8,7 @@
 
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/metrics/image_metrics.h"
+#include "avatar/model_table.h"
 #include "avatar/nn/functional.h"
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/checkpoint.h"
@@ -120,14 +121,14 @@ std::vector<std::pair<std::string, torch::Tensor>> NamedTensors(const GaussianSt
 
 nlohmann::json ConfigJson(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data) {
   nlohmann::json config = {{"version", 1},
-          {"model", "gaussian-style"},
+          {"model", kGaussianStyle.name},
           {"architecture", OptionsJson(avatar.model->options())},
           {"frames", data.num_frames},
           {"deform", avatar.deform},
           {"resolution", options.resolution},
           {"holdout", options.holdout},
           {"holdout_order", options.holdout_order},
-          {"mask", options.MaskFor("gaussian-style")},
+          {"mask", options.MaskFor(kGaussianStyle)},
           {"mask_hair", options.mask_hair},
           {"mask_skin", options.mask_skin},
           {"width", data.width},
@@ -149,7 +150,7 @@ Status SaveAvatar(const GaussianStyleAvatar& avatar, const TrainOptions& options
 Status SaveAvatarSafetensors(const GaussianStyleAvatar& avatar, const nlohmann::json& config, const fs::path& dir) {
   SafeTensorsFile file;
   file.metadata["format"] = "pt";
-  file.metadata["model"] = "gaussian-style";
+  file.metadata["model"] = kGaussianStyle.Name();
   try {
     for (const auto& [name, tensor] : NamedTensors(avatar)) file.tensors.push_back(ToSafeTensor(name, tensor));
   } catch (const c10::Error& e) {

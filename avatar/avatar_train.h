@@ -47,6 +47,14 @@ struct TrainOptions {
   double ssim_weight = 0.2;     // loss = (1 - w) L1 + w (1 - SSIM)
   double holdout = 0.2;         // the fraction of the frames never trained on
   std::string holdout_order = "auto";  // which: last, interleaved or auto (DatasetOptions)
+  // gaussian-style: the fraction of the training frames set aside as
+  // validation frames (never trained on; the last ones, or every
+  // round(1 / validation)-th with an interleaved hold-out), scored at each
+  // evaluation (none without evaluations: eval_every 0); and, when
+  // `patience` > 0, stage 2 stops once their score has not risen for that
+  // many evaluations. The held-out frames play no part.
+  double validation = 0;
+  int patience = 0;
   std::vector<std::string> holdout_cameras;  // cameras never trained on, scored with the held-out frames
   // The head masks trained and scored on (DatasetOptions::mask): ingest,
   // mesh, or auto (mesh for gaussian-style, which trains on tracked frames;

@@ -37,6 +37,8 @@ nlohmann::json ToJson(const TrainOptions& options) {
   j["pose_lr"] = options.pose_lr;
   j["mapping_latents"] = options.mapping_latents;
   j["decoder_max_minutes"] = options.decoder_max_minutes;
+  j["validation"] = options.validation;
+  j["patience"] = options.patience;
   return j;
 }
 
@@ -48,6 +50,8 @@ TrainOptions TrainOptionsFromJson(const nlohmann::json& j) {
   options.pose_lr = j.value("pose_lr", options.pose_lr);
   options.mapping_latents = j.value("mapping_latents", options.mapping_latents);
   options.decoder_max_minutes = j.value("decoder_max_minutes", options.decoder_max_minutes);
+  options.validation = j.value("validation", options.validation);
+  options.patience = j.value("patience", options.patience);
   return options;
 }
 
@@ -59,6 +63,9 @@ Status TrainOptions::Check() const {
   if (resolution < 16 || resolution > 4096) return Status::InvalidArgument("train: --resolution must be in [16, 4096]");
   if (steps < 1) return Status::InvalidArgument("train: --steps must be at least 1");
   if (!(max_minutes >= 0)) return Status::InvalidArgument("train: --max-minutes must be zero or positive");
+  if (!(validation >= 0 && validation <= 0.5))
+    return Status::InvalidArgument("train: --validation must be in [0, 0.5]");
+  if (patience < 0) return Status::InvalidArgument("train: --patience must be zero or positive");
   if (!(decoder_max_minutes >= 0))
     return Status::InvalidArgument("train: --decoder-max-minutes must be zero or positive");
   if (!(canonical_fraction >= 0 && canonical_fraction <= 1))

@@ -1518,5 +1518,41 @@ TEST(TrainHardCases, ATimeLimitBeforeStageTwoIsSaid) {
   }
 }
 
+// --validation sets the last training frames aside (the held-out frames
+// stay as they were) and --patience stops stage 2 once their score stops
+// rising; stage 1's scores do not count, since that avatar does not follow
+// the expressions.
+TEST(TrainHardCases, ValidationFramesChooseWhenStageTwoStops) {
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("validation"));
+  std::vector<std::string> args = TrainArgs(ws);
+  *(std::find(args.begin(), args.end(), "--eval-every") + 1) = "10";
+  args.insert(args.end(), {"--validation", "0.1", "--patience", "1", "--log-level", "info"});
+  const Result r = Headforge(args);
+  ASSERT_EQ(r.code, 0) << r.err;
+  // 125 frames, the last 25 held out; 10 of the 100 training frames set aside.
+  EXPECT_NE(r.err.find("10 training frames (10 views) set aside as validation frames"), std::string::npos) << r.err;
+  nlohmann::json eval;
+  ASSERT_TRUE(ReadJson(ws / kModelDir / "eval.json", &eval).ok());
+  EXPECT_EQ(eval["views"].size(), 25u);
+  const nlohmann::json& v = eval.at("validation");
+  EXPECT_EQ(v["views"], 10);
+  const int stopped = v["stopped_at"].get<int>(), best = v["best_step"].get<int>();
+  EXPECT_GT(best, 150) << "stage 1's scores must not count";
+  EXPECT_GT(stopped, best);
+  EXPECT_LT(stopped, 300) << "with an evaluation every 10 steps and a patience of one, stage 2 stops early";
+  EXPECT_NE(r.err.find("stopped at step " + std::to_string(stopped) + " of 300"), std::string::npos) << r.err;
+  int evaluations = 0, last_step = 0;
+  for (const auto& line : StatsLines(ws / kModelDir / "stats.jsonl")) {
+    last_step = std::max(last_step, line.value("step", 0));
+    if (!line.contains("validation_psnr_masked")) continue;
+    ++evaluations;
+    EXPECT_TRUE(std::isfinite(line["validation_psnr_masked"].get<double>())) << line;
+  }
+  EXPECT_EQ(evaluations, stopped / 10);
+  EXPECT_EQ(last_step, stopped);
+  EXPECT_NE(Headforge({"status", ws.string()}).out.find("stopped at step " + std::to_string(stopped)),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace headforge

@@ -6,9 +6,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <set>
 
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/metrics/image_metrics.h"
@@ -73,6 +75,7 @@ class Trainer : public LoopTrainer {
   bool Evaluate(int step, nlohmann::json* line) override;
   Status Preview(int step) override { return WritePreview(out_dir_ / "previews", step); }
   Status Save(const LoopState& state) override { return SaveCheckpoint(checkpoint_, state); }
+  bool Done(int step, std::string* why) override;
 
  private:
   void Densify(int step);
@@ -98,6 +101,11 @@ class Trainer : public LoopTrainer {
   double lr_means_ = 0;  // the means' first learning rate; it decays to 1% over the steps
   // [training views, 6]: each one's head-pose correction (--pose-lr), zero at first.
   torch::Tensor pose_corrections_;
+  // The validation frames' best masked PSNR in stage 2, its step, and the
+  // evaluations since (--validation, --patience).
+  double best_validation_ = -1;
+  int best_validation_step_ = 0, since_best_ = 0;
+  int stopped_at_ = 0;  // > 0: stopped there by --patience
 };
 
 Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
@@ -228,8 +236,38 @@ bool Trainer::Evaluate(int step, nlohmann::json* line) {
   (*line)["test_psnr_masked"] = s.psnr_masked;
   (*line)["test_ssim_masked"] = s.ssim_masked;
   (*line)["gaussians"] = avatar_.gaussians.params.size();
+  std::string validation;
+  if (!data_.validation.empty()) {
+    avatar_.deform = deform_now(step);
+    const double v = MeanScores(EvaluateValidation(avatar_, data_)).psnr_masked;
+    avatar_.deform = deform;
+    (*line)["validation_psnr_masked"] = v;
+    validation = ", validation " + std::to_string(v).substr(0, 5) + " dB";
+    // Only stage 2 counts: stage 1's avatar does not follow the expressions.
+    if (deform_now(step)) {
+      if (v > best_validation_) {
+        best_validation_ = v;
+        best_validation_step_ = step;
+        since_best_ = 0;
+      } else {
+        ++since_best_;
+      }
+    }
+  }
   HF_LOG(Info) << "train: step " << step << ", " << avatar_.gaussians.params.size() << " Gaussians, held-out PSNR "
-               << s.psnr_masked << " dB over the head (every 5th view)";
+               << s.psnr_masked << " dB over the head (every 5th view)" << validation;
+  return true;
+}
+
+bool Trainer::Done(int step, std::string* why) {
+  if (options_.patience <= 0 || data_.validation.empty() || !deform_now(step) || since_best_ < options_.patience)
+    return false;
+  char text[200];
+  std::snprintf(text, sizeof(text),
+                "the validation frames' score has not risen for %d evaluations (best %.2f dB at step %d; --patience)",
+                since_best_, best_validation_, best_validation_step_);
+  *why = text;
+  stopped_at_ = step;
   return true;
 }
 
@@ -278,6 +316,9 @@ Status Trainer::SaveCheckpoint(const fs::path& path, const LoopState& state) con
   densify_->SaveState("densify.", &c);
   c.Put("generator", gen_.get_state());
   c.Put("order", order_);
+  c.Put("validation.best", best_validation_);
+  c.Put("validation.best_step", int64_t(best_validation_step_));
+  c.Put("validation.since", int64_t(since_best_));
   return c.Save(path);
 }
 
@@ -286,7 +327,12 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   HF_RETURN_IF_ERROR(Checkpoint::Load(path, &c));
   const Status damaged = Status::DataError(path.string() + " is not this training's checkpoint; delete it to start over");
   torch::Tensor generator;
-  if (!state_.Load(c) || !c.Get("generator", &generator)) return damaged;
+  int64_t best_step = 0, since = 0;
+  if (!state_.Load(c) || !c.Get("generator", &generator) || !c.Get("validation.best", &best_validation_) ||
+      !c.Get("validation.best_step", &best_step) || !c.Get("validation.since", &since))
+    return damaged;
+  best_validation_step_ = int(best_step);
+  since_best_ = int(since);
   GaussianParams& p = avatar_.gaussians.params;
   const auto rows = p.All();
   for (size_t i = 0; i < rows.size(); ++i) {
@@ -324,9 +370,21 @@ Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, Stats
 
 Status Trainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   if (pose_corrections_.defined()) avatar_.pose_corrections = pose_corrections_.detach().clone();
-  HF_RETURN_IF_ERROR(FinishAvatar(avatar_, options_, data_, out_dir, nlohmann::json::object(), summary));
+  nlohmann::json extra = nlohmann::json::object();
+  if (!data_.validation.empty()) {
+    // The end's own validation score beside the best stage 2 reached.
+    const double end = MeanScores(EvaluateValidation(avatar_, data_)).psnr_masked;
+    extra["validation"] = {{"views", data_.validation.size()}, {"psnr_masked", end},
+                           {"best_psnr_masked", best_validation_}, {"best_step", best_validation_step_},
+                           {"stopped_at", stopped_at_}, {"patience", options_.patience}};
+  }
+  HF_RETURN_IF_ERROR(FinishAvatar(avatar_, options_, data_, out_dir, extra, summary));
   summary->steps = state_.step;
   summary->seconds = state_.seconds;
+  if (stopped_at_ > 0)
+    summary->note = "stopped at step " + std::to_string(stopped_at_) + " of " + std::to_string(options_.steps) +
+                    ": the validation frames' score had stopped rising (--patience " +
+                    std::to_string(options_.patience) + ")";
   if (options_.deform && options_.max_minutes > 0 && state_.step <= stage1_steps_ && stage1_steps_ < options_.steps) {
     // The time limit came first: the deformation never trained.
     summary->note = "stage 1 only: the time limit came before stage 2 (step " + std::to_string(stage1_steps_ + 1) +
@@ -338,12 +396,16 @@ Status Trainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
 
 }  // namespace
 
-std::vector<ViewScores> EvaluateAvatar(GaussianStyleAvatar& avatar, const AvatarDataset& data, int stride,
-                                       const fs::path& write_dir, bool training_views) {
+namespace {
+
+// `views` drawn as the avatar draws them: `training_views` with their own
+// latents and pose corrections, others with frame 0's latent.
+std::vector<ViewScores> ScoreViews(GaussianStyleAvatar& avatar, const AvatarDataset& data,
+                                   const std::vector<AvatarView>& views, int stride, const fs::path& write_dir,
+                                   bool training_views) {
   torch::NoGradGuard no_grad;
   const torch::Device device = avatar.gaussians.params.means.device();
   const torch::Tensor background = torch::full({3}, kEvalBackground, torch::TensorOptions().device(device));
-  const std::vector<AvatarView>& views = training_views ? data.train : data.test;
   std::vector<ViewScores> scores;
   for (size_t i = 0; i < views.size(); i += size_t(std::max(stride, 1))) {
     const AvatarView& view = views[i];
@@ -367,6 +429,38 @@ std::vector<ViewScores> EvaluateAvatar(GaussianStyleAvatar& avatar, const Avatar
         .ok();
   }
   return scores;
+}
+
+}  // namespace
+
+std::vector<ViewScores> EvaluateAvatar(GaussianStyleAvatar& avatar, const AvatarDataset& data, int stride,
+                                       const fs::path& write_dir, bool training_views) {
+  return ScoreViews(avatar, data, training_views ? data.train : data.test, stride, write_dir, training_views);
+}
+
+std::vector<ViewScores> EvaluateValidation(GaussianStyleAvatar& avatar, const AvatarDataset& data) {
+  return ScoreViews(avatar, data, data.validation, 1, {}, false);
+}
+
+int SetValidationAside(double fraction, AvatarDataset* data) {
+  std::vector<int> frames;
+  for (const AvatarView& v : data->train) frames.push_back(v.frame);
+  std::sort(frames.begin(), frames.end());
+  frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
+  const int n = int(frames.size());
+  std::set<int> aside;
+  if (data->holdout_every > 0) {
+    const int stride = HoldoutStride(fraction);
+    for (int i = stride / 2; i < n; i += stride) aside.insert(frames[size_t(i)]);
+  } else {
+    const int count = std::max(1, int(std::lround(fraction * n)));
+    for (int i = std::max(0, n - count); i < n; ++i) aside.insert(frames[size_t(i)]);
+  }
+  if (fraction <= 0 || n - int(aside.size()) < kFewestTrainingFrames) return 0;
+  std::vector<AvatarView> kept;
+  for (AvatarView& v : data->train) (aside.count(v.frame) ? data->validation : kept).push_back(std::move(v));
+  data->train = std::move(kept);
+  return int(aside.size());
 }
 
 int64_t PruneUnseenGaussians(GaussianStyleAvatar& avatar, const AvatarDataset& data) {
@@ -436,8 +530,17 @@ Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, co
   return Status::Ok();
 }
 
-Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& data, const fs::path& out_dir,
+Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& loaded, const fs::path& out_dir,
                           StatsLog* stats, Progress* progress, TrainSummary* summary) {
+  // The validation frames (--validation) leave training here, for every stage.
+  AvatarDataset data = loaded;
+  if (options.validation > 0 && options.eval_every > 0) {
+    if (const int frames = SetValidationAside(options.validation, &data); frames > 0)
+      HF_LOG(Info) << "train: " << frames << " training frames (" << data.validation.size()
+                   << " views) set aside as validation frames, to choose when stage 2 stops";
+    else
+      HF_LOG(Warning) << "train: too few training frames to set any aside for --validation; training on all";
+  }
   torch::Device device = torch::kCPU;
   HF_RETURN_IF_ERROR(ParseDevice("train", options.device, &device));
   const fs::path checkpoint = out_dir / "checkpoint.pt", decoder_checkpoint = out_dir / "decoder_checkpoint.pt";

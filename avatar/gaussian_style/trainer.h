@@ -79,6 +79,13 @@ Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const s
 // each render | target | error written into `write_dir` when given.
 std::vector<ViewScores> EvaluateAvatar(GaussianStyleAvatar& avatar, const AvatarDataset& data, int stride,
                                        const fs::path& write_dir, bool training_views = false);
+// The same for the validation views, drawn as the held-out ones are.
+std::vector<ViewScores> EvaluateValidation(GaussianStyleAvatar& avatar, const AvatarDataset& data);
+// `fraction` of `data`'s training frames (all their views) moved from
+// data->train to data->validation: the last ones, or every
+// round(1 / fraction)-th when the hold-out is interleaved. Nothing moves
+// when fewer than kFewestTrainingFrames would be left; returns the frames moved.
+int SetValidationAside(double fraction, AvatarDataset* data);
 // The held-out views' scores as eval.json (with `extra` merged in), the
 // model file, and the summary's figures.
 // Removes the Gaussians whose centre no training view shows over the person

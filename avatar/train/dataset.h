@@ -88,6 +88,10 @@ struct AvatarDataset {
   int first_test_frame = 0;            // frames from here on are held out
   int holdout_every = 0;               // > 0: so is every frame f with f % holdout_every == holdout_every / 2
   std::vector<AvatarView> train, test;
+  // Training frames set aside to choose when training stops (never trained
+  // on, never held out): filled by the trainer (SetValidationAside), not by
+  // the loader or a pack.
+  std::vector<AvatarView> validation;
   std::vector<std::string> expression_names;
   // The subject's mesh: identity shape [V, 3] (head frame, metres), the
   // expression basis [V * 3, E] and triangles [T, 3] (int64).

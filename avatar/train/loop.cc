@@ -132,6 +132,17 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
     }
     if (boundary || (options.preview_every > 0 && step % options.preview_every == 0))
       HF_RETURN_IF_ERROR(trainer->Preview(step));
+    if (std::string why; !last && trainer->Done(step, &why)) {
+      if (!state->stats.empty()) {
+        nlohmann::json line = line_for(step);
+        state->stats.TakeMeans(&line);
+        trainer->Describe(step, &line);
+        line["seconds"] = options.clock_offset + elapsed();
+        stats->Append(line.dump());
+      }
+      HF_LOG(Info) << options.label << ": stopped at step " << step << " of " << options.steps << ": " << why;
+      break;
+    }
     if (out_of_time) {
       HF_LOG(Info) << options.label << ": time limit of " << Number(options.max_minutes) << " min reached at step "
                    << step;

@@ -107,6 +107,9 @@ class LoopTrainer {
   virtual Status Save(const LoopState& state) { return Status::Ok(); }
   // A warning the last step raised (a collapsing GAN), or empty.
   virtual std::string TakeWarning() { return {}; }
+  // True when training should end after `step` (asked after each
+  // evaluation: a validation score that stopped rising), saying why.
+  virtual bool Done(int step, std::string* why) { return false; }
 };
 
 // Runs `trainer` from state->step + 1 to options.steps (or the time limit):

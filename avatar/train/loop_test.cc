@@ -47,8 +47,13 @@ class CountingTrainer : public LoopTrainer {
     return Status::Ok();
   }
   std::string TakeWarning() override { return std::exchange(warning_, std::string()); }
+  bool Done(int step, std::string* why) override {
+    if (step != done_at) return false;
+    *why = "enough";
+    return true;
+  }
 
-  int nan_at = -1, warn_at = -1, boundary_at = -1, interrupt_at = -1;
+  int nan_at = -1, warn_at = -1, boundary_at = -1, interrupt_at = -1, done_at = -1;
   std::vector<int> steps, evaluated, previews, saved;
   Checkpoint last_saved;
 
@@ -130,6 +135,23 @@ TEST(TrainingLoop, StopsAtTheTimeLimitWithALastLine) {
   ASSERT_EQ(log.size(), 1u);
   EXPECT_DOUBLE_EQ(Lines(log)[0]["loss"].get<double>(), 1.0);
   EXPECT_TRUE(trainer.saved.empty());
+}
+
+TEST(TrainingLoop, ATrainerThatIsDoneEndsItWithTheStepsFiguresLogged) {
+  CountingTrainer trainer;
+  trainer.done_at = 6;
+  LoopState state;
+  StatsLog log;
+  NullProgress progress;
+  ASSERT_TRUE(RunLoop(Cadence(), &trainer, &state, &log, &progress).ok());
+  EXPECT_EQ(state.step, 6);
+  EXPECT_EQ(trainer.steps.back(), 6);
+  const std::vector<nlohmann::json> lines = Lines(log);
+  // Logs at 4, the evaluation at 5, then the figures of steps 5 and 6 at the stop.
+  ASSERT_EQ(lines.size(), 3u);
+  EXPECT_EQ(lines[2]["step"], 6);
+  EXPECT_DOUBLE_EQ(lines[2]["loss"].get<double>(), 5.5);
+  EXPECT_EQ(trainer.saved, (std::vector<int>{4}));
 }
 
 TEST(TrainingLoop, AnInterruptSavesAndTheResumedRunWritesWhatOneRunWould) {

@@ -164,6 +164,10 @@ int BenchTrain(const std::vector<std::string>& args) {
                                                    ": stage 3 needs --decoder-steps N (and its --prior-steps, "
                                                    "--pti-steps, --decoder-resolution; docs/avatar.md)"));
     jobs.push_back({found->name, found->what, train});
+    // The ablation compares the variants over one budget: none stops early
+    // unless asked (--patience), and none trains on fewer frames than asked.
+    if (!options.WasGiven("train.patience")) jobs.back().options.patience = 0;
+    if (!options.WasGiven("train.validation")) jobs.back().options.validation = 0;
     found->apply(&jobs.back().options);
     if (!found->stage3) jobs.back().options.decoder_steps = 0;  // their rows are stages 1 and 2
   }
@@ -177,6 +181,8 @@ int BenchTrain(const std::vector<std::string>& args) {
     } else {
       job.options.steps = rung.steps;
       job.options.max_minutes = 0;
+      job.options.patience = 0;  // a rung is its step count: it trains every step, on every training frame
+      job.options.validation = 0;
       if (rung.gaussians) {
         if (kGanAvatar.Is(train.model))
           return ReportFailure(Status::InvalidArgument("--ladder: '" + text + "' gives a Gaussian count, which the " +

@@ -534,7 +534,11 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& load
                           StatsLog* stats, Progress* progress, TrainSummary* summary) {
   // The validation frames (--validation) leave training here, for every stage.
   AvatarDataset data = loaded;
-  if (options.validation > 0 && options.eval_every > 0) {
+  if (options.validation > 0 && options.eval_every > 0 && options.pose_lr > 0) {
+    // The pose corrections are kept per training view of the workspace, as
+    // render and export load it: a split would shift them.
+    HF_LOG(Warning) << "train: --validation is not used with --pose-lr; training on every training frame";
+  } else if (options.validation > 0 && options.eval_every > 0) {
     if (const int frames = SetValidationAside(options.validation, &data); frames > 0)
       HF_LOG(Info) << "train: " << frames << " training frames (" << data.validation.size()
                    << " views) set aside as validation frames, to choose when stage 2 stops";
@@ -580,7 +584,8 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& load
   HF_RETURN_IF_ERROR(TrainStyleDecoder(options, data, &avatar, out_dir, checkpoint, stats, progress, &seconds));
   nlohmann::json stage2;
   HF_RETURN_IF_ERROR(ReadJson(out_dir / "eval_stage2.json", &stage2));
-  const nlohmann::json extra = {{"stage2", stage2.at("mean")}, {"stage3_seconds", seconds}};
+  nlohmann::json extra = {{"stage2", stage2.at("mean")}, {"stage3_seconds", seconds}};
+  if (stage2.contains("validation")) extra["validation"] = stage2["validation"];  // where stage 2 stopped
   HF_RETURN_IF_ERROR(FinishAvatar(avatar, options, data, out_dir, extra, summary));
   summary->seconds += seconds;
   fs::remove(decoder_checkpoint, ec);

@@ -107,8 +107,9 @@ class LoopTrainer {
   virtual Status Save(const LoopState& state) { return Status::Ok(); }
   // A warning the last step raised (a collapsing GAN), or empty.
   virtual std::string TakeWarning() { return {}; }
-  // True when training should end after `step` (asked after each
-  // evaluation: a validation score that stopped rising), saying why.
+  // True when training should end after `step`, saying why (asked after
+  // each step but the last, after its evaluation when it has one: a
+  // validation score that stopped rising).
   virtual bool Done(int step, std::string* why) { return false; }
 };
 

@@ -231,6 +231,35 @@ std::vector<std::string> Tokens(const po::variable_value& value) {
 
 }  // namespace
 
+namespace {
+
+// The keys of the config file `path` that `options` know, into `values`;
+// the others' names into `unknown`.
+Status ReadConfigFile(const std::string& path, const std::vector<std::unique_ptr<OptionSet::Option>>& options,
+                      po::variables_map* values, std::vector<std::string>* unknown) {
+  std::ifstream in(path);
+  if (!in) return Status::InvalidArgument("cannot read config file " + path);
+  po::options_description file_keys;
+  for (const auto& option : options) {
+    if (option->key == "config") continue;
+    file_keys.add_options()(option->key.c_str(), option->is_list
+                                                     ? po::value<std::vector<std::string>>()->composing()
+                                                     : static_cast<po::value_semantic*>(po::value<std::string>()));
+  }
+  try {
+    const auto parsed = po::parse_config_file(in, file_keys, /*allow_unregistered=*/true);
+    po::store(parsed, *values);
+    unknown->clear();
+    for (const auto& o : parsed.options)
+      if (o.unregistered) unknown->push_back(o.string_key);
+  } catch (const po::error& e) {
+    return Status::InvalidArgument("config file " + path + ": " + e.what());
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
 Status OptionSet::Parse(const std::vector<std::string>& args) {
   po::options_description cli;
   cli.add_options()("help,h", "show this help");
@@ -277,29 +306,7 @@ Status OptionSet::Parse(const std::vector<std::string>& args) {
     if (const auto* value = find(*option)) HF_RETURN_IF_ERROR(option->set(Tokens(*value)));
   }
   po::variables_map from_file;
-  if (!config_path_.empty()) {
-    std::ifstream in(config_path_);
-    if (!in) return Status::InvalidArgument("cannot read config file " + config_path_);
-    po::options_description file_keys;
-    std::set<std::string> known;
-    for (const auto& option : options_) {
-      if (option->key == "config") continue;
-      file_keys.add_options()(option->key.c_str(), option->is_list
-                                                       ? po::value<std::vector<std::string>>()->composing()
-                                                       : static_cast<po::value_semantic*>(
-                                                             po::value<std::string>()));
-      known.insert(option->key);
-    }
-    try {
-      const auto parsed = po::parse_config_file(in, file_keys, /*allow_unregistered=*/true);
-      po::store(parsed, from_file);
-      unknown_config_keys_.clear();
-      for (const auto& o : parsed.options)
-        if (o.unregistered) unknown_config_keys_.push_back(o.string_key);
-    } catch (const po::error& e) {
-      return Status::InvalidArgument("config file " + config_path_ + ": " + e.what());
-    }
-  }
+  if (!config_path_.empty()) HF_RETURN_IF_ERROR(ReadConfigFile(config_path_, options_, &from_file, &unknown_config_keys_));
 
   for (const auto& option : options_) {
     if (option->key == "config") continue;
@@ -314,6 +321,19 @@ Status OptionSet::Parse(const std::vector<std::string>& args) {
     if (!status.ok())
       return Status::InvalidArgument("option --" + option->key + " (" + origin +
                                      "): " + status.message());
+    given_.insert(option->key);
+  }
+  return Status::Ok();
+}
+
+Status OptionSet::ApplyConfigBeneath(const std::string& path) {
+  po::variables_map from_file;
+  std::vector<std::string> unknown;
+  HF_RETURN_IF_ERROR(ReadConfigFile(path, options_, &from_file, &unknown));
+  for (const auto& option : options_) {
+    if (option->key == "config" || given_.count(option->key) || !from_file.count(option->key)) continue;
+    if (Status status = option->set(Tokens(from_file[option->key])); !status.ok())
+      return Status::InvalidArgument("option --" + option->key + " (config file " + path + "): " + status.message());
     given_.insert(option->key);
   }
   return Status::Ok();

@@ -59,6 +59,11 @@ class OptionSet {
   // when given. InvalidArgument on an unknown option or a value of the wrong type.
   Status Parse(const std::vector<std::string>& args);
 
+  // After Parse: the options nobody gave take their values from the config
+  // file `path` (the command line and --config still win), and count as
+  // given. `headforge run` without --video reads ingest's recorded options so.
+  Status ApplyConfigBeneath(const std::string& path);
+
   bool help_requested() const { return help_requested_; }
   // Whether the last Parse set `key` from the command line or the config
   // file (presets fill only the options nobody gave).

@@ -79,6 +79,40 @@ TEST(OptionSet, ConfigFileUsesDottedKeysAndCommandLineWins) {
   fs::remove_all(dir);
 }
 
+TEST(OptionSet, AConfigAppliedBeneathTheCommandLineFillsOnlyWhatNobodyGave) {
+  const fs::path dir = fs::temp_directory_path() / "hf_options_beneath";
+  fs::create_directories(dir);
+  const fs::path ini = dir / "recorded.ini";
+  {
+    std::ofstream out(ini);
+    out << "[ingest]\nfps = 10\nmax_frames = 3\nvideo = one.mp4\n";
+  }
+  Sample s;
+  OptionSet set;
+  Bind(&set, &s);
+  ASSERT_TRUE(set.Parse({"--max-frames", "4"}).ok());
+  EXPECT_FALSE(set.WasGiven("ingest.fps"));
+  ASSERT_TRUE(set.ApplyConfigBeneath(ini.string()).ok());
+  EXPECT_DOUBLE_EQ(s.fps, 10.0);
+  EXPECT_EQ(s.max_frames, 4);  // the command line stays
+  EXPECT_EQ(s.videos, (std::vector<std::string>{"one.mp4"}));
+  EXPECT_TRUE(set.WasGiven("ingest.fps"));
+  EXPECT_TRUE(set.WasGiven("ingest.video"));
+  {
+    std::ofstream out(ini);
+    out << "[ingest]\nfps = fast\n";
+  }
+  Sample t;
+  OptionSet other;
+  Bind(&other, &t);
+  ASSERT_TRUE(other.Parse({}).ok());
+  const Status bad = other.ApplyConfigBeneath(ini.string());
+  EXPECT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("ingest.fps"), std::string::npos) << bad.message();
+  EXPECT_FALSE(other.ApplyConfigBeneath((dir / "missing.ini").string()).ok());
+  fs::remove_all(dir);
+}
+
 TEST(OptionSet, IniRoundTripReproducesValues) {
   Sample s;
   OptionSet set;

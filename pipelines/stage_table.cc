@@ -240,8 +240,8 @@ int RunCommand(const std::vector<std::string>& args) {
           "too few frames to train on stops the run after ingest, before calibrate spends its time.");
   if (parsed >= 0) return parsed;
   // On a workspace already ingested, --video may be left out: ingest's
-  // inputs and options are those it last ran with (its ingest.ini, read as a
-  // config file; the command line still wins).
+  // inputs and options are those it last ran with (its ingest.ini), beneath
+  // the command line and --config.
   const bool config_given = std::any_of(args.begin(), args.end(), [](const std::string& a) {
     return a == "--config" || a.rfind("--config=", 0) == 0;
   });
@@ -250,15 +250,12 @@ int RunCommand(const std::vector<std::string>& args) {
       fs::is_regular_file(fs::path(common.workspace) / "ingest.ini", ec)) {
     const fs::path config =
         fs::temp_directory_path() / ("headforge_run_" + std::to_string(::getpid()) + "_ingest.ini");
-    if (Status s = RecordedIngestConfig(common.workspace, options.WasGiven("train.preset"), config); !s.ok())
-      return ReportFailure(s);
+    Status s = RecordedIngestConfig(common.workspace, options.WasGiven("train.preset"), config);
+    if (s.ok()) s = options.ApplyConfigBeneath(config.string());
+    fs::remove(config, ec);
+    if (!s.ok()) return ReportFailure(s);
     HF_LOG(Info) << "run: no --video: ingest's inputs and options as it last ran ("
                  << (fs::path(common.workspace) / "ingest.ini").string() << ")";
-    std::vector<std::string> again = {"--config", config.string()};
-    again.insert(again.end(), args.begin(), args.end());
-    const int code = RunCommand(again);
-    fs::remove(config, ec);
-    return code;
   }
   if (Status s = common.Check(true); !s.ok()) return ReportFailure(s);
   for (const std::string* name : {&from, &until}) {

@@ -229,18 +229,17 @@ void Trainer::Describe(int step, nlohmann::json* line) {
 }
 
 bool Trainer::Evaluate(int step, nlohmann::json* line) {
+  // Drawn as the avatar stands at this step; put back after.
   const bool deform = avatar_.deform;
   avatar_.deform = deform_now(step);
   const ViewScores s = MeanScores(EvaluateAvatar(avatar_, data_, 5, {}));
+  const double v = data_.validation.empty() ? 0 : MeanScores(EvaluateValidation(avatar_, data_)).psnr_masked;
   avatar_.deform = deform;
   (*line)["test_psnr_masked"] = s.psnr_masked;
   (*line)["test_ssim_masked"] = s.ssim_masked;
   (*line)["gaussians"] = avatar_.gaussians.params.size();
   std::string validation;
   if (!data_.validation.empty()) {
-    avatar_.deform = deform_now(step);
-    const double v = MeanScores(EvaluateValidation(avatar_, data_)).psnr_masked;
-    avatar_.deform = deform;
     (*line)["validation_psnr_masked"] = v;
     validation = ", validation " + std::to_string(v).substr(0, 5) + " dB";
     // Only stage 2 counts: stage 1's avatar does not follow the expressions.
@@ -443,6 +442,7 @@ std::vector<ViewScores> EvaluateValidation(GaussianStyleAvatar& avatar, const Av
 }
 
 int SetValidationAside(double fraction, AvatarDataset* data) {
+  if (!(fraction > 0)) return 0;
   std::vector<int> frames;
   for (const AvatarView& v : data->train) frames.push_back(v.frame);
   std::sort(frames.begin(), frames.end());
@@ -456,7 +456,7 @@ int SetValidationAside(double fraction, AvatarDataset* data) {
     const int count = std::max(1, int(std::lround(fraction * n)));
     for (int i = std::max(0, n - count); i < n; ++i) aside.insert(frames[size_t(i)]);
   }
-  if (fraction <= 0 || n - int(aside.size()) < kFewestTrainingFrames) return 0;
+  if (n - int(aside.size()) < kFewestTrainingFrames) return 0;
   std::vector<AvatarView> kept;
   for (AvatarView& v : data->train) (aside.count(v.frame) ? data->validation : kept).push_back(std::move(v));
   data->train = std::move(kept);

@@ -88,6 +88,14 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
     line[options.step_key] = step;
     return line;
   };
+  // The figures since the last log line, averaged, with the trainer's own fields.
+  auto log_line = [&](int step) {
+    nlohmann::json line = line_for(step);
+    state->stats.TakeMeans(&line);
+    trainer->Describe(step, &line);
+    line["seconds"] = options.clock_offset + elapsed();
+    stats->Append(line.dump());
+  };
   std::string label = options.label;
   if (options.max_minutes > 0)
     label += " (" + std::to_string(options.steps) + " steps or " + Number(options.max_minutes) +
@@ -116,13 +124,7 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
     const bool out_of_time = options.max_minutes > 0 && elapsed() > 60.0 * options.max_minutes;
     const bool last = step == options.steps || out_of_time;
     const bool boundary = trainer->Boundary(step);
-    if (step % std::max(options.log_every, 1) == 0 || last || boundary) {
-      nlohmann::json line = line_for(step);
-      state->stats.TakeMeans(&line);
-      trainer->Describe(step, &line);
-      line["seconds"] = options.clock_offset + elapsed();
-      stats->Append(line.dump());
-    }
+    if (step % std::max(options.log_every, 1) == 0 || last || boundary) log_line(step);
     if (!last && options.eval_every > 0 && step % options.eval_every == 0) {
       nlohmann::json line = line_for(step);
       if (trainer->Evaluate(step, &line)) {
@@ -133,13 +135,7 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
     if (boundary || (options.preview_every > 0 && step % options.preview_every == 0))
       HF_RETURN_IF_ERROR(trainer->Preview(step));
     if (std::string why; !last && trainer->Done(step, &why)) {
-      if (!state->stats.empty()) {
-        nlohmann::json line = line_for(step);
-        state->stats.TakeMeans(&line);
-        trainer->Describe(step, &line);
-        line["seconds"] = options.clock_offset + elapsed();
-        stats->Append(line.dump());
-      }
+      if (!state->stats.empty()) log_line(step);
       HF_LOG(Info) << options.label << ": stopped at step " << step << " of " << options.steps << ": " << why;
       break;
     }

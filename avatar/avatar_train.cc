@@ -96,7 +96,8 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
          "preset");
   o->Add("train.device", &t->device, "cpu, or cuda (cuda:N) in a build against a LibTorch with CUDA.", "device",
          OptionSet::Effect::kRuntime);
-  o->Add("train.resolution", &t->resolution, "The frames' longer side while training, pixels.", "resolution");
+  o->Add("train.resolution", &t->resolution, "The frames' longer side while training, pixels.", "train-size");
+  o->AddOldFlag("train.resolution", "resolution");
   o->Add("train.steps", &t->steps, "Optimisation steps (one view each), both stages.", "steps");
   o->Add("train.max_minutes", &t->max_minutes, "Stop training after this many minutes (0: no limit).", "max-minutes");
   o->Add("train.canonical_fraction", &t->canonical_fraction,
@@ -169,7 +170,7 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
          "triplane-resolution");
   o->Add("train.latent_dim", &t->latent_dim, "Size of each frame's latent.", "latent-dim");
   o->Add("train.render_resolution", &t->render_resolution,
-         "gan-avatar: the volume render's longer side; --resolution / this must be a power of two.",
+         "gan-avatar: the volume render's longer side; --train-size / this must be a power of two.",
          "render-resolution");
   o->Add("train.batch", &t->batch, "gan-avatar, and stage 3's prior: real and generated views per step.", "batch");
   o->Add("train.reconstruction_steps", &t->reconstruction_steps,
@@ -238,7 +239,7 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.pti_frames", &t->pti_frames, "gaussian-style stage 3: the frames of the most extreme head poses PTI uses.",
          "pti-frames");
   o->Add("train.decoder_resolution", &t->decoder_resolution,
-         "gaussian-style stage 3: the decoder's square side, a power of two (0: --resolution).", "decoder-resolution");
+         "gaussian-style stage 3: the decoder's square side, a power of two (0: --train-size).", "decoder-resolution");
   o->Add("train.projected_blocks", &t->projected_blocks,
          "gaussian-style stage 3: generator blocks (4, 8, 16, ... px) the encoder's features are fused into.",
          "projected-blocks");

@@ -79,7 +79,7 @@ struct TrainOptions {
   int feature_channels = 32;
   int triplane_resolution = 64;
   int latent_dim = 64;
-  // gan-avatar: the volume render's longer side (--resolution is the
+  // gan-avatar: the volume render's longer side (--train-size is the
   // super-resolved output's; their ratio a power of two), views per batch,
   // the discriminator's step, R1's weight and interval, ADA's target and
   // the samples per ray (stratified, then importance).
@@ -114,7 +114,7 @@ struct TrainOptions {
   std::string generator_from;
   // gaussian-style's stage 3, the StyleGAN decoder: its steps (0: no stage
   // 3), the personal prior's steps (the generator trained on the frames),
-  // PTI's steps (each half) and frames, the decoder's side (0: --resolution),
+  // PTI's steps (each half) and frames, the decoder's side (0: --train-size),
   // the generator blocks the encoder feeds, the adversarial and
   // feature-matching weights, ADA, full-tune (no PTI, the generator trained
   // too) and generator weights to start from instead of the prior.

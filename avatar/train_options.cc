@@ -60,7 +60,7 @@ Status TrainOptions::Check() const {
   HF_RETURN_IF_ERROR(ParseDevice("train", device, &parsed));
   if (!FindAvatarModel(model))
     return Status::InvalidArgument("train: --model must be " + AvatarModelNames() + ", not '" + model + "'");
-  if (resolution < 16 || resolution > 4096) return Status::InvalidArgument("train: --resolution must be in [16, 4096]");
+  if (resolution < 16 || resolution > 4096) return Status::InvalidArgument("train: --train-size must be in [16, 4096]");
   if (steps < 1) return Status::InvalidArgument("train: --steps must be at least 1");
   if (!(max_minutes >= 0)) return Status::InvalidArgument("train: --max-minutes must be zero or positive");
   if (!(validation >= 0 && validation <= 0.5))
@@ -80,7 +80,7 @@ Status TrainOptions::Check() const {
                                    "'");
   if (mask != "auto" && mask != "ingest" && mask != "mesh")
     return Status::InvalidArgument("train: --mask must be auto, ingest or mesh, not '" + mask +
-                                   "' (your own masks: a folder given to ingest's --masks)");
+                                   "' (your own masks: a folder given to ingest's --mask-folder)");
   if (!(mask_hair >= 0 && mask_hair <= 0.3) || !(mask_skin >= 0 && mask_skin <= 0.3))
     return Status::InvalidArgument("train: --mask-hair and --mask-skin must be in [0, 0.3] metres");
   if (!(pose_lr >= 0)) return Status::InvalidArgument("train: --pose-lr must be zero or positive");
@@ -96,7 +96,7 @@ Status TrainOptions::Check() const {
   if (kGanAvatar.Is(model)) {
     if (render_resolution < 4 || render_resolution > resolution ||
         resolution % render_resolution != 0 || !IsPowerOfTwo(resolution / render_resolution))
-      return Status::InvalidArgument("train: --render-resolution must divide --resolution by a power of two (" +
+      return Status::InvalidArgument("train: --render-resolution must divide --train-size by a power of two (" +
                                      std::to_string(render_resolution) + " into " + std::to_string(resolution) + ")");
     if (batch < 1) return Status::InvalidArgument("train: --batch must be at least 1");
     if (reconstruction_steps < 0 || adversarial_ramp < 0 || !(recon_weight >= 0))
@@ -124,7 +124,7 @@ Status TrainOptions::Check() const {
   if (kGaussianStyle.Is(model) && decoder_steps > 0) {
     const int side = decoder_resolution > 0 ? decoder_resolution : resolution;
     if (side < 8 || !IsPowerOfTwo(side))
-      return Status::InvalidArgument("train: the decoder's side (--decoder-resolution, else --resolution) must be a "
+      return Status::InvalidArgument("train: the decoder's side (--decoder-resolution, else --train-size) must be a "
                                      "power of two of at least 8, not " + std::to_string(side));
     if (prior_steps < 0 || pti_steps < 0 || pti_frames < 1 || projected_blocks < 0 || batch < 1)
       return Status::InvalidArgument("train: --prior-steps and --pti-steps must be >= 0, --pti-frames and --batch >= 1, "

@@ -77,7 +77,7 @@ struct IngestedCapture {
 
   fs::path workspace;
   double fps = 25.0;
-  int resolution = 0;         // --resolution
+  int resolution = 0;         // --frame-size
   std::string crop_mode;      // sequence, frame or none
   std::vector<int> samples;   // per output frame: the sample it came from
   std::vector<IngestedCamera> cameras;

@@ -36,6 +36,7 @@ struct Camera {
   int offset = 0;
   std::map<int, FrameAnalysis> analysis;  // sample index k -> analysis
   double median_sharpness = 0.0;
+  int64_t stream_end = -1;  // frames the source gave before it ended while samples were wanted; -1: did not
 };
 
 // The source frame index of sample k in the reference (first) camera: every
@@ -159,13 +160,19 @@ Status AnalyseCamera(Camera* cam, const SamplePlan& plan, int threads, Analysers
     const auto it = wanted.find(j);
     if (it == wanted.end()) {
       if (next_k >= plan.max_frames() && (wanted.empty() || j > wanted.rbegin()->first)) break;
-      if (!cam->source->Skip()) break;
+      if (!cam->source->Skip()) {
+        cam->stream_end = j;
+        break;
+      }
       continue;
     }
     cv::Mat frame;
     bool end = false;
     HF_RETURN_IF_ERROR(cam->source->Read(&frame, &end));
-    if (end) break;
+    if (end) {
+      cam->stream_end = j;
+      break;
+    }
     batch.emplace_back(it->second, frame);
     batch_sources.emplace_back(j, it->second);
     if (static_cast<int>(batch.size()) >= kBatch) flush();
@@ -181,7 +188,7 @@ Status LoadUserMasks(const IngestOptions& options, const std::string& camera, in
   if (fs::is_directory(dir / camera, ec)) {
     dir = dir / camera;
   } else if (cameras > 1) {
-    return Status::NotFound("--masks " + options.masks + " needs a sub-folder " + camera +
+    return Status::NotFound("--mask-folder " + options.masks + " needs a sub-folder " + camera +
                             " when there are several cameras");
   }
   if (!fs::is_directory(dir, ec)) return Status::NotFound("mask folder not found: " + dir.string());
@@ -227,6 +234,22 @@ Status OpenCameras(const IngestOptions& options, std::vector<Camera>* cameras, I
                       << first_fps << " fps; cameras are paired by frame index (plus --offsets)";
   }
   return Status::Ok();
+}
+
+// A video whose stream ended well before the frame count its container
+// declares (a decoding error, a file cut short in a copy): said with both
+// counts, as a damaged input, before its few frames travel further.
+void WarnIfCutShort(const Camera& cam, IngestSummary* summary) {
+  const int64_t declared = cam.source->frame_count_hint();
+  if (cam.source->is_folder() || cam.stream_end < 0 || declared <= 0) return;
+  // The declared count is an estimate in some containers (duration times
+  // rate): a few frames short is not damage.
+  if (cam.stream_end + std::max<int64_t>(5, declared / 20) >= declared) return;
+  const std::string what = cam.source->path() + ": the video ended after " + std::to_string(cam.stream_end) +
+                           " frames where its container declares " + std::to_string(declared) +
+                           ": a decoding error or a truncated file cut it short";
+  HF_LOG(Warning) << "ingest: " << what << "; only those frames are used (re-copy or re-encode the file to use it all)";
+  summary->damaged.push_back(what);
 }
 
 // Pass 1: sharpness, faces and landmarks of every sampled frame of every camera.
@@ -391,7 +414,7 @@ Status PlanFaces(const IngestOptions& options, const std::vector<Camera>& camera
     if (found == 0 && cam.stream.errors == 0 && cameras.size() > 1 && whole && !plan.user_masks.empty()) {
       HF_LOG(Warning) << "ingest: " << cam.name << ": no face in any of its " << kept.size()
                       << " frames (a camera behind or beside the head?): kept whole, without landmarks, with the "
-                         "masks of --masks";
+                         "masks of --mask-folder";
       summary->face_lost += static_cast<int>(kept.size());
       continue;
     }
@@ -405,7 +428,7 @@ Status PlanFaces(const IngestOptions& options, const std::vector<Camera>& camera
           "--detector-threshold, a video where the face is frontal and well lit, or a higher "
           "resolution source" +
           (cameras.size() > 1 ? std::string("; a camera of several that never sees the face (behind the head) is "
-                                            "kept when --masks gives every camera's head masks")
+                                            "kept when --mask-folder gives every camera's head masks")
                               : std::string()));
     }
     if (options.min_face_px > 0) {
@@ -693,6 +716,7 @@ Status RunIngest(const IngestOptions& options, const fs::path& out_dir, int thre
                     << " fps; every source frame is used";
   const SamplePlan plan(options, reference);
   HF_RETURN_IF_ERROR(AnalyseCameras(options, plan, threads, progress, &cameras));
+  for (const Camera& cam : cameras) WarnIfCutShort(cam, summary);
   std::vector<int> kept;
   std::vector<DroppedSample> dropped;
   HF_RETURN_IF_ERROR(KeepSamples(options, &cameras, &kept, &dropped, summary));

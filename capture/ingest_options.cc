@@ -22,9 +22,9 @@ Status IngestOptions::Check() const {
     return Status::InvalidArgument("empty time range: --end (" + std::to_string(end) +
                                    " s) must be after --start (" + std::to_string(start) + " s)");
   if (resolution <= 0)
-    return Status::InvalidArgument("--resolution must be a positive number of pixels, not " +
+    return Status::InvalidArgument("--frame-size must be a positive number of pixels, not " +
                                    std::to_string(resolution));
-  if (resolution > 8192) return Status::InvalidArgument("--resolution above 8192 is not supported");
+  if (resolution > 8192) return Status::InvalidArgument("--frame-size above 8192 is not supported");
   if (crop != "auto" && crop != "sequence" && crop != "frame" && crop != "none")
     return Status::InvalidArgument("--crop must be auto, sequence, frame or none, not '" + crop + "'");
   if (!(crop_scale >= 1.0 && crop_scale <= 10.0))
@@ -66,10 +66,11 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
   o->Add("ingest.end", &in->end, "End of the time range, seconds; 0 means the end of the video.",
          "end");
   o->Add("ingest.resolution", &in->resolution, "Side of the square output frames, pixels.",
-         "resolution");
+         "frame-size");
+  o->AddOldFlag("ingest.resolution", "resolution");
   o->Add("ingest.crop", &in->crop,
          "sequence: one crop per camera holding the head in every frame (fixed intrinsics); "
-         "frame: a crop following the head; none: the whole frame (longer side scaled to --resolution); "
+         "frame: a crop following the head; none: the whole frame (longer side scaled to --frame-size); "
          "auto: sequence for one fixed camera; none for several cameras or one that moves (COLMAP needs the background).",
          "crop");
   o->Add("ingest.crop_scale", &in->crop_scale, "Crop side as a multiple of the face size.",
@@ -98,7 +99,8 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
   o->Add("ingest.masks", &in->masks,
          "Folder of your own masks, one per source frame in name order (a sub-folder per camera "
          "name, cam0, cam1..., for several cameras); replaces the automatic head mask.",
-         "masks", OptionSet::Effect::kRuntime);
+         "mask-folder", OptionSet::Effect::kRuntime);
+  o->AddOldFlag("ingest.masks", "masks");
   o->Add("ingest.matte", &in->matte,
          "What masks each frame: auto (selfie where the models are installed, else grabcut with a warning); "
          "selfie (MediaPipe's selfie segmentation, Apache-2.0: the whole person, ears and hair's edge included); "

@@ -282,7 +282,7 @@ TEST(Ingest, ACameraThatNeverSeesTheFaceIsKeptWithTheUsersMasks) {
   }
   IngestOptions options = Defaults({WriteFolder(dir / "front", frames).string(), WriteFolder(dir / "back", back).string()});
   options.blur_ratio = 0.0;
-  ExpectFailure(Ingest(options, dir / "refused"), Status::Code::kDataError, {"no face found", "--masks"});
+  ExpectFailure(Ingest(options, dir / "refused"), Status::Code::kDataError, {"no face found", "--mask-folder"});
   WriteFolder(dir / "masks" / "cam0", masks);
   WriteFolder(dir / "masks" / "cam1", masks);
   options.masks = (dir / "masks").string();

@@ -194,14 +194,29 @@ OptionSet::OptionSet() {
 
 OptionSet::~OptionSet() = default;
 
+namespace {
+
+// Whether a flag or key of any of `options` is `name`.
+bool NameTaken(const std::vector<std::unique_ptr<OptionSet::Option>>& options, const std::string& name) {
+  for (const auto& other : options)
+    if (other->flag == name || other->key == name || other->old_flag == name) return true;
+  return false;
+}
+
+}  // namespace
+
 void OptionSet::AddOption(std::unique_ptr<Option> option) {
-  for (const auto& other : options_) {
-    HF_CHECK(other->key != option->key);
-    if (!option->flag.empty() && (other->flag == option->flag || other->key == option->flag))
-      option->flag.clear();  // taken: the option stays reachable by its dotted key
-  }
+  for (const auto& other : options_) HF_CHECK(other->key != option->key);
+  // Taken: the option stays reachable by its dotted key.
+  if (!option->flag.empty() && NameTaken(options_, option->flag)) option->flag.clear();
   if (option->flag == option->key) option->flag.clear();
   options_.push_back(std::move(option));
+}
+
+void OptionSet::AddOldFlag(const std::string& key, const std::string& old_flag) {
+  if (NameTaken(options_, old_flag)) return;
+  for (const auto& option : options_)
+    if (option->key == key) option->old_flag = old_flag;
 }
 
 void OptionSet::AddPositional(const std::string& name, std::string* value,
@@ -266,6 +281,7 @@ Status OptionSet::Parse(const std::vector<std::string>& args) {
   for (const auto& option : options_) {
     cli.add_options()(option->key.c_str(), MakeSemantic(*option));
     if (!option->flag.empty()) cli.add_options()(option->flag.c_str(), MakeSemantic(*option));
+    if (!option->old_flag.empty()) cli.add_options()(option->old_flag.c_str(), MakeSemantic(*option));
   }
   po::positional_options_description positional;
   const std::string kPositionalKey = "__positional";
@@ -286,6 +302,7 @@ Status OptionSet::Parse(const std::vector<std::string>& args) {
   }
   help_requested_ = given.count("help") > 0;
   given_.clear();
+  deprecation_notes_.clear();
   if (help_requested_) return Status::Ok();
 
   // Positional arguments.
@@ -299,6 +316,12 @@ Status OptionSet::Parse(const std::vector<std::string>& args) {
   auto find = [&](const Option& option) -> const po::variable_value* {
     if (!option.flag.empty() && given.count(option.flag)) return &given[option.flag];
     if (given.count(option.key)) return &given[option.key];
+    if (!option.old_flag.empty() && given.count(option.old_flag)) {
+      deprecation_notes_.push_back("--" + option.old_flag + " is the old name of --" +
+                                   (option.flag.empty() ? option.key : option.flag) +
+                                   "; it still works, but use the new name");
+      return &given[option.old_flag];
+    }
     return nullptr;
   };
   for (const auto& option : options_) {
@@ -373,6 +396,7 @@ std::string OptionSet::Help(const std::string& usage, const std::string& descrip
       if (!option->flag.empty()) out << "--" << option->flag << ", ";
       out << "--" << option->key << " <" << option->type_name << ">";
       if (option->is_bool) out << " (--flag alone means true; --flag=false)";
+      if (!option->old_flag.empty()) out << " (formerly --" << option->old_flag << ")";
       out << "\n      " << option->help;
       out << "\n      default: " << (option->default_text.empty() ? "(none)" : option->default_text) << "\n";
     }

@@ -52,6 +52,11 @@ class OptionSet {
   void Add(const std::string& key, T* value, const std::string& help,
            const std::string& flag = "", Effect effect = Effect::kSemantic);
 
+  // An earlier flag name of the option `key` (added before), still accepted
+  // but named in deprecation_notes() with the present one when used. Not
+  // kept where another option of this command owns the name.
+  void AddOldFlag(const std::string& key, const std::string& old_flag);
+
   // A positional argument (e.g. WORKSPACE for `status`), stored as text.
   void AddPositional(const std::string& name, std::string* value, const std::string& help);
 
@@ -73,6 +78,9 @@ class OptionSet {
   std::optional<std::vector<std::string>> Value(const std::string& key) const;
   // Keys given in a config file that no option of this command knows.
   const std::vector<std::string>& unknown_config_keys() const { return unknown_config_keys_; }
+  // After Parse: one line for each old flag name the command line used,
+  // naming the present one.
+  const std::vector<std::string>& deprecation_notes() const { return deprecation_notes_; }
 
   // The option table for `headforge <command> --help`.
   std::string Help(const std::string& usage, const std::string& description) const;
@@ -92,6 +100,7 @@ class OptionSet {
   std::string config_path_;
   bool help_requested_ = false;
   std::vector<std::string> unknown_config_keys_;
+  std::vector<std::string> deprecation_notes_;
   std::set<std::string> given_;
 };
 
@@ -99,6 +108,7 @@ class OptionSet {
 struct OptionSet::Option {
   std::string key;
   std::string flag;
+  std::string old_flag;  // an earlier name, accepted with a note ("" for none)
   std::string help;
   std::string type_name;
   std::string default_text;

@@ -197,6 +197,30 @@ TEST(OptionSet, TakenShortFlagFallsBackToDottedKey) {
   EXPECT_EQ(b, 4);
 }
 
+TEST(OptionSet, AnOldFlagNameStillSetsItsOptionWithANote) {
+  double size = 1, train = 2, other = 3;
+  OptionSet set;
+  set.Add("ingest.resolution", &size, "a", "frame-size");
+  set.AddOldFlag("ingest.resolution", "resolution");
+  set.Add("train.resolution", &train, "b", "train-size");
+  set.AddOldFlag("train.resolution", "resolution");  // taken by ingest's: not kept
+  set.Add("render.size", &other, "c", "size");
+  set.AddOldFlag("render.size", "frame-size");  // another option's present name: not kept
+  ASSERT_TRUE(set.Parse({"--resolution", "7", "--train-size", "8"}).ok());
+  EXPECT_EQ(size, 7);
+  EXPECT_EQ(train, 8);
+  ASSERT_EQ(set.deprecation_notes().size(), 1u);
+  EXPECT_EQ(set.deprecation_notes()[0], "--resolution is the old name of --frame-size; it still works, but use the new name");
+  EXPECT_TRUE(set.WasGiven("ingest.resolution"));
+  ASSERT_TRUE(set.Parse({"--frame-size", "5"}).ok());
+  EXPECT_EQ(size, 5);
+  EXPECT_TRUE(set.deprecation_notes().empty());
+  EXPECT_NE(set.Help("u", "d").find("--frame-size, --ingest.resolution <number> (formerly --resolution)"),
+            std::string::npos);
+  ASSERT_TRUE(set.Parse({"--size", "1"}).ok());
+  EXPECT_EQ(other, 1);
+}
+
 TEST(FrameList, AllNumbersRangesAndSteps) {
   std::vector<int> frames;
   ASSERT_TRUE(ParseFrameList({"all"}, 4, &frames).ok());

@@ -110,6 +110,7 @@ int ParseOrExit(OptionSet* options, const std::vector<std::string>& args, const 
   }
   for (const auto& key : options->unknown_config_keys())
     HF_LOG(Warning) << "config key '" << key << "' is not an option of this command; ignored";
+  for (const auto& note : options->deprecation_notes()) HF_LOG(Warning) << note;
   return -1;
 }
 

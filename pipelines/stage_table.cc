@@ -235,8 +235,8 @@ int RunCommand(const std::vector<std::string>& args) {
           "On a workspace already ingested --video may be left out: ingest then runs with the\n"
           "inputs and options it last ran with (WORKSPACE/ingest.ini).\n"
           "Options of every stage are accepted, by their short flag or their dotted key; where two\n"
-          "stages share a flag's name the first stage has it (--resolution is ingest's frame size)\n"
-          "and the other is given by its key (--train.resolution, the training size). A capture with\n"
+          "stages share a flag's name the first stage has it and the other is given by its key\n"
+          "(--frame-size is ingest's frame size, --train-size the training size). A capture with\n"
           "too few frames to train on stops the run after ingest, before calibrate spends its time.");
   if (parsed >= 0) return parsed;
   // On a workspace already ingested, --video may be left out: ingest's

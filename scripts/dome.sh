@@ -40,7 +40,7 @@ fi
 cameras=()
 for c in $(seq 0 19); do cameras+=("$out/sim/cam$c"); done
 start=$(date +%s)
-"$bin" run --video "${cameras[@]}" --masks "$out/sim/masks" --mode rig --rig "$out/rig.json" \
+"$bin" run --video "${cameras[@]}" --mask-folder "$out/sim/masks" --mode rig --rig "$out/rig.json" \
   --holdout-cameras cam3,cam6,cam9 --workspace "$out/ws" "$@"
 echo "dome: run took $(( $(date +%s) - start )) s"
 "$bin" status "$out/ws"

@@ -105,8 +105,14 @@ if [ "$(id -u)" -ne 0 ]; then
   fi
 fi
 export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq
-$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+# apt's thousands of lines go to a log; only a failure shows its end.
+log="$(mktemp "${TMPDIR:-/tmp}/headforge_install.XXXXXX.log")"
+echo "install_deps: apt's log: $log"
+if ! { $SUDO apt-get update -qq && $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"; } >"$log" 2>&1; then
+  echo "install_deps: apt-get failed; the end of its log ($log):" >&2
+  tail -n 30 "$log" >&2
+  exit 1
+fi
 install_node_tools
 install_human_models
 echo "install_deps: done"

@@ -88,8 +88,8 @@ std::vector<BadInput> CommandLineCases() {
       {"ingest without a video", [=](const fs::path& d) { return video(d, {}); }, 2, {"--video"}},
       {"a negative frame rate", [=](const fs::path& d) { return video(d, {"--video", grid, "--fps", "-1"}); }, 2,
        {"--fps"}},
-      {"a resolution of 0", [=](const fs::path& d) { return video(d, {"--video", grid, "--resolution", "0"}); }, 2,
-       {"resolution"}},
+      {"a resolution of 0", [=](const fs::path& d) { return video(d, {"--video", grid, "--frame-size", "0"}); }, 2,
+       {"--frame-size"}},
       {"an empty time range",
        [=](const fs::path& d) { return video(d, {"--video", grid, "--start", "2", "--end", "1"}); }, 2,
        {"empty time range"}},
@@ -107,7 +107,7 @@ std::vector<BadInput> CommandLineCases() {
        [](const fs::path& d) {
          return std::vector<std::string>{"train", "--workspace", (d / "ws").string(), "--mask", (d / "my_masks").string()};
        },
-       2, {"--mask must be auto, ingest or mesh", "ingest's --masks"}, true},
+       2, {"--mask must be auto, ingest or mesh", "ingest's --mask-folder"}, true},
       {"an unknown camera among the held-out ones (comma-separated)",
        [](const fs::path& d) {
          return std::vector<std::string>{"train", "--workspace", (d / "ws").string(), "--holdout-cameras",
@@ -381,6 +381,39 @@ TEST(BadInputsAccepted, WithoutTheMatteModelsIngestMasksWithGrabCut) {
   nlohmann::json capture;
   ASSERT_TRUE(ReadJson(dir / "w" / "capture.json", &capture).ok());
   EXPECT_EQ(capture["cameras"][0]["masks"], "grabcut");
+  fs::remove_all(dir);
+}
+
+// An MP4 whose index sits at its start (faststart) and whose data was cut
+// short: the container still declares every frame, the stream ends early.
+// Ingest says both counts, and the workspace records the damage.
+TEST(BadInputsAccepted, AVideoCutShortSaysTheFramesItGotAndTheFramesDeclared) {
+  const fs::path dir = fs::temp_directory_path() / "hf_bad_cut_short";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  ASSERT_EQ(std::system(("ffmpeg -loglevel error -y -i '" + (kGrid / "bbaf2n.mpg").string() +
+                         "' -an -c:v libx264 -movflags +faststart '" + (dir / "whole.mp4").string() + "'")
+                            .c_str()),
+            0);
+  std::string bytes;
+  ASSERT_TRUE(ReadFileToString(dir / "whole.mp4", &bytes).ok());
+  WriteText(dir / "cut.mp4", bytes.substr(0, bytes.size() * 2 / 5));
+  const Result r = Headforge({"ingest", "--video", (dir / "cut.mp4").string(), "--workspace", (dir / "w").string(),
+                              "--frame-size", "128", "--threads", "1"});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("where its container declares 75"), std::string::npos) << r.err;
+  nlohmann::json capture, manifest;
+  ASSERT_TRUE(ReadJson(dir / "w" / "capture.json", &capture).ok());
+  const size_t frames = capture["cameras"][0]["frames"].size();
+  EXPECT_GT(frames, 5u);
+  EXPECT_LT(frames, 60u);
+  ASSERT_TRUE(ReadJson(dir / "w" / "workspace.json", &manifest).ok());
+  EXPECT_NE(manifest.dump().find("the video ended after"), std::string::npos) << manifest.dump();
+  // The whole file: no such note.
+  const Result whole = Headforge({"ingest", "--video", (dir / "whole.mp4").string(), "--workspace",
+                                  (dir / "w2").string(), "--frame-size", "128", "--threads", "1"});
+  ASSERT_EQ(whole.code, 0) << whole.err;
+  EXPECT_EQ(whole.err.find("container declares"), std::string::npos) << whole.err;
   fs::remove_all(dir);
 }
 

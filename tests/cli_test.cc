@@ -112,7 +112,7 @@ TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
 
   // A changed option redoes the stage.
   const Result changed = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
-                              ws.string(), "--until", "track", "--max-frames", "5", "--resolution", "128"});
+                              ws.string(), "--until", "track", "--max-frames", "5", "--frame-size", "128"});
   ASSERT_EQ(changed.code, 0) << changed.err;
   EXPECT_FALSE(Contains(changed.err, "up to date"));
   EXPECT_EQ(CountFiles(ws / "frames" / "cam0"), 5u);
@@ -120,7 +120,7 @@ TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
   // default (draft) 300, standard 2000; a budget given stays.
   EXPECT_TRUE(Contains(Slurp(ws / "ingest.ini"), "select = 300\n"));
   const std::vector<std::string> five = {"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace", ws.string(),
-                                         "--until", "ingest", "--max-frames", "5", "--resolution", "128"};
+                                         "--until", "ingest", "--max-frames", "5", "--frame-size", "128"};
   std::vector<std::string> standard = five;
   // Without --device cpu: a run that stops before train is not refused for
   // the GPU preset's device on a CPU build.
@@ -135,7 +135,7 @@ TEST_F(CliTest, SecondRunSkipsTheStageUntilAnOptionChanges) {
 
   // A stage run alone is skipped when up to date, and runs again with --force.
   const std::vector<std::string> ingest = {"ingest", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
-                                           ws.string(), "--max-frames", "5", "--resolution", "128", "--select", "40"};
+                                           ws.string(), "--max-frames", "5", "--frame-size", "128", "--select", "40"};
   const Result skipped = Headforge(ingest);
   ASSERT_EQ(skipped.code, 0) << skipped.err;
   EXPECT_TRUE(Contains(skipped.err, "ingest: up to date")) << skipped.err;
@@ -247,9 +247,11 @@ TEST_F(CliTest, ConfigFileSetsDottedKeysAndCommandLineWins) {
   const fs::path ws = Scratch("config");
   const fs::path ini = fs::temp_directory_path() / "hf_cli_config.ini";
   ASSERT_TRUE(WriteFileAtomic(ini, "threads = 2\n[ingest]\nmax_frames = 4\nresolution = 96\nfps = 5\n").ok());
+  // The frame size's old flag name still works, with a note naming the new one.
   const Result r = Headforge({"ingest", "--config", ini.string(), "--resolution", "64", "--video",
                         (kGrid / "lbax4n.mpg").string(), "--workspace", ws.string()});
   ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(Contains(r.err, "--resolution is the old name of --frame-size")) << r.err;
   const std::string written = Slurp(ws / "ingest.ini");
   EXPECT_TRUE(Contains(written, "max_frames = 4")) << written;
   EXPECT_TRUE(Contains(written, "resolution = 64")) << written;
@@ -270,8 +272,8 @@ TEST(Cli, HelpVersionAndUsageErrors) {
 
   const Result ingest_help = Headforge({"ingest", "--help"});
   EXPECT_EQ(ingest_help.code, 0);
-  for (const char* text : {"--fps, --ingest.fps", "--max-frames", "--start", "--end", "--masks",
-                           "--resolution", "default: 512", "--detector", "--workspace", "--threads"})
+  for (const char* text : {"--fps, --ingest.fps", "--max-frames", "--start", "--end", "--mask-folder",
+                           "--frame-size, --ingest.resolution <int> (formerly --resolution)", "default: 512", "--detector", "--workspace", "--threads"})
     EXPECT_TRUE(Contains(ingest_help.out, text)) << text;
 
   const Result version = Headforge({"--version"});
@@ -284,9 +286,9 @@ TEST(Cli, HelpVersionAndUsageErrors) {
   EXPECT_EQ(unknown.code, 2);
   EXPECT_TRUE(Contains(unknown.err, "no-such-flag"));
   const Result bad = Headforge({"run", "--video", (kGrid / "bbaf2n.mpg").string(), "--workspace",
-                          "/tmp/hf_cli_bad", "--resolution", "0"});
+                          "/tmp/hf_cli_bad", "--frame-size", "0"});
   EXPECT_EQ(bad.code, 2);
-  EXPECT_TRUE(Contains(bad.err, "--resolution must be a positive")) << bad.err;
+  EXPECT_TRUE(Contains(bad.err, "--frame-size must be a positive")) << bad.err;
   const Result missing = Headforge({"run", "--video", "/no/such.mp4", "--workspace", "/tmp/hf_cli_missing"});
   EXPECT_EQ(missing.code, 1);
   EXPECT_TRUE(Contains(missing.err, "/no/such.mp4")) << missing.err;
@@ -347,7 +349,7 @@ TEST(SimulateThenIngest, IngestAcceptsTheSimulatorsOutputUnchanged) {
                                 (root / "capture").string(), "--frames", "6"});
   ASSERT_EQ(sim.code, 0) << sim.err;
   const Result ingest = Headforge({"ingest", "--video", (root / "capture" / "cam0").string(), "--workspace",
-                                   (root / "ws").string(), "--resolution", "256"});
+                                   (root / "ws").string(), "--frame-size", "256"});
   ASSERT_EQ(ingest.code, 0) << ingest.err;
 
   nlohmann::json truth, landmarks, capture;

@@ -1,5 +1,5 @@
 // The front end's learned models through the real program: ingest's masks
-// against the simulator's (its masks, ingested with --masks so that they are
+// against the simulator's (its masks, ingested with --mask-folder so that they are
 // cropped alike, are the truth) before a plain backdrop and a defocused room.
 #include <gtest/gtest.h>
 
@@ -25,7 +25,7 @@ double MeanIou(const std::string& scene, int frames, const std::string& matte, s
   const fs::path sim = SharedSimulation(scene, frames);
   const fs::path dir = Scratch(scene + "_" + matte);
   const std::string input = SimulatedInputs(sim).front();
-  const Result truth = Headforge({"ingest", "--workspace", (dir / "truth").string(), "--video", input, "--masks",
+  const Result truth = Headforge({"ingest", "--workspace", (dir / "truth").string(), "--video", input, "--mask-folder",
                                   (sim / "masks").string()});
   EXPECT_EQ(truth.code, 0) << truth.err;
   const Result got = Headforge({"ingest", "--workspace", (dir / "got").string(), "--video", input, "--matte", matte});

@@ -35,7 +35,7 @@ fs::path Scratch(const std::string& name) {
 }
 
 std::vector<std::string> TrainArgs(const fs::path& ws) {
-  return {"train", "--workspace", ws.string(), "--model", "gan-avatar", "--resolution", "32",
+  return {"train", "--workspace", ws.string(), "--model", "gan-avatar", "--train-size", "32",
           "--render-resolution", "16", "--samples", "8", "--fine-samples", "8", "--batch", "2",
           "--triplane-resolution", "16", "--steps", "60", "--log-every", "5", "--checkpoint-every", "5",
           "--r1-every", "2", "--eval-every", "0", "--preview-every", "30", "--max-minutes", "0", "--threads", "1",
@@ -320,10 +320,10 @@ TEST_F(GanAvatarTrain, ExportWritesTheModelsWeightsAndVideosAndNoGaussians) {
 
 TEST(GanAvatarOptions, ARenderSizeThatDoesNotDivideTheOutputIsRefused) {
   const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("bad_options"));
-  const Result r = Headforge({"train", "--workspace", ws.string(), "--model", "gan-avatar", "--resolution", "64",
+  const Result r = Headforge({"train", "--workspace", ws.string(), "--model", "gan-avatar", "--train-size", "64",
                               "--render-resolution", "24"});
   EXPECT_NE(r.code, 0);
-  EXPECT_NE(r.err.find("--render-resolution must divide --resolution by a power of two"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--render-resolution must divide --train-size by a power of two"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(ws / kModelDir / "model.pt"));
   // The frames' latents asked of a GAN that would fit none: refused before
   // any training, not after it.

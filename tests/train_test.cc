@@ -66,7 +66,7 @@ std::string OpenPageCommand(const fs::path& dir, const std::string& page, int wi
 // Small enough for seconds a run: 48 px, 300 steps (half in stage 1), a
 // few thousand Gaussians, a checkpoint every 20 steps.
 std::vector<std::string> TinyOptions() {
-  return {"--resolution", "48", "--steps", "300", "--canonical-fraction", "0.5", "--init-gaussians", "1500",
+  return {"--train-size", "48", "--steps", "300", "--canonical-fraction", "0.5", "--init-gaussians", "1500",
           "--max-gaussians", "2500", "--densify-from", "20", "--densify-every", "20", "--densify-until", "120",
           "--eval-every", "0", "--preview-every", "0", "--log-every", "10", "--checkpoint-every", "20",
           "--max-minutes", "0", "--threads", "1"};
@@ -252,7 +252,7 @@ TEST_F(TrainStage, RunChainsTrainAfterTrackAndSkipsItWhenNothingChanged) {
   const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("run"));
   std::vector<std::string> args = {"run", "--workspace", ws.string(), "--video"};
   for (const auto& input : SimulatedInputs(SharedSimulation("talking_static", 125))) args.push_back(input);
-  for (const auto& a : TinyOptions()) args.push_back(a == "--resolution" ? "--train.resolution" : a);
+  for (const auto& a : TinyOptions()) args.push_back(a);
   const Result first = Headforge(args);
   ASSERT_EQ(first.code, 0) << first.err;
   EXPECT_NE(first.err.find("track: up to date"), std::string::npos) << first.err;
@@ -1241,7 +1241,7 @@ TEST(ModelChoice, OneFixedCameraGetsGaussianStyleAndAllRoundOrSeveralGetGanAvata
 }
 
 // The masks training uses on talking_static against the simulator's own
-// (ingested with --masks, so that they are cropped alike), at 128 px: the
+// (ingested with --mask-folder, so that they are cropped alike), at 128 px: the
 // workspace's person mattes (ingest's default network) agree with the truth,
 // and cut to the tracked mesh (--mask mesh, the gaussian-style default,
 // which takes a real person's shoulders and body away) they lose little;
@@ -1253,7 +1253,7 @@ TEST(DatasetMasks, TheMattesAndTheirCutToTheMeshAgreeWithTheSimulators) {
   const fs::path truth = CopyOf(TrackedTalkingStatic(), Scratch("masks_truth"));
   const fs::path ingested = Scratch("masks_ingested");
   const Result ingest = Headforge({"ingest", "--workspace", ingested.string(), "--video",
-                                   SimulatedInputs(sim).front(), "--masks", (sim / "masks").string()});
+                                   SimulatedInputs(sim).front(), "--mask-folder", (sim / "masks").string()});
   ASSERT_EQ(ingest.code, 0) << ingest.err;
   fs::remove_all(truth / "masks");
   fs::copy(ingested / "masks", truth / "masks", fs::copy_options::recursive);

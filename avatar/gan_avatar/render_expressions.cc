@@ -127,7 +127,7 @@ Status EstimateImageExpressions(const at::Tensor& images, const std::vector<Spla
     return Status::DataError("the tracker fitted none of the " + std::to_string(samples) +
                              " images (median landmark residual " + std::to_string(result.median_residual_px) +
                              " px); for the GAN's renders, train the GAN longer (--steps, --max-minutes) or at a "
-                             "larger --resolution");
+                             "larger --train-size");
   out->index = torch::tensor(kept, torch::kLong);
   out->images = cpu.index_select(0, out->index);
   out->expressions = torch::stack(expressions);

@@ -27,8 +27,6 @@
 namespace headforge {
 namespace {
 
-const char* const kFormats[] = {"mesh", "gaussians", "weights", "videos", "viewer", "report"};
-
 bool Wants(const ExportOptions& options, const std::string& format) {
   return std::find(options.formats.begin(), options.formats.end(), format) != options.formats.end() ||
          std::find(options.formats.begin(), options.formats.end(), "all") != options.formats.end();
@@ -104,22 +102,6 @@ const char* const ExportOptions::kDefaultPlayCanvasJs = HEADFORGE_WEB_TOOLS "/pl
 const char* const ExportOptions::kDefaultFaceApi = HEADFORGE_WEB_TOOLS;
 const char* const ExportOptions::kDefaultSplatTransform = HEADFORGE_WEB_TOOLS "/.bin/splat-transform";
 
-Status ExportOptions::Check() const {
-  for (const std::string& f : formats)
-    if (f != "all" && std::find(std::begin(kFormats), std::end(kFormats), f) == std::end(kFormats))
-      return Status::InvalidArgument("export: unknown format '" + f + "' (the formats: mesh, gaussians, weights, videos, viewer, report, all)");
-  if (formats.empty()) return Status::InvalidArgument("export: --formats names nothing to write");
-  if (texture_size < 16 || texture_size > 8192)
-    return Status::InvalidArgument("export: --texture-size must lie in [16, 8192]");
-  if (bake_views < 1) return Status::InvalidArgument("export: --bake-views must be at least 1");
-  if (!(orbit_deg >= 0 && orbit_deg <= 180)) return Status::InvalidArgument("export: --orbit-deg must lie in [0, 180]");
-  if (splat_frame < -1) return Status::InvalidArgument("export: --splat-frame is a frame number, or -1 for the neutral pose");
-  HF_RETURN_IF_ERROR(CheckClipFormat(clip_format));
-  if (model != "auto" && !FindAvatarModel(model))
-    return Status::InvalidArgument("export: --model must be auto, " + AvatarModelNames() + ", not '" + model + "'");
-  return Status::Ok();
-}
-
 void AddExportOptions(OptionSet* o, ExportOptions* e) {
   o->Add("export.formats", &e->formats,
          "What to write: mesh (glTF avatar with blendshapes, animation, texture), gaussians (PLY and "
@@ -193,185 +175,298 @@ std::string ExportSummary::OneLine() const {
   return text;
 }
 
-Status RunExport(const ExportOptions& requested, const fs::path& workspace, const std::string& face_model,
-                 const fs::path& out_dir, Progress* progress, ExportSummary* summary) {
-  HF_RETURN_IF_ERROR(requested.Check());
-  ExportOptions options = requested;
-  const auto start = std::chrono::steady_clock::now();
-  HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
-  // The model the Gaussians, weights and videos come from.
-  const fs::path gaussian_dir = kGaussianStyle.Dir(workspace), gan_dir = kGanAvatar.Dir(workspace);
+namespace {
+
+// One export: what was asked, the model chosen, and what the writers before
+// have written (the viewer shows the mesh, Gaussians and clip; the report
+// lists every file).
+struct ExportJob {
+  ExportOptions options;
+  fs::path workspace;
+  std::string face_model;
+  fs::path out_dir;
+  Progress* progress = nullptr;
+  fs::path model_dir;
+  bool gan = false;      // the model is gan-avatar's (a volume: no Gaussians)
+  bool trained = false;  // model_dir holds a trained model
+  SplatClip baked;       // the clip, when --frames asked for one
+  ExportSummary out;
+
+  fs::path viewer_clip() const { return out_dir / "viewer_clip"; }
+};
+
+Status WriteMesh(ExportJob* job) {
+  FaceModel model;
+  HF_RETURN_IF_ERROR(FaceModel::Load(job->face_model, &model));
+  MeshAvatarOptions mesh_options;
+  mesh_options.texture_size = job->options.texture_size;
+  mesh_options.bake_views = job->options.bake_views;
+  MeshAvatar mesh;
+  HF_RETURN_IF_ERROR(
+      BuildMeshAvatar(job->workspace, model, mesh_options, job->progress, &mesh).WithContext("export mesh"));
+  HF_RETURN_IF_ERROR(WriteMeshAvatarGlb(job->out_dir / "avatar_mesh.glb", mesh));
+  job->out.files.push_back("avatar_mesh.glb");
+  return Status::Ok();
+}
+
+Status WriteGaussians(ExportJob* job) {
+  AvatarSplats splats;
+  HF_RETURN_IF_ERROR(
+      PoseAvatarSplats(job->workspace, job->model_dir, job->face_model, job->options.splat_frame, &splats));
+  HF_RETURN_IF_ERROR(WriteGaussianPly(job->out_dir / "gaussians.ply", CloudFromSplats(splats)));
+  HF_RETURN_IF_ERROR(WriteGaussianGlb(job->out_dir / "gaussians.glb", splats));
+  job->out.files.push_back("gaussians.ply");
+  job->out.files.push_back("gaussians.glb");
+  return Status::Ok();
+}
+
+// The baked clip of --frames (the tracked ones among them), and the viewer's
+// copies of it when the viewer is written too.
+Status WriteClip(ExportJob* job) {
+  const ExportOptions& options = job->options;
+  TrackingFile tracking;
+  HF_RETURN_IF_ERROR(ReadTracking(job->workspace / "tracking.json", &tracking));
+  int count = 0;
+  std::set<int> tracked;
+  for (const TrackedFrame& f : tracking.frames) {
+    tracked.insert(f.frame);
+    count = std::max(count, f.frame + 1);
+  }
+  std::vector<int> asked;
+  HF_RETURN_IF_ERROR(ParseFrameList(options.frames, count, &asked).WithContext("export --frames"));
+  SplatClipOptions clip_options;
+  for (int f : asked)
+    if (tracked.count(f)) clip_options.frames.push_back(f);
+  if (clip_options.frames.size() < asked.size())
+    HF_LOG(Warning) << "export: " << asked.size() - clip_options.frames.size()
+                    << " of the clip's frames were not tracked (no face found) and are left out";
+  if (clip_options.frames.empty()) return Status::InvalidArgument("export: none of --frames was tracked");
+  clip_options.format = options.clip_format;
+  clip_options.splat_transform = options.splat_transform;
+  // The viewer's copies need splat-transform too; without it a ply clip is
+  // written and the viewer shows the still Gaussians.
+  if (Wants(options, "viewer")) {
+    std::error_code ec;
+    if (options.clip_format != "ply" || fs::exists(options.splat_transform, ec))
+      clip_options.viewer_dir = job->viewer_clip();
+    else
+      HF_LOG(Warning) << "export: no splat-transform (" << options.splat_transform
+                      << "): the viewer page shows the still Gaussians, not the clip";
+  }
+  HF_RETURN_IF_ERROR(WriteSplatClip(job->workspace, job->model_dir, job->face_model, clip_options, job->out_dir,
+                                    job->progress, &job->baked));
+  for (const std::string& f : job->baked.files) job->out.files.push_back(f);
+  return Status::Ok();
+}
+
+Status WriteWeights(ExportJob* job) {
+  std::vector<std::string> files;
+  const fs::path dir = job->out_dir / "weights";
+  if (job->gan) {
+    HF_RETURN_IF_ERROR(ExportGanWeights(job->workspace, job->model_dir, dir, &files));
+  } else {
+    HF_RETURN_IF_ERROR(ExportAvatarWeights(job->workspace, job->model_dir, dir, &files));
+  }
+  for (const std::string& f : files) job->out.files.push_back("weights/" + f);
+  return Status::Ok();
+}
+
+// The track stage's overlays (the fitted mesh on the frames), one per
+// camera, copied beside the avatar's videos, where the report shows them.
+Status CopyTrackingOverlays(ExportJob* job, const fs::path& videos) {
+  std::vector<fs::path> overlays;
+  for (const auto& entry : fs::directory_iterator(job->workspace)) {
+    const std::string name = entry.path().filename().string();
+    if (entry.is_regular_file() && name.rfind("overlay_", 0) == 0 && entry.path().extension() == ".mp4")
+      overlays.push_back(entry.path());
+  }
+  std::sort(overlays.begin(), overlays.end());
+  for (const fs::path& overlay : overlays) {
+    std::string bytes;
+    HF_RETURN_IF_ERROR(ReadFileToString(overlay, &bytes));
+    const std::string name = "tracking_" + overlay.filename().string();
+    HF_RETURN_IF_ERROR(WriteFileAtomic(videos / name, bytes));
+    job->out.files.push_back("videos/" + name);
+  }
+  return Status::Ok();
+}
+
+// Self-reenactment of the held-out frames, an orbit, and a cross-reenactment
+// when --drive names a workspace; then the tracking overlays.
+Status WriteVideos(ExportJob* job) {
+  const ExportOptions& options = job->options;
+  const fs::path videos = job->out_dir / "videos";
+  auto render_options = [&]() {
+    AvatarRenderOptions render;
+    render.device = options.device;
+    render.model = job->model_dir.string();
+    return render;
+  };
+  auto render_video = [&](AvatarRenderOptions render, const std::string& name) {
+    return RenderVideo(job->workspace, job->face_model, render, videos, name, job->progress, &job->out.files);
+  };
+  AvatarRenderOptions render = render_options();
+  render.held_out = true;
+  render.side_by_side = true;
+  HF_RETURN_IF_ERROR(render_video(render, "self_reenactment.mp4"));
+  render = render_options();
+  render.orbit_deg = options.orbit_deg;
+  if (render.orbit_deg == 0) {
+    CameraSet cameras;
+    HF_RETURN_IF_ERROR(CameraSet::Read(job->workspace / "cameras_head.json", &cameras));
+    render.orbit_deg = cameras.AzimuthSpreadDeg() > 180 ? 180 : 45;
+  }
+  render.orbit_steps = render.orbit_deg >= 180 ? 120 : 72;
+  HF_RETURN_IF_ERROR(render_video(render, "orbit.mp4"));
+  if (!options.drive.empty()) {
+    render = render_options();
+    render.drive = options.drive;
+    HF_RETURN_IF_ERROR(render_video(render, "cross_reenactment.mp4"));
+  }
+  return CopyTrackingOverlays(job, videos);
+}
+
+// The viewer page, when there is something for it to show.
+Status WriteViewerPage(ExportJob* job) {
+  const fs::path& out_dir = job->out_dir;
+  const bool mesh = fs::exists(out_dir / "avatar_mesh.glb"), gaussians = fs::exists(out_dir / "gaussians.glb");
+  if (!mesh && !gaussians && job->baked.viewer_files.empty()) return Status::Ok();
+  ViewerOptions viewer;
+  viewer.playcanvas_js = job->options.playcanvas_js;
+  if (mesh) viewer.mesh_glb = out_dir / "avatar_mesh.glb";
+  if (gaussians) viewer.gaussians_glb = out_dir / "gaussians.glb";
+  const SplatClip& baked = job->baked;
+  viewer.clip_files = baked.viewer_files;
+  viewer.clip_times.assign(baked.times.begin(), baked.times.begin() + long(baked.viewer_files.size()));
+  viewer.clip_frames = int(baked.frames.size());
+  viewer.clip_fps = baked.fps > 0 ? baked.fps : 25;
+  HF_RETURN_IF_ERROR(WriteViewer(out_dir / "viewer", viewer));
+  job->out.files.push_back("viewer/index.html");
+  return Status::Ok();
+}
+
+// The face metrics of a trained model's held-out renders, and report.html.
+Status WriteReportPage(ExportJob* job) {
+  if (job->trained) {
+    HF_RETURN_IF_ERROR(WriteFaceMetrics(job->options, job->model_dir, job->out_dir));
+    job->out.files.push_back("face_metrics.json");
+  }
+  ReportOptions report;
+  report.chart_js = job->options.chart_js;
+  report.exported = job->out.files;
+  report.bench_results = BenchResultFiles(job->options, job->workspace);
+  std::string note;
+  HF_RETURN_IF_ERROR(WriteReport(job->workspace, job->out_dir, report, &note));
+  if (!note.empty()) HF_LOG(Warning) << "export: report.html: " << note;
+  job->out.files.push_back("report.html");
+  return Status::Ok();
+}
+
+// The writers in the order they run: the viewer shows what the mesh,
+// Gaussians and clip writers made, and the report lists every file.
+struct FormatWriter {
+  const char* name;                         // "clip" runs when --frames names frames, not by --formats
+  Status (*write)(ExportJob* job);
+};
+const FormatWriter kWriters[] = {{"mesh", WriteMesh},       {"gaussians", WriteGaussians}, {"clip", WriteClip},
+                                 {"weights", WriteWeights}, {"videos", WriteVideos},       {"viewer", WriteViewerPage},
+                                 {"report", WriteReportPage}};
+
+// The names --formats takes: every writer's but the clip's.
+std::vector<std::string> FormatNames() {
+  std::vector<std::string> names;
+  for (const FormatWriter& writer : kWriters)
+    if (std::string(writer.name) != "clip") names.push_back(writer.name);
+  return names;
+}
+
+bool Runs(const FormatWriter& writer, const ExportOptions& options) {
+  return std::string(writer.name) == "clip" ? !options.frames.empty() : Wants(options, writer.name);
+}
+
+// Chooses the model the Gaussians, weights and videos come from, and drops
+// or refuses what it cannot give (a volume has no Gaussians to write).
+Status ChooseModel(ExportJob* job) {
+  ExportOptions& options = job->options;
+  const fs::path gaussian_dir = kGaussianStyle.Dir(job->workspace), gan_dir = kGanAvatar.Dir(job->workspace);
   std::error_code ec;
   const bool gaussian_trained = fs::exists(gaussian_dir / "config.json", ec), gan_trained = IsTrainedGan(gan_dir);
   // auto: the model trained last (a workspace may hold both).
-  const bool gan = kGanAvatar.Is(options.model) ||
-                   (options.model == "auto" && gan_trained && LatestModelFolder(workspace) == gan_dir);
-  const fs::path model_dir = gan ? gan_dir : gaussian_dir;
-  const bool trained = gan ? gan_trained : gaussian_trained;
-  if (gan && Wants(options, "gaussians")) {
+  job->gan = kGanAvatar.Is(options.model) ||
+             (options.model == "auto" && gan_trained && LatestModelFolder(job->workspace) == gan_dir);
+  job->model_dir = job->gan ? gan_dir : gaussian_dir;
+  job->trained = job->gan ? gan_trained : gaussian_trained;
+  if (job->gan && Wants(options, "gaussians")) {
     if (options.formats == std::vector<std::string>{"gaussians"})
       return Status::InvalidArgument("export: the gan-avatar model is a volume and has no Gaussians to write");
     HF_LOG(Info) << "export: the gan-avatar model is a volume, not Gaussians: no gaussians.ply or gaussians.glb";
     std::vector<std::string> kept;
-    for (const char* f : kFormats)
-      if (std::string(f) != "gaussians" && Wants(options, f)) kept.push_back(f);
+    for (const std::string& f : FormatNames())
+      if (f != "gaussians" && Wants(options, f)) kept.push_back(f);
     options.formats = kept;
   }
-  const bool clip = !options.frames.empty();
-  if (gan && clip)
+  if (job->gan && !options.frames.empty())
     return Status::InvalidArgument("export: --frames bakes the Gaussian avatar's clip; the gan-avatar model is a volume "
                                    "and has no Gaussians (its videos show it moving)");
   // Refused before anything is written: the formats that need a trained model.
-  const bool needs_model = ExportNeedsModel(options);
-  if (needs_model && !trained)
-    return Status::NotFound("no trained avatar in " + model_dir.string() + " (run headforge train" +
-                            (gan ? " --model " + kGanAvatar.Name() : std::string()) +
+  if (!ExportNeedsModel(options)) return Status::Ok();
+  if (!job->trained)
+    return Status::NotFound("no trained avatar in " + job->model_dir.string() + " (run headforge train" +
+                            (job->gan ? " --model " + kGanAvatar.Name() : std::string()) +
                             " first, or export --formats mesh report alone)");
-  if (needs_model)
-    HF_LOG(Info) << "export: the " << (gan ? kGanAvatar.name : kGaussianStyle.name) << " model in "
-                 << model_dir.string();
-  ExportSummary out;
-  if (Wants(options, "mesh")) {
-    FaceModel model;
-    HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
-    MeshAvatarOptions mesh_options;
-    mesh_options.texture_size = options.texture_size;
-    mesh_options.bake_views = options.bake_views;
-    MeshAvatar mesh;
-    HF_RETURN_IF_ERROR(BuildMeshAvatar(workspace, model, mesh_options, progress, &mesh).WithContext("export mesh"));
-    HF_RETURN_IF_ERROR(WriteMeshAvatarGlb(out_dir / "avatar_mesh.glb", mesh));
-    out.files.push_back("avatar_mesh.glb");
-  }
-  if (Wants(options, "gaussians")) {
-    AvatarSplats splats;
-    HF_RETURN_IF_ERROR(PoseAvatarSplats(workspace, model_dir, face_model, options.splat_frame, &splats));
-    HF_RETURN_IF_ERROR(WriteGaussianPly(out_dir / "gaussians.ply", CloudFromSplats(splats)));
-    HF_RETURN_IF_ERROR(WriteGaussianGlb(out_dir / "gaussians.glb", splats));
-    out.files.push_back("gaussians.ply");
-    out.files.push_back("gaussians.glb");
-  }
-  SplatClip baked;
-  const fs::path viewer_clip = out_dir / "viewer_clip";
-  if (clip) {
-    TrackingFile tracking;
-    HF_RETURN_IF_ERROR(ReadTracking(workspace / "tracking.json", &tracking));
-    int count = 0;
-    std::set<int> tracked;
-    for (const TrackedFrame& f : tracking.frames) {
-      tracked.insert(f.frame);
-      count = std::max(count, f.frame + 1);
-    }
-    std::vector<int> asked;
-    HF_RETURN_IF_ERROR(ParseFrameList(options.frames, count, &asked).WithContext("export --frames"));
-    SplatClipOptions clip_options;
-    for (int f : asked)
-      if (tracked.count(f)) clip_options.frames.push_back(f);
-    if (clip_options.frames.size() < asked.size())
-      HF_LOG(Warning) << "export: " << asked.size() - clip_options.frames.size()
-                      << " of the clip's frames were not tracked (no face found) and are left out";
-    if (clip_options.frames.empty()) return Status::InvalidArgument("export: none of --frames was tracked");
-    clip_options.format = options.clip_format;
-    clip_options.splat_transform = options.splat_transform;
-    // The viewer's copies need splat-transform too; without it a ply clip is
-    // written and the viewer shows the still Gaussians.
-    if (Wants(options, "viewer")) {
-      if (options.clip_format != "ply" || fs::exists(options.splat_transform, ec))
-        clip_options.viewer_dir = viewer_clip;
-      else
-        HF_LOG(Warning) << "export: no splat-transform (" << options.splat_transform
-                        << "): the viewer page shows the still Gaussians, not the clip";
-    }
-    HF_RETURN_IF_ERROR(WriteSplatClip(workspace, model_dir, face_model, clip_options, out_dir, progress, &baked));
-    for (const std::string& f : baked.files) out.files.push_back(f);
-  }
-  if (Wants(options, "weights")) {
-    std::vector<std::string> files;
-    if (gan) {
-      HF_RETURN_IF_ERROR(ExportGanWeights(workspace, model_dir, out_dir / "weights", &files));
-    } else {
-      HF_RETURN_IF_ERROR(ExportAvatarWeights(workspace, model_dir, out_dir / "weights", &files));
-    }
-    for (const std::string& f : files) out.files.push_back("weights/" + f);
-  }
-  if (Wants(options, "videos")) {
-    const fs::path videos = out_dir / "videos";
-    AvatarRenderOptions render;
-    render.device = options.device;
-    render.model = model_dir.string();
-    render.held_out = true;
-    render.side_by_side = true;
-    HF_RETURN_IF_ERROR(RenderVideo(workspace, face_model, render, videos, "self_reenactment.mp4", progress, &out.files));
-    render = AvatarRenderOptions();
-    render.device = options.device;
-    render.model = model_dir.string();
-    render.orbit_deg = options.orbit_deg;
-    if (render.orbit_deg == 0) {
-      CameraSet cameras;
-      HF_RETURN_IF_ERROR(CameraSet::Read(workspace / "cameras_head.json", &cameras));
-      render.orbit_deg = cameras.AzimuthSpreadDeg() > 180 ? 180 : 45;
-    }
-    render.orbit_steps = render.orbit_deg >= 180 ? 120 : 72;
-    HF_RETURN_IF_ERROR(RenderVideo(workspace, face_model, render, videos, "orbit.mp4", progress, &out.files));
-    if (!options.drive.empty()) {
-      render = AvatarRenderOptions();
-      render.device = options.device;
-      render.model = model_dir.string();
-      render.drive = options.drive;
-      HF_RETURN_IF_ERROR(
-          RenderVideo(workspace, face_model, render, videos, "cross_reenactment.mp4", progress, &out.files));
-    }
-    // The track stage's overlays (the fitted mesh on the frames), one per
-    // camera, beside the avatar's videos, where the report shows them.
-    std::vector<fs::path> overlays;
-    for (const auto& entry : fs::directory_iterator(workspace)) {
-      const std::string name = entry.path().filename().string();
-      if (entry.is_regular_file() && name.rfind("overlay_", 0) == 0 && entry.path().extension() == ".mp4")
-        overlays.push_back(entry.path());
-    }
-    std::sort(overlays.begin(), overlays.end());
-    for (const fs::path& overlay : overlays) {
-      std::string bytes;
-      HF_RETURN_IF_ERROR(ReadFileToString(overlay, &bytes));
-      const std::string name = "tracking_" + overlay.filename().string();
-      HF_RETURN_IF_ERROR(WriteFileAtomic(videos / name, bytes));
-      out.files.push_back("videos/" + name);
+  HF_LOG(Info) << "export: the " << (job->gan ? kGanAvatar.name : kGaussianStyle.name) << " model in "
+               << job->model_dir.string();
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status ExportOptions::Check() const {
+  const std::vector<std::string> names = FormatNames();
+  for (const std::string& f : formats)
+    if (f != "all" && std::find(names.begin(), names.end(), f) == names.end())
+      return Status::InvalidArgument("export: unknown format '" + f + "' (the formats: mesh, gaussians, weights, videos, viewer, report, all)");
+  if (formats.empty()) return Status::InvalidArgument("export: --formats names nothing to write");
+  if (texture_size < 16 || texture_size > 8192)
+    return Status::InvalidArgument("export: --texture-size must lie in [16, 8192]");
+  if (bake_views < 1) return Status::InvalidArgument("export: --bake-views must be at least 1");
+  if (!(orbit_deg >= 0 && orbit_deg <= 180)) return Status::InvalidArgument("export: --orbit-deg must lie in [0, 180]");
+  if (splat_frame < -1) return Status::InvalidArgument("export: --splat-frame is a frame number, or -1 for the neutral pose");
+  HF_RETURN_IF_ERROR(CheckClipFormat(clip_format));
+  if (model != "auto" && !FindAvatarModel(model))
+    return Status::InvalidArgument("export: --model must be auto, " + AvatarModelNames() + ", not '" + model + "'");
+  return Status::Ok();
+}
+
+Status RunExport(const ExportOptions& requested, const fs::path& workspace, const std::string& face_model,
+                 const fs::path& out_dir, Progress* progress, ExportSummary* summary) {
+  HF_RETURN_IF_ERROR(requested.Check());
+  const auto start = std::chrono::steady_clock::now();
+  HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
+  ExportJob job;
+  job.options = requested;
+  job.workspace = workspace;
+  job.face_model = face_model;
+  job.out_dir = out_dir;
+  job.progress = progress;
+  HF_RETURN_IF_ERROR(ChooseModel(&job));
+  for (const FormatWriter& writer : kWriters) {
+    if (!Runs(writer, job.options)) continue;
+    HF_RETURN_IF_ERROR(writer.write(&job));
+    // The viewer keeps its copies of the clip; the folder they were made in goes.
+    if (std::string(writer.name) == "viewer") {
+      std::error_code ec;
+      fs::remove_all(job.viewer_clip(), ec);
     }
   }
-  if (Wants(options, "viewer") && (fs::exists(out_dir / "avatar_mesh.glb") || fs::exists(out_dir / "gaussians.glb") ||
-                                   !baked.viewer_files.empty())) {
-    ViewerOptions viewer;
-    viewer.playcanvas_js = options.playcanvas_js;
-    if (fs::exists(out_dir / "avatar_mesh.glb")) viewer.mesh_glb = out_dir / "avatar_mesh.glb";
-    if (fs::exists(out_dir / "gaussians.glb")) viewer.gaussians_glb = out_dir / "gaussians.glb";
-    viewer.clip_files = baked.viewer_files;
-    viewer.clip_times.assign(baked.times.begin(), baked.times.begin() + long(baked.viewer_files.size()));
-    viewer.clip_frames = int(baked.frames.size());
-    viewer.clip_fps = baked.fps > 0 ? baked.fps : 25;
-    HF_RETURN_IF_ERROR(WriteViewer(out_dir / "viewer", viewer));
-    out.files.push_back("viewer/index.html");
-  }
-  fs::remove_all(viewer_clip, ec);
-  if (Wants(options, "report")) {
-    if (trained) {
-      HF_RETURN_IF_ERROR(WriteFaceMetrics(options, model_dir, out_dir));
-      out.files.push_back("face_metrics.json");
-    }
-    ReportOptions report;
-    report.chart_js = options.chart_js;
-    report.exported = out.files;
-    report.bench_results = BenchResultFiles(options, workspace);
-    std::string note;
-    HF_RETURN_IF_ERROR(WriteReport(workspace, out_dir, report, &note));
-    if (!note.empty()) HF_LOG(Warning) << "export: report.html: " << note;
-    out.files.push_back("report.html");
-  }
+  ExportSummary& out = job.out;
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const nlohmann::json record = {{"version", 1},
                                  {"files", out.files},
-                                 {"formats", options.formats},
-                                 {"splat_frame", options.splat_frame},
-                                 {"clip_frames", baked.frames.size()},
-                                 {"texture_size", options.texture_size},
+                                 {"formats", job.options.formats},
+                                 {"splat_frame", job.options.splat_frame},
+                                 {"clip_frames", job.baked.frames.size()},
+                                 {"texture_size", job.options.texture_size},
                                  {"seconds", out.seconds}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "export.json", record, 2));
   out.files.push_back("export.json");

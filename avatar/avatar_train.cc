@@ -319,16 +319,6 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* t) {
   return Status::Ok();
 }
 
-int HoldoutStride(double holdout) { return std::max(2, int(std::lround(1 / holdout))); }
-
-int HeldOutFrames(int frames, double holdout, bool interleaved) {
-  if (!interleaved) return std::max(1, int(std::lround(holdout * frames)));
-  const int every = HoldoutStride(holdout);
-  int held = 0;
-  for (int f = 0; f < frames; ++f) held += f % every == every / 2;
-  return held;
-}
-
 Status CheckEnoughFramesToTrain(const fs::path& workspace, double holdout) {
   IngestedCapture capture;
   if (!ReadIngestedCapture(workspace, &capture).ok()) return Status::Ok();  // the stages say what is wrong

@@ -13,15 +13,13 @@
 #include <vector>
 
 #include "avatar/model_table.h"
+#include "avatar/train/dataset_options.h"
 #include "core/fs.h"
 #include "core/options.h"
 #include "core/progress.h"
 #include "core/status.h"
 
 namespace headforge {
-
-// Both models train on at least this many frames besides those held out.
-constexpr int kFewestTrainingFrames = 8;
 
 struct TrainOptions {
   std::string model{kGaussianStyle.name};
@@ -147,13 +145,6 @@ Status ApplyTrainPreset(const OptionSet& parsed, TrainOptions* train);
 // The frames a preset trains on at most (ingest's --select in `headforge
 // run`): draft 300, standard 2000, high 6000; 0 for a name that is none.
 int PresetFrameBudget(const std::string& preset);
-
-// How many of `frames` training holds out: the last round(holdout x frames)
-// (one at least), or, interleaved, every HoldoutStride(holdout)-th from the
-// middle of the first stride (DatasetOptions::holdout_order).
-int HeldOutFrames(int frames, double holdout, bool interleaved);
-// The interleaved hold-out's stride: round(1 / holdout), 2 at least.
-int HoldoutStride(double holdout);
 
 // Fails when the ingested capture in `workspace` has too few frames for
 // either model to train on kFewestTrainingFrames besides those held out

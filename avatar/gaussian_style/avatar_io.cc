@@ -125,12 +125,12 @@ nlohmann::json ConfigJson(const GaussianStyleAvatar& avatar, const TrainOptions&
           {"architecture", OptionsJson(avatar.model->options())},
           {"frames", data.num_frames},
           {"deform", avatar.deform},
-          {"resolution", options.resolution},
-          {"holdout", options.holdout},
-          {"holdout_order", options.holdout_order},
+          {"resolution", options.data.resolution},
+          {"holdout", options.data.holdout},
+          {"holdout_order", options.data.holdout_order},
           {"mask", options.MaskFor(kGaussianStyle)},
-          {"mask_hair", options.mask_hair},
-          {"mask_skin", options.mask_skin},
+          {"mask_hair", options.data.mask_hair},
+          {"mask_skin", options.data.mask_skin},
           {"width", data.width},
           {"height", data.height},
           {"gaussians", avatar.gaussians.params.size()},
@@ -173,15 +173,16 @@ Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar
     out.deform = config.at("deform").get<bool>();
     if (config.contains("decoder")) out.decoder = StyleDecoder(StyleDecoderOptionsFromJson(config.at("decoder")));
     if (options) {
-      options->resolution = config.at("resolution").get<int>();
-      options->holdout = config.value("holdout", options->holdout);
+      DatasetOptions& data = options->data;
+      data.resolution = config.at("resolution").get<int>();
+      data.holdout = config.value("holdout", data.holdout);
       // Models trained before the order existed held out the last frames.
-      options->holdout_order = config.value("holdout_order", std::string("last"));
-      options->mesh_riding = out.model->options().mesh_riding;
+      data.holdout_order = config.value("holdout_order", std::string("last"));
+      options->gaussian_style.mesh_riding = out.model->options().mesh_riding;
       // Models trained before the mask was chosen trained on the workspace's.
-      options->mask = config.value("mask", std::string("ingest"));
-      options->mask_hair = config.value("mask_hair", options->mask_hair);
-      options->mask_skin = config.value("mask_skin", options->mask_skin);
+      data.mask = config.value("mask", std::string("ingest"));
+      data.mask_hair = config.value("mask_hair", data.mask_hair);
+      data.mask_skin = config.value("mask_skin", data.mask_skin);
     }
   } catch (const std::exception& e) {
     return Status::DataError((dir / "config.json").string() + " is damaged (" + e.what() + "); run headforge train again");

@@ -1,11 +1,15 @@
 // Which views of a workspace an avatar trains on and how they are read
 // (LoadAvatarDataset, dataset.h): the training size, the held-out frames and
-// cameras, and the head masks. No LibTorch here: pipelines/ and train's
-// options (avatar_train.h) may include it.
+// cameras, and the head masks. No LibTorch here: train's options
+// (avatar_train.h) hold one, and pipelines/ reads them.
 #pragma once
+
+#include <nlohmann/json_fwd.hpp>
 
 #include <string>
 #include <vector>
+
+#include "core/status.h"
 
 namespace headforge {
 
@@ -33,15 +37,25 @@ struct DatasetOptions {
   // On talking_static at 128 px the skin's margin against the simulator's
   // masks (mean IoU; GrabCut's alone 0.963): 2 mm 0.959, 6 mm 0.966, 12 mm
   // 0.973, 16 mm 0.976, 24 mm 0.975; the tracked mesh is a pixel or two off.
+  // Train's options also take "auto" (each model's own: TrainOptions::MaskFor),
+  // which the loader does not.
   std::string mask = "ingest";
   double mask_hair = 0.03;
   double mask_skin = 0.016;
 
-  // How a load reads the views.
+  // How a load reads the views; not options of train's, and not recorded.
   int min_train_frames = kFewestTrainingFrames;  // fewer is refused
   bool images = true;         // false: cameras and conditions only (rendering)
   int uv_map_side = 0;        // > 0: the training views' UV maps on a canvas this side (stage 3)
+
+  // Train's checks of these options (the messages name train's flags).
+  Status Check() const;
 };
+
+// The options above that train records (every one but the load's own three)
+// by their field names; reading keeps the value of a field `j` lacks.
+nlohmann::json ToJson(const DatasetOptions& options);
+void FromJson(const nlohmann::json& j, DatasetOptions* options);
 
 // How many of `frames` training holds out: the last round(holdout x frames)
 // (one at least), or, interleaved, every HoldoutStride(holdout)-th from the

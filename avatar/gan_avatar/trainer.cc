@@ -400,23 +400,20 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
     model.Put("trained_frames", TrainingFrames());
   }
   HF_RETURN_IF_ERROR(model.Save(out_dir / "model.pt"));
+  // The options it trained with (the masks resolved, as render and export read them), once.
+  TrainOptions recorded = options_;
+  recorded.data = options_.DataFor(kGanAvatar);
   const nlohmann::json config = {
       {"model", kGanAvatar.name},
       {"version", 1},
       {"architecture", arch_},
       {"expression_mapping", {{"expressions", data_.expression_names}, {"hidden", 256}, {"layers", 2},
-                              {"loss", gan_options_.mapping_loss}, {"latents", gan_options_.mapping_latents},
                               {"trained", bool(avatar_.mapping)}}},
       {"render_size", {render_w_, render_h_}},
       {"output_size", {data_.width, data_.height}},
       {"background", kBackground},
-      {"training", {{"steps", state_.step}, {"batch", options_.batch}, {"seconds", state_.seconds},
-                    {"seed", options_.seed}, {"preset", options_.preset}, {"holdout", options_.data.holdout},
-                    {"holdout_order", options_.data.holdout_order}, {"holdout_cameras", options_.data.holdout_cameras},
-                    {"mask", options_.MaskFor(kGanAvatar)}, {"mask_hair", options_.data.mask_hair},
-                    {"mask_skin", options_.data.mask_skin},
-                    {"generator_from", gan_options_.generator_from}}},
-      {"options", ToJson(options_)}};
+      {"training", {{"steps", state_.step}, {"seconds", state_.seconds}}},
+      {"options", ToJson(recorded)}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "config.json", config, 1));
   summary->steps = state_.step;
   summary->seconds = state_.seconds;

@@ -25,13 +25,12 @@ Status PoseAvatarFrames(const fs::path& workspace, const fs::path& model_dir, co
                         const std::vector<int>& frames,
                         const std::function<Status(int frame, const AvatarSplats& splats)>& each) {
   GaussianStyleAvatar avatar;
-  TrainOptions trained;
   FaceModel model;
   DatasetOptions loading;
   loading.images = false;
   AvatarDataset data;
   HF_RETURN_IF_ERROR(
-      LoadTrained(workspace, model_dir, face_model, torch::kCPU, 0, &loading, &avatar, &trained, &model, &data));
+      LoadTrained(workspace, model_dir, face_model, torch::kCPU, 0, &loading, &avatar, &model, &data));
   std::map<int, const AvatarView*> views;
   for (const auto* list : {&data.train, &data.test})
     for (const AvatarView& v : *list) views.emplace(v.frame, &v);

@@ -52,7 +52,6 @@ struct DrawableAvatar {
 
   GaussianStyleAvatar gaussian;
   GanAvatar gan;
-  TrainOptions trained;
   FaceModel model;
   DatasetOptions loading;  // how `data` was read (and a driving workspace is)
   AvatarDataset data;      // its workspace's views, held out as in training
@@ -73,21 +72,18 @@ Status LoadDrawableAvatar(const fs::path& workspace, fs::path model_dir, const s
     // The gan-avatar model: the tracked expression through its mapping.
     HF_RETURN_IF_ERROR(LoadGanAvatar(model_dir, device, &a->gan));
     HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &a->model));
+    // Held out as in training; the views at the output's size unless asked otherwise.
+    a->loading = a->gan.trained;
+    a->loading.images = images;
     a->loading.resolution = resolution > 0 ? resolution : std::max(a->gan.out_width, a->gan.out_height);
     a->loading.min_train_frames = 1;
-    a->loading.holdout = a->gan.holdout;
-    a->loading.holdout_order = a->gan.holdout_order;
-    a->loading.holdout_cameras = a->gan.holdout_cameras;
-    a->loading.mask = a->gan.mask;
-    a->loading.mask_hair = a->gan.mask_hair;
-    a->loading.mask_skin = a->gan.mask_skin;
     HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, a->model, a->loading, &a->data).WithContext("render"));
     a->background = a->gan.background;
     a->draw = [a](const torch::Tensor& condition, const SplatCamera& camera) { return a->gan.Draw(condition, camera); };
     return Status::Ok();
   }
   HF_RETURN_IF_ERROR(LoadTrained(workspace, model_dir, face_model, device, resolution, &a->loading, &a->gaussian,
-                                 &a->trained, &a->model, &a->data));
+                                 &a->model, &a->data));
   a->background = background;
   const torch::Tensor grey = torch::full({3}, background, torch::TensorOptions().device(device));
   a->draw = [a, grey](const torch::Tensor& condition, const SplatCamera& camera) {

@@ -11,6 +11,6 @@ namespace headforge {
 
 // --max-minutes, --log-every, --eval-every, --preview-every and
 // --checkpoint-every for a loop of `steps` steps shown as `label`.
-LoopOptions TrainLoopOptions(const TrainOptions& options, const std::string& label, int steps);
+LoopOptions TrainLoopOptions(const TrainLoopSettings& settings, const std::string& label, int steps);
 
 }  // namespace headforge

@@ -16,24 +16,36 @@ namespace headforge {
 
 namespace {
 
+// The field `key` of `options` or of one of its blocks (objects within it),
+// or null: the field names are unique across the blocks.
+nlohmann::json* FindField(nlohmann::json* options, const std::string& key) {
+  const auto it = options->find(key);
+  if (it != options->end() && !it->is_object()) return &*it;
+  for (nlohmann::json& value : *options)  // an object's values
+    if (value.is_object())
+      if (nlohmann::json* found = FindField(&value, key)) return found;
+  return nullptr;
+}
+
 // `settings` ("field=value") over `options`' JSON form; a value that does not
 // parse as JSON is a string.
 Status ApplySettings(const std::vector<std::string>& settings, nlohmann::json* options) {
   for (const std::string& setting : settings) {
     const size_t eq = setting.find('=');
     const std::string key = setting.substr(0, eq);
-    if (eq == std::string::npos || !options->contains(key))
+    nlohmann::json* field = eq == std::string::npos ? nullptr : FindField(options, key);
+    if (!field)
       return Status::InvalidArgument("--set " + setting + ": no option '" + key +
                                      "' (the names are headforge train's options with _ for -: max_minutes, "
                                      "decoder_steps, ...)");
     nlohmann::json value = nlohmann::json::parse(setting.substr(eq + 1), nullptr, /*allow_exceptions=*/false);
     if (value.is_discarded()) value = setting.substr(eq + 1);
-    const nlohmann::json& old = (*options)[key];
+    const nlohmann::json& old = *field;
     const bool fits = (old.is_number() && value.is_number()) || old.type() == value.type();
     if (!fits)
       return Status::InvalidArgument("--set " + setting + ": " + key + " takes a " + std::string(old.type_name()) +
                                      " such as " + old.dump());
-    (*options)[key] = value;
+    *field = value;
   }
   return Status::Ok();
 }
@@ -56,14 +68,15 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
                              "); write the pack again with this version's headforge pack");
   }
   // A generator file named in the pack must be on this machine too.
-  if (!options.decoder_init.empty()) {
+  const DecoderTrainOptions& decoder = options.gaussian_style.decoder;
+  if (!decoder.decoder_init.empty()) {
     std::error_code ec;
-    if (!fs::is_regular_file(options.decoder_init, ec))
-      return Status::InvalidArgument("pack: its --decoder-init " + options.decoder_init +
+    if (!fs::is_regular_file(decoder.decoder_init, ec))
+      return Status::InvalidArgument("pack: its --decoder-init " + decoder.decoder_init +
                                      " is not on this machine; put it at the same path");
   }
   HF_RETURN_IF_ERROR(options.Check().WithContext(pack.string()));
-  if (options.decoder_steps > 0 && options.adversarial_weight > 0 && !data.train.empty() &&
+  if (decoder.decoder_steps > 0 && decoder.adversarial_weight > 0 && !data.train.empty() &&
       !data.train.front().uv_map.defined())
     return Status::InvalidArgument(pack.string() + " has no UV maps for stage 3's discriminator: write it with "
                                    "--decoder-steps (and an --adversarial-weight above 0), or set "
@@ -74,11 +87,11 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
     HF_LOG(Info) << "train: this build writes no images (previews, held_out/): headforge render --held-out "
                     "--side-by-side draws them once the model is in its workspace";
   if (kGaussianStyle.Is(options.model)) return TrainGaussianStyleRun(options, data, out_dir, progress, summary);
-  if (!options.generator_from.empty())
+  if (!options.gan_avatar.generator_from.empty())
     return Status::InvalidArgument("--set generator_from: a pack trains the GAN itself; --generator-from is headforge "
                                    "train's, on the workspace");
   HF_RETURN_IF_ERROR(TrainGanAvatar(options, data, /*track_images=*/{}, out_dir, progress, summary));
-  if (options.mapping_steps > 0)
+  if (options.gan_avatar.mapping_steps > 0)
     HF_LOG(Info) << "train: the GAN is trained; on the workspace's machine, headforge train --workspace WS --model "
                     "gan-avatar --generator-from " << out_dir.string()
                  << " (this folder copied there) adds the expression mapping";

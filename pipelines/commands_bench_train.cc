@@ -27,20 +27,23 @@ struct Variant {
 };
 
 const Variant kVariants[] = {
-    {"stage1", "stage 1 only", [](TrainOptions* t) { t->deform = false; }},
-    {"no-region", "stages 1+2, no region loss", [](TrainOptions* t) { t->region_weight = 0; }},
+    {"stage1", "stage 1 only", [](TrainOptions* t) { t->gaussian_style.deform = false; }},
+    {"no-region", "stages 1+2, no region loss", [](TrainOptions* t) { t->gaussian_style.region_weight = 0; }},
     {"full", "stages 1+2", [](TrainOptions*) {}},
-    {"canonical", "stages 1+2, canonical deformation", [](TrainOptions* t) { t->mesh_riding = false; }},
-    {"mesh-riding", "stages 1+2, mesh riding", [](TrainOptions* t) { t->mesh_riding = true; }},
+    {"canonical", "stages 1+2, canonical deformation", [](TrainOptions* t) { t->gaussian_style.mesh_riding = false; }},
+    {"mesh-riding", "stages 1+2, mesh riding", [](TrainOptions* t) { t->gaussian_style.mesh_riding = true; }},
     // Scored over its own masks: set beside the others only through the
     // simulator's truth (--truth).
-    {"mask-ingest", "stages 1+2, the workspace's masks", [](TrainOptions* t) { t->mask = "ingest"; }},
+    {"mask-ingest", "stages 1+2, the workspace's masks", [](TrainOptions* t) { t->data.mask = "ingest"; }},
     // Stage 3 (GaussianStyle's Table 2b); they need --decoder-steps. Each
     // scores stage 2's splats beside the decoded image (eval_stage2.json).
     {"stage3", "stages 1-3", [](TrainOptions*) {}, true},
-    {"stage3-no-ada", "stages 1-3, no augmentation", [](TrainOptions* t) { t->decoder_ada = false; }, true},
-    {"stage3-no-discriminator", "stages 1-3, no discriminator", [](TrainOptions* t) { t->adversarial_weight = 0; }, true},
-    {"stage3-full-tune", "stages 1-3, full-tune (no PTI, generator trained)", [](TrainOptions* t) { t->full_tune = true; }, true},
+    {"stage3-no-ada", "stages 1-3, no augmentation",
+     [](TrainOptions* t) { t->gaussian_style.decoder.decoder_ada = false; }, true},
+    {"stage3-no-discriminator", "stages 1-3, no discriminator",
+     [](TrainOptions* t) { t->gaussian_style.decoder.adversarial_weight = 0; }, true},
+    {"stage3-full-tune", "stages 1-3, full-tune (no PTI, generator trained)",
+     [](TrainOptions* t) { t->gaussian_style.decoder.full_tune = true; }, true},
 };
 
 // One rung of --ladder: "STEPS", "STEPS/GAUSSIANS" (the gaussian-style
@@ -159,17 +162,18 @@ int BenchTrain(const std::vector<std::string>& args) {
           "--variants: no variant '" + name +
           "' (stage1, no-region, full, canonical, mesh-riding, stage3, stage3-no-ada, stage3-no-discriminator, "
           "stage3-full-tune)"));
-    if (found->stage3 && train.decoder_steps <= 0)
+    if (found->stage3 && train.gaussian_style.decoder.decoder_steps <= 0)
       return ReportFailure(Status::InvalidArgument("--variants " + name +
                                                    ": stage 3 needs --decoder-steps N (and its --prior-steps, "
                                                    "--pti-steps, --decoder-resolution; docs/avatar.md)"));
     jobs.push_back({found->name, found->what, train});
     // The ablation compares the variants over one budget: none stops early
     // unless asked (--patience), and none trains on fewer frames than asked.
-    if (!options.WasGiven("train.patience")) jobs.back().options.patience = 0;
-    if (!options.WasGiven("train.validation")) jobs.back().options.validation = 0;
+    GaussianStyleTrainOptions& style = jobs.back().options.gaussian_style;
+    if (!options.WasGiven("train.patience")) style.patience = 0;
+    if (!options.WasGiven("train.validation")) style.validation = 0;
     found->apply(&jobs.back().options);
-    if (!found->stage3) jobs.back().options.decoder_steps = 0;  // their rows are stages 1 and 2
+    if (!found->stage3) style.decoder.decoder_steps = 0;  // their rows are stages 1 and 2
   }
   for (const std::string& text : ladder) {
     Rung rung;
@@ -179,16 +183,17 @@ int BenchTrain(const std::vector<std::string>& args) {
       job.options.preset = rung.preset;
       if (Status s = ApplyTrainPreset(options, &job.options); !s.ok()) return ReportFailure(s);
     } else {
-      job.options.steps = rung.steps;
-      job.options.max_minutes = 0;
-      job.options.patience = 0;  // a rung is its step count: it trains every step, on every training frame
-      job.options.validation = 0;
+      GaussianStyleTrainOptions& style = job.options.gaussian_style;
+      job.options.loop.steps = rung.steps;
+      job.options.loop.max_minutes = 0;
+      style.patience = 0;  // a rung is its step count: it trains every step, on every training frame
+      style.validation = 0;
       if (rung.gaussians) {
         if (kGanAvatar.Is(train.model))
           return ReportFailure(Status::InvalidArgument("--ladder: '" + text + "' gives a Gaussian count, which the " +
                                                        kGanAvatar.Name() + " model has not"));
-        job.options.max_gaussians = rung.gaussians;
-        job.options.init_gaussians = std::min<int64_t>(job.options.init_gaussians, rung.gaussians);
+        style.max_gaussians = rung.gaussians;
+        style.init_gaussians = std::min<int64_t>(style.init_gaussians, rung.gaussians);
       }
     }
     if (Status s = job.options.Check(); !s.ok()) return ReportFailure(s.WithContext("--ladder " + text));

@@ -42,7 +42,7 @@ int PackCommand(const std::vector<std::string>& args) {
   std::error_code ec;
   const double mib = double(fs::file_size(out, ec)) / (1 << 20);
   HF_LOG(Info) << "pack: " << out << " (" << static_cast<int>(mib + 0.5) << " MiB) for " << train.model << " ("
-               << train.preset << ", " << train.resolution << " px, on " << train.device
+               << train.preset << ", " << train.data.resolution << " px, on " << train.device
                << "); train it with headforge-train " << out << " --out DIR"
                << (kGanAvatar.Is(train.model)
                        ? ", then headforge train --model " + kGanAvatar.Name() + " --generator-from DIR here"

@@ -42,7 +42,7 @@ class TrainJob : public StageJob {
     return options_.model == "auto" && !same ? first.WithContext("--model auto: no model takes these options") : first;
   }
   Status Ahead(const fs::path& workspace) const override {
-    return CheckEnoughFramesToTrain(workspace, options_.holdout);
+    return CheckEnoughFramesToTrain(workspace, options_.data.holdout);
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     std::string model = options_.model, why = "as asked";
@@ -60,7 +60,8 @@ class TrainJob : public StageJob {
     HF_RETURN_IF_ERROR(RunTrain(*options, env.workspace->root(), env.settings->face_model,
                                 context.staging / "models" / folder, env.progress, &summary));
     result->outputs = {"models/" + folder};
-    const std::string how = options->generator_from.empty() ? options->preset : "the GAN of " + options->generator_from;
+    const std::string& generator_from = options->gan_avatar.generator_from;
+    const std::string how = generator_from.empty() ? options->preset : "the GAN of " + generator_from;
     result->message = model + " (" + how + (options_.model == "auto" ? ", auto: " + why : "") +
                       "): " + summary.OneLine();
     return Status::Ok();

@@ -174,7 +174,7 @@ TEST_F(GanAvatarTrain, APackTrainsTheGanAndTheWorkspaceAddsTheMapping) {
   nlohmann::json config, eval, expected_eval;
   ASSERT_TRUE(ReadJson(out / "config.json", &config).ok());
   EXPECT_FALSE(config["expression_mapping"]["trained"].get<bool>());
-  EXPECT_EQ(config["options"]["resolution"], 32);
+  EXPECT_EQ(config["options"]["data"]["resolution"], 32);
   ASSERT_TRUE(ReadJson(out / "eval.json", &eval).ok());
   ASSERT_TRUE(ReadJson(reference_ / kModelDir / "eval.json", &expected_eval).ok());
   EXPECT_NE(eval["latent"].get<std::string>().find("running mean"), std::string::npos) << eval["latent"];

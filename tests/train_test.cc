@@ -228,11 +228,10 @@ TEST_F(TrainStage, PoseCorrectionsResumeAfterAKillAndScoreTheTrainingViews) {
 
   // The saved corrections, and the training views' score drawn with them.
   GaussianStyleAvatar avatar;
-  TrainOptions trained;
   FaceModel model;
   DatasetOptions loading;
   AvatarDataset data;
-  ASSERT_TRUE(LoadTrained(ws, ws / kModelDir, DefaultDataDir() + "/ict_facekit/ict_face_model.h5", torch::kCPU, 0, &loading, &avatar, &trained, &model, &data).ok());
+  ASSERT_TRUE(LoadTrained(ws, ws / kModelDir, DefaultDataDir() + "/ict_facekit/ict_face_model.h5", torch::kCPU, 0, &loading, &avatar, &model, &data).ok());
   ASSERT_TRUE(avatar.pose_corrections.defined());
   ASSERT_EQ(avatar.pose_corrections.size(0), int64_t(data.train.size()));
   EXPECT_GT(avatar.pose_corrections.abs().max().item<double>(), 0.0);

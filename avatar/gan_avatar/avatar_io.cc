@@ -15,6 +15,32 @@ bool IsGanAvatarFolder(const fs::path& dir) {
   return ReadJson(dir / "config.json", &config).ok() && kGanAvatar.Is(config.value("model", ""));
 }
 
+namespace {
+
+// The views `config`'s model trained on: in its options' "data" block, or,
+// in models written before the blocks, in "training" (the mask resolved
+// there).
+DatasetOptions TrainedData(const nlohmann::json& config) {
+  DatasetOptions data;
+  data.holdout_order = "last";
+  const auto options = config.find("options");
+  if (options != config.end() && options->contains("data")) {
+    FromJson(options->at("data"), &data);
+  } else if (config.contains("training")) {
+    const nlohmann::json& training = config.at("training");
+    data.holdout = training.value("holdout", data.holdout);
+    data.holdout_order = training.value("holdout_order", data.holdout_order);
+    data.holdout_cameras = training.value("holdout_cameras", std::vector<std::string>());
+    data.mask = training.value("mask", data.mask);
+    data.mask_hair = training.value("mask_hair", data.mask_hair);
+    data.mask_skin = training.value("mask_skin", data.mask_skin);
+  }
+  if (data.mask == "auto") data.mask = std::string(kGanAvatar.default_mask);
+  return data;
+}
+
+}  // namespace
+
 Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avatar) {
   nlohmann::json config;
   HF_RETURN_IF_ERROR(ReadJson(dir / "config.json", &config));
@@ -30,15 +56,7 @@ Status LoadGanAvatar(const fs::path& dir, torch::Device device, GanAvatar* avata
     avatar->out_height = config.at("output_size").at(1);
     avatar->background = config.at("background");
     avatar->expressions = int64_t(config.at("expression_mapping").at("expressions").size());
-    if (config.contains("training")) {
-      avatar->holdout = config.at("training").value("holdout", avatar->holdout);
-      avatar->holdout_order = config.at("training").value("holdout_order", avatar->holdout_order);
-      avatar->holdout_cameras =
-          config.at("training").value("holdout_cameras", std::vector<std::string>());
-      avatar->mask = config.at("training").value("mask", avatar->mask);
-      avatar->mask_hair = config.at("training").value("mask_hair", avatar->mask_hair);
-      avatar->mask_skin = config.at("training").value("mask_skin", avatar->mask_skin);
-    }
+    avatar->trained = TrainedData(config);
   } catch (const nlohmann::json::exception& e) {
     return Status::DataError(dir.string() + "/config.json: " + e.what());
   }

@@ -12,6 +12,7 @@
 
 #include "avatar/gan_avatar/expression_mapping.h"
 #include "avatar/gan_avatar/model.h"
+#include "avatar/train/dataset_options.h"
 #include "core/fs.h"
 #include "core/status.h"
 
@@ -27,12 +28,11 @@ struct GanAvatar {
   int render_width = 0, render_height = 0, out_width = 0, out_height = 0;
   double background = 0.5;
   int64_t expressions = 0;
-  // What training held out: the last fraction of the frames and whole cameras.
-  double holdout = 0.2;
-  std::string holdout_order = "last";
-  std::vector<std::string> holdout_cameras;
-  std::string mask = "ingest";  // the masks it trained on (DatasetOptions::mask)
-  double mask_hair = 0.03, mask_skin = 0.016;
+  // The views it trained on, as its config.json records them: what training
+  // held out (frames and whole cameras) and the masks (resolved: ingest or
+  // mesh). Models written before they were recorded held out the last 20% of
+  // the frames and trained on the workspace's masks.
+  DatasetOptions trained;
 
   // The image [3, H, W] (on the CPU, in [0, 1]) for `expressions` [E] (the
   // mean latent when undefined or without a mapping) from `camera`, a camera

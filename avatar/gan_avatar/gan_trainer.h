@@ -45,8 +45,8 @@ class GanTrainer : public LoopTrainer {
         adam_g_(0.0, 0.99), adam_d_(0.0, 0.99), ada_(options.ada_target), watch_(options.collapse_steps) {}
 
   Status Start(const fs::path& checkpoint, StatsLog* stats);
-  // The generator of a finished training (options.generator_from) in place
-  // of this one's; Train then trains no GAN.
+  // The generator of a finished training (its options' generator_from) in
+  // place of this one's; Train then trains no GAN.
   Status ImportGenerator(const fs::path& dir);
   Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
   Status TrainMapping(const ImageTracker& track_images, StatsLog* stats, Progress* progress);
@@ -84,7 +84,7 @@ class GanTrainer : public LoopTrainer {
   // from its own camera with a latent of its frame's own (L1 on the image
   // and on the raw render).
   torch::Tensor ReconstructionLoss(RunningStats* stats);
-  bool reconstructing(int step) const { return step <= options_.reconstruction_steps; }
+  bool reconstructing(int step) const { return step <= gan_options_.reconstruction_steps; }
   // The discriminator's input: the image and the raw render brought to its size.
   torch::Tensor DualImage(const torch::Tensor& image, const torch::Tensor& raw) const {
     return torch::cat({image, nn::ResizeBilinear(raw, image.size(2), image.size(3))}, 1);
@@ -106,6 +106,7 @@ class GanTrainer : public LoopTrainer {
   torch::Tensor RenderLatents(const torch::Tensor& w, const SplatCamera& camera);
 
   TrainOptions options_;
+  const GanAvatarTrainOptions& gan_options_ = options_.gan_avatar;  // the model's own part of options_
   const AvatarDataset& data_;
   torch::Device device_;
   at::Generator gen_;

@@ -27,9 +27,9 @@ torch::Tensor GanTrainer::TrainingFrames() const {
 }
 
 torch::Tensor GanTrainer::MappingCodes(at::Generator& random) const {
-  if (options_.mapping_latents != "frames") return torch::Tensor();
+  if (gan_options_.mapping_latents != "frames") return torch::Tensor();
   const torch::Tensor trained = frame_codes_.detach().cpu().index_select(0, TrainingFrames());
-  const int64_t count = trained.size(0), samples = options_.mapping_samples;
+  const int64_t count = trained.size(0), samples = gan_options_.mapping_samples;
   // Each training frame's latent once (evenly chosen where the samples are
   // fewer), then blends of two frames' latents (expressions between them).
   std::vector<torch::Tensor> rows;
@@ -60,7 +60,7 @@ class GanTrainer::MappingLoop : public LoopTrainer {
     const torch::Tensor index = torch::randint(count, {batch}, random_, torch::kLong).to(t_.device_);
     const torch::Tensor w = t_.avatar_.mapping->forward(expressions_.index_select(0, index));
     torch::Tensor loss;
-    if (t_.options_.mapping_loss == "latent") {
+    if (t_.gan_options_.mapping_loss == "latent") {
       loss = (w - w_.index_select(0, index)).pow(2).mean();
     } else {
       const SplatCamera camera = t_.RenderCamera(t_.FrontalView());
@@ -94,13 +94,13 @@ class GanTrainer::MappingLoop : public LoopTrainer {
 };
 
 Status GanTrainer::TrainMapping(const ImageTracker& track_images, StatsLog* stats, Progress* progress) {
-  if (options_.mapping_steps == 0) return Status::Ok();
+  if (gan_options_.mapping_steps == 0) return Status::Ok();
   if (!track_images) {
     HF_LOG(Info) << "train: gan-avatar: no expression mapping in this build (its tracker needs the full one); the "
                     "model draws every frame with the mean latent until headforge train --generator-from adds it";
     return Status::Ok();
   }
-  if (options_.mapping_latents == "frames" && !codes_trained_)  // TrainOptions::Check and ImportGenerator refuse it first
+  if (gan_options_.mapping_latents == "frames" && !codes_trained_)  // TrainOptions::Check and ImportGenerator refuse it first
     return Status::Internal("train: --mapping-latents frames without the training frames' latents");
   const auto start = std::chrono::steady_clock::now();
   for (torch::Tensor& p : g_params_) p.requires_grad_(false);  // the generator is frozen
@@ -108,7 +108,7 @@ Status GanTrainer::TrainMapping(const ImageTracker& track_images, StatsLog* stat
   // Its own random stream: the same renders whether the GAN was trained here
   // or imported (--generator-from).
   at::Generator random = at::detail::createCPUGenerator(uint64_t(options_.seed) + 13);
-  const int64_t samples = options_.mapping_samples;
+  const int64_t samples = gan_options_.mapping_samples;
   const torch::Tensor codes = MappingCodes(random);
   std::vector<torch::Tensor> ws, renders;
   progress->Start("train: gan-avatar renders for the expression mapping", samples);
@@ -141,9 +141,10 @@ Status GanTrainer::TrainMapping(const ImageTracker& track_images, StatsLog* stat
   const torch::Tensor e_all = samples_.expressions.to(device_), w_all = samples_.w.to(device_),
                       images = samples_.images.to(device_);
   MappingLoop mapping(*this, e_all, w_all, images, random, &adam);
-  LoopOptions loop = TrainLoopOptions(options_, "train: gan-avatar expression mapping", options_.mapping_steps);
+  LoopOptions loop =
+      TrainLoopOptions(options_.loop, "train: gan-avatar expression mapping", gan_options_.mapping_steps);
   loop.step_key = "mapping_step";
-  loop.tags = {{"mapping_loss_kind", options_.mapping_loss}};
+  loop.tags = {{"mapping_loss_kind", gan_options_.mapping_loss}};
   loop.checkpoint_every = 0;  // a few minutes at most: an interrupt keeps the GAN and starts the mapping over
   loop.resume_hint = "the GAN is kept: run the same command again to train the mapping from it";
   loop.what = "the expression mapping";
@@ -168,7 +169,7 @@ Status GanTrainer::CheckMappedExpressions(const ImageTracker& track_images, Prog
       if (v.camera == frontal.camera && !v.unreliable) by_frame.emplace(v.frame, &v);
   std::vector<const AvatarView*> all, chosen;
   for (const auto& [frame, v] : by_frame) all.push_back(v);
-  const size_t count = std::min(all.size(), size_t(std::max(options_.mapping_samples, 2)));
+  const size_t count = std::min(all.size(), size_t(std::max(gan_options_.mapping_samples, 2)));
   for (size_t k = 0; k < count; ++k) chosen.push_back(all[k * all.size() / count]);
   if (chosen.size() < 2) return Status::Ok();
   std::vector<torch::Tensor> rows, frames;

@@ -107,7 +107,7 @@ torch::Tensor GanTrainer::ReconstructionLoss(RunningStats* stats) {
 }
 
 void GanTrainer::Step(int step, RunningStats* stats) {
-  if (step == options_.reconstruction_steps + 1 && options_.reconstruction_steps > 0)
+  if (step == gan_options_.reconstruction_steps + 1 && gan_options_.reconstruction_steps > 0)
     HF_LOG(Info) << "train: gan-avatar: adversarial training from step " << step;
   if (reconstructing(step)) {
     ReconstructionLoss(stats).backward();
@@ -131,10 +131,11 @@ void GanTrainer::Step(int step, RunningStats* stats) {
   const torch::Tensor loss_g = F::softplus(-discriminator_->forward(nn::Augment(fake_dual, p, 6, gen_), fake_c)).mean();
   // After the warm-up the adversarial loss comes in over --adversarial-ramp
   // steps, while the reconstruction goes on at --recon-weight.
-  const int since = step - options_.reconstruction_steps;
-  const double ramp = options_.adversarial_ramp > 0 ? std::min(1.0, double(since) / options_.adversarial_ramp) : 1.0;
+  const int since = step - gan_options_.reconstruction_steps;
+  const int ramp_steps = gan_options_.adversarial_ramp;
+  const double ramp = ramp_steps > 0 ? std::min(1.0, double(since) / ramp_steps) : 1.0;
   torch::Tensor total = ramp * loss_g;
-  if (options_.recon_weight > 0) total = total + options_.recon_weight * ReconstructionLoss(stats);
+  if (gan_options_.recon_weight > 0) total = total + gan_options_.recon_weight * ReconstructionLoss(stats);
   total.backward();
   adam_g_.Step();
   adam_g_.ZeroGrad();
@@ -325,7 +326,7 @@ Status GanTrainer::ImportGenerator(const fs::path& dir) {
                       << "training frames than these; they are not used";
     }
   }
-  if (options_.mapping_latents == "frames" && !codes_trained_)
+  if (gan_options_.mapping_latents == "frames" && !codes_trained_)
     return Status::InvalidArgument("train: --mapping-latents frames: the GAN of " + dir.string() +
                                    " kept no latents for this workspace's training frames (a model written before "
                                    "they were kept, or trained without the reconstruction loss); use "
@@ -339,15 +340,15 @@ Status GanTrainer::ImportGenerator(const fs::path& dir) {
 }
 
 Status GanTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
-  if (!options_.generator_from.empty()) return Status::Ok();  // the GAN was trained elsewhere
+  if (!gan_options_.generator_from.empty()) return Status::Ok();  // the GAN was trained elsewhere
   out_dir_ = out_dir;
   checkpoint_ = checkpoint;
-  HF_RETURN_IF_ERROR(RunLoop(TrainLoopOptions(options_, "train: gan-avatar", options_.steps), this, &state_, stats,
-                             progress));
+  HF_RETURN_IF_ERROR(RunLoop(TrainLoopOptions(options_.loop, "train: gan-avatar", options_.loop.steps), this, &state_,
+                             stats, progress));
   progress->Finish(std::to_string(state_.step) + " steps");
   // The reconstruction loss fits each training frame's latent, in the
   // warm-up and wherever it is kept beside the adversarial loss.
-  codes_trained_ = state_.step > 0 && (options_.reconstruction_steps > 0 || options_.recon_weight > 0);
+  codes_trained_ = state_.step > 0 && (gan_options_.reconstruction_steps > 0 || gan_options_.recon_weight > 0);
   // The GAN is done: a kill during the expression mapping resumes here.
   state_.stats_lines = stats->size();
   return SaveCheckpoint(checkpoint, state_);
@@ -375,7 +376,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
   nlohmann::json eval = {
       {"held_out_frames", data_.HeldOutText()},
       {"background", kBackground},
-      {"latent", avatar_.mapping ? "the expression mapping (" + options_.mapping_loss +
+      {"latent", avatar_.mapping ? "the expression mapping (" + gan_options_.mapping_loss +
                                  " loss) of each frame's tracked expression"
                           : std::string("the running mean of w (no expression mapping)")},
       {"mean", ScoresJson(mean, false)},
@@ -384,7 +385,7 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
       {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
       {"mapping", {{"renders", samples_.rendered}, {"tracked", samples_.w.defined() ? samples_.w.size(0) : 0},
                    {"flagged", samples_.flagged}, {"median_residual_px", samples_.median_residual_px},
-                   {"loss", options_.mapping_loss}, {"latents", options_.mapping_latents},
+                   {"loss", gan_options_.mapping_loss}, {"latents", gan_options_.mapping_latents},
                    {"last_loss", mapping_loss_}}},
       {"views", views}};
   if (!expression_check_.is_null()) eval["expression_agreement"] = expression_check_;
@@ -399,23 +400,20 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
     model.Put("trained_frames", TrainingFrames());
   }
   HF_RETURN_IF_ERROR(model.Save(out_dir / "model.pt"));
+  // The options it trained with (the masks resolved, as render and export read them), once.
+  TrainOptions recorded = options_;
+  recorded.data = options_.DataFor(kGanAvatar);
   const nlohmann::json config = {
       {"model", kGanAvatar.name},
       {"version", 1},
       {"architecture", arch_},
       {"expression_mapping", {{"expressions", data_.expression_names}, {"hidden", 256}, {"layers", 2},
-                              {"loss", options_.mapping_loss}, {"latents", options_.mapping_latents},
                               {"trained", bool(avatar_.mapping)}}},
       {"render_size", {render_w_, render_h_}},
       {"output_size", {data_.width, data_.height}},
       {"background", kBackground},
-      {"training", {{"steps", state_.step}, {"batch", options_.batch}, {"seconds", state_.seconds},
-                    {"seed", options_.seed}, {"preset", options_.preset}, {"holdout", options_.holdout},
-                    {"holdout_order", options_.holdout_order}, {"holdout_cameras", options_.holdout_cameras},
-                    {"mask", options_.MaskFor(kGanAvatar)}, {"mask_hair", options_.mask_hair},
-                    {"mask_skin", options_.mask_skin},
-                    {"generator_from", options_.generator_from}}},
-      {"options", ToJson(options_)}};
+      {"training", {{"steps", state_.step}, {"seconds", state_.seconds}}},
+      {"options", ToJson(recorded)}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(out_dir / "config.json", config, 1));
   summary->steps = state_.step;
   summary->seconds = state_.seconds;
@@ -429,7 +427,7 @@ using gan_training::GanTrainer;
 using gan_training::kBoxPadding;
 
 void GanRenderSize(const TrainOptions& options, const AvatarDataset& data, int* width, int* height) {
-  const double factor = double(options.render_resolution) / std::max(data.width, data.height);
+  const double factor = double(options.gan_avatar.render_resolution) / std::max(data.width, data.height);
   *width = std::max(1, int(std::lround(data.width * factor)));
   *height = std::max(1, int(std::lround(data.height * factor)));
 }
@@ -439,10 +437,10 @@ GanAvatarOptions GanArchitecture(const TrainOptions& options, const AvatarDatase
   arch.z_dim = options.latent_dim;
   arch.plane_resolution = options.triplane_resolution;
   arch.feature_channels = options.feature_channels;
-  arch.coarse_samples = options.coarse_samples;
-  arch.fine_samples = options.fine_samples;
+  arch.coarse_samples = options.gan_avatar.coarse_samples;
+  arch.fine_samples = options.gan_avatar.fine_samples;
   arch.super_resolution_doublings =
-      int(std::lround(std::log2(double(options.resolution) / double(options.render_resolution))));
+      int(std::lround(std::log2(double(options.data.resolution) / double(options.gan_avatar.render_resolution))));
   const torch::Tensor v = data.identity_vertices.to(torch::kFloat64);
   const torch::Tensor lo = std::get<0>(v.min(0)), hi = std::get<0>(v.max(0));
   for (int a = 0; a < 3; ++a) {
@@ -465,11 +463,12 @@ Status TrainGanAvatar(const TrainOptions& options, const AvatarDataset& data, co
   HF_RETURN_IF_ERROR(trainer.Start(checkpoint, stats));
   const int resumed_from = trainer.step();  // 0 unless a checkpoint was found
   std::error_code ec;
-  if (!options.generator_from.empty() && !fs::exists(checkpoint, ec)) {
-    HF_RETURN_IF_ERROR(trainer.ImportGenerator(options.generator_from));
+  const std::string& generator_from = options.gan_avatar.generator_from;
+  if (!generator_from.empty() && !fs::exists(checkpoint, ec)) {
+    HF_RETURN_IF_ERROR(trainer.ImportGenerator(generator_from));
     // Its GAN's lines first, so that stats.jsonl tells the whole training.
     std::string text;
-    if (stats->size() == 0 && ReadFileToString(fs::path(options.generator_from) / "stats.jsonl", &text).ok()) {
+    if (stats->size() == 0 && ReadFileToString(fs::path(generator_from) / "stats.jsonl", &text).ok()) {
       std::istringstream lines(text);
       for (std::string line; std::getline(lines, line);)
         if (!line.empty() && line.find("\"mapping_step\"") == std::string::npos) stats->Append(line);

@@ -120,21 +120,18 @@ std::vector<std::pair<std::string, torch::Tensor>> NamedTensors(const GaussianSt
 }  // namespace
 
 nlohmann::json ConfigJson(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data) {
+  TrainOptions recorded = options;
+  recorded.data = options.DataFor(kGaussianStyle);  // the masks it trained on, as render and export read them
   nlohmann::json config = {{"version", 1},
           {"model", kGaussianStyle.name},
           {"architecture", OptionsJson(avatar.model->options())},
           {"frames", data.num_frames},
           {"deform", avatar.deform},
-          {"resolution", options.resolution},
-          {"holdout", options.holdout},
-          {"holdout_order", options.holdout_order},
-          {"mask", options.MaskFor(kGaussianStyle)},
-          {"mask_hair", options.mask_hair},
-          {"mask_skin", options.mask_skin},
           {"width", data.width},
           {"height", data.height},
           {"gaussians", avatar.gaussians.params.size()},
-          {"expression_names", data.expression_names}};
+          {"expression_names", data.expression_names},
+          {"options", ToJson(recorded)}};
   if (avatar.decoder) config["decoder"] = ToJson(avatar.decoder->options());
   return config;
 }
@@ -160,7 +157,30 @@ Status SaveAvatarSafetensors(const GaussianStyleAvatar& avatar, const nlohmann::
   return WriteJsonAtomic(dir / "config.json", config, 2);
 }
 
-Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar* avatar, TrainOptions* options) {
+namespace {
+
+// The views a model trained on, as `config` records them.
+DatasetOptions TrainedData(const nlohmann::json& config) {
+  DatasetOptions data;
+  if (config.contains("options")) {
+    FromJson(config.at("options").at("data"), &data);
+    return data;
+  }
+  // Written before the options were recorded: at the top.
+  data.resolution = config.at("resolution").get<int>();
+  data.holdout = config.value("holdout", data.holdout);
+  // Models trained before the order existed held out the last frames.
+  data.holdout_order = config.value("holdout_order", std::string("last"));
+  // Models trained before the mask was chosen trained on the workspace's.
+  data.mask = config.value("mask", std::string("ingest"));
+  data.mask_hair = config.value("mask_hair", data.mask_hair);
+  data.mask_skin = config.value("mask_skin", data.mask_skin);
+  return data;
+}
+
+}  // namespace
+
+Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar* avatar, DatasetOptions* trained) {
   nlohmann::json config;
   HF_RETURN_IF_ERROR(ReadArtefact(dir / "config.json", 1, "train", &config));
   Checkpoint c;
@@ -172,17 +192,7 @@ Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar
     out.model = GaussianStyle(OptionsFromJson(config.at("architecture")), config.at("frames").get<int64_t>());
     out.deform = config.at("deform").get<bool>();
     if (config.contains("decoder")) out.decoder = StyleDecoder(StyleDecoderOptionsFromJson(config.at("decoder")));
-    if (options) {
-      options->resolution = config.at("resolution").get<int>();
-      options->holdout = config.value("holdout", options->holdout);
-      // Models trained before the order existed held out the last frames.
-      options->holdout_order = config.value("holdout_order", std::string("last"));
-      options->mesh_riding = out.model->options().mesh_riding;
-      // Models trained before the mask was chosen trained on the workspace's.
-      options->mask = config.value("mask", std::string("ingest"));
-      options->mask_hair = config.value("mask_hair", options->mask_hair);
-      options->mask_skin = config.value("mask_skin", options->mask_skin);
-    }
+    if (trained) *trained = TrainedData(config);
   } catch (const std::exception& e) {
     return Status::DataError((dir / "config.json").string() + " is damaged (" + e.what() + "); run headforge train again");
   }

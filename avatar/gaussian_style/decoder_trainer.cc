@@ -92,11 +92,11 @@ class DecoderTrainer : public LoopTrainer {
         adam_prior_g_(0.0, 0.99), adam_prior_d_(0.0, 0.99), adam_fuse_d_(0.0, 0.99),
         ada_prior_(options.ada_target), ada_fuse_(options.ada_target), prior_watch_(options.collapse_steps),
         fuse_watch_(options.collapse_steps) {
-    side_ = options.decoder_resolution > 0 ? options.decoder_resolution : options.resolution;
-    prior_end_ = options.decoder_init.empty() ? options.prior_steps : 0;
-    invert_end_ = prior_end_ + (options.full_tune ? 0 : options.pti_steps);
-    tune_end_ = invert_end_ + (options.full_tune ? 0 : options.pti_steps);
-    total_ = tune_end_ + options.decoder_steps;
+    side_ = stage3_.decoder_resolution > 0 ? stage3_.decoder_resolution : options.data.resolution;
+    prior_end_ = stage3_.decoder_init.empty() ? stage3_.prior_steps : 0;
+    invert_end_ = prior_end_ + (stage3_.full_tune ? 0 : stage3_.pti_steps);
+    tune_end_ = invert_end_ + (stage3_.full_tune ? 0 : stage3_.pti_steps);
+    total_ = tune_end_ + stage3_.decoder_steps;
   }
 
   Status Start(const fs::path& checkpoint, const fs::path& stage2_checkpoint, StatsLog* stats);
@@ -136,6 +136,8 @@ class DecoderTrainer : public LoopTrainer {
   Status WritePreview(const fs::path& dir, int step);
 
   TrainOptions options_;
+  const GaussianStyleTrainOptions& style_ = options_.gaussian_style;  // the model's own part of options_
+  const DecoderTrainOptions& stage3_ = style_.decoder;
   const AvatarDataset& data_;
   GaussianStyleAvatar* avatar_;
   torch::Device device_;
@@ -177,7 +179,7 @@ void DecoderTrainer::ChoosePtiFrames() {
   for (int64_t i : usable_) rows.push_back(data_.train[size_t(i)].condition.slice(0, e, e + 6));
   const torch::Tensor r = torch::stack(rows).to(torch::kFloat64);
   torch::Tensor nearest = (r - r.mean(0, true)).norm(2, 1);
-  const int k = std::min<int>(options_.pti_frames, int(usable_.size()));
+  const int k = std::min<int>(stage3_.pti_frames, int(usable_.size()));
   for (int j = 0; j < k; ++j) {
     const int64_t pick = nearest.argmax().item<int64_t>();
     pti_views_.push_back(usable_[size_t(pick)]);
@@ -189,12 +191,12 @@ Status DecoderTrainer::Start(const fs::path& checkpoint, const fs::path& stage2_
   StyleDecoderOptions architecture;
   architecture.feature_channels = avatar_->model->options().feature_channels;
   architecture.generator.resolution = side_;
-  architecture.projected_blocks = options_.projected_blocks;
+  architecture.projected_blocks = stage3_.projected_blocks;
   torch::manual_seed(uint64_t(options_.seed) + 3);
   avatar_->decoder = StyleDecoder(architecture);
   StyleDecoderImpl& decoder = *avatar_->decoder;
-  if (!options_.decoder_init.empty())
-    HF_RETURN_IF_ERROR(LoadGeneratorWeights(options_.decoder_init, decoder.generator.get()).WithContext("train"));
+  if (!stage3_.decoder_init.empty())
+    HF_RETURN_IF_ERROR(LoadGeneratorWeights(stage3_.decoder_init, decoder.generator.get()).WithContext("train"));
   nn::DiscriminatorOptions d;
   d.resolution = side_;
   d.channels = 16;
@@ -214,7 +216,7 @@ Status DecoderTrainer::Start(const fs::path& checkpoint, const fs::path& stage2_
   fuse_d_params_ = fuse_d_->parameters();
   fuse_params_ = decoder.FusionParameters();
   for (const torch::Tensor& t : avatar_->model->parameters()) fuse_params_.push_back(t);
-  if (options_.full_tune)
+  if (stage3_.full_tune)
     for (const torch::Tensor& t : generator_params_) fuse_params_.push_back(t);
   for (torch::Tensor& t : generator_params_) adam_prior_g_.Add(&t, options_.lr_discriminator, false);
   for (torch::Tensor& t : generator_params_) adam_tune_.Add(&t, options_.lr_network * 0.2, false);
@@ -226,7 +228,7 @@ Status DecoderTrainer::Start(const fs::path& checkpoint, const fs::path& stage2_
   for (size_t i = 0; i < data_.train.size(); ++i)
     if (!data_.train[i].unreliable) usable_.push_back(int64_t(i));
   if (usable_.empty()) return Status::DataError("train: no reliably tracked training view for stage 3");
-  if (options_.adversarial_weight > 0)
+  if (stage3_.adversarial_weight > 0)
     for (int64_t i : usable_)
       if (!data_.train[size_t(i)].uv_map.defined())
         return Status::InvalidArgument("train: stage 3's discriminator needs the training views' UV maps "
@@ -262,7 +264,7 @@ void DecoderTrainer::DiscriminatorStep(nn::DiscriminatorImpl& d, Adam& adam, nn:
   batch.real = real;
   batch.fake = fake;
   batch.colour_channels = 3;
-  batch.augment_p = options_.decoder_ada ? ada.p() : 0.0;
+  batch.augment_p = stage3_.decoder_ada ? ada.p() : 0.0;
   const DiscriminatorUpdate u =
       UpdateDiscriminator(d, adam, ada, batch, {options_.r1_gamma, options_.r1_every}, step, gen_);
   stats->Add("d_real_accuracy", u.real_accuracy);
@@ -282,7 +284,7 @@ void DecoderTrainer::PriorStep(int step, RunningStats* stats) {
     reals.push_back(Target(data_.train[size_t(usable_[size_t(pick)])]));
   }
   const torch::Tensor real = torch::cat(reals) * 2 - 1;
-  const double p = options_.decoder_ada ? ada_prior_.p() : 0.0;
+  const double p = stage3_.decoder_ada ? ada_prior_.p() : 0.0;
   const torch::Tensor loss_g = F::softplus(-prior_d_->forward(nn::Augment(fake, p, 3, gen_))).mean();
   loss_g.backward();
   adam_prior_g_.Step();
@@ -300,9 +302,9 @@ void DecoderTrainer::InvertOrTune(bool tune, RunningStats* stats) {
   const torch::Tensor target = torch::cat(targets);
   const torch::Tensor out = decoder.Generate(tune ? pti_w_.detach() : pti_w_);
   const torch::Tensor l1 = (out - target).abs().mean();
-  torch::Tensor loss = (1 - options_.ssim_weight) * l1 + options_.ssim_weight * (1 - Ssim(out, target));
-  if (options_.perceptual_weight > 0 && prior_end_ > 0)
-    loss = loss + options_.perceptual_weight * FeatureMatching(*prior_d_, out * 2 - 1, target * 2 - 1);
+  torch::Tensor loss = (1 - style_.ssim_weight) * l1 + style_.ssim_weight * (1 - Ssim(out, target));
+  if (stage3_.perceptual_weight > 0 && prior_end_ > 0)
+    loss = loss + stage3_.perceptual_weight * FeatureMatching(*prior_d_, out * 2 - 1, target * 2 - 1);
   loss.backward();
   Adam& adam = tune ? adam_tune_ : adam_invert_;
   adam.Step();
@@ -330,16 +332,16 @@ void DecoderTrainer::FuseStep(int step, RunningStats* stats) {
   const torch::Tensor out = decoder.forward(splat.unsqueeze(0));
   const torch::Tensor target = Target(view);
   const torch::Tensor l1 = (out - target).abs().mean();
-  torch::Tensor loss = (1 - options_.ssim_weight) * l1 + options_.ssim_weight * (1 - Ssim(out, target));
-  const bool adversarial = options_.adversarial_weight > 0;
+  torch::Tensor loss = (1 - style_.ssim_weight) * l1 + style_.ssim_weight * (1 - Ssim(out, target));
+  const bool adversarial = stage3_.adversarial_weight > 0;
   torch::Tensor fake, real;
   if (adversarial) {
     const torch::Tensor uv = UvMap(view);
     fake = torch::cat({out * 2 - 1, uv}, 1);
     real = torch::cat({target * 2 - 1, uv}, 1);
-    const double p = options_.decoder_ada ? ada_fuse_.p() : 0.0;
-    loss = loss + options_.adversarial_weight * F::softplus(-fuse_d_->forward(nn::Augment(fake, p, 3, gen_))).mean();
-    if (options_.perceptual_weight > 0) loss = loss + options_.perceptual_weight * FeatureMatching(*fuse_d_, fake, real);
+    const double p = stage3_.decoder_ada ? ada_fuse_.p() : 0.0;
+    loss = loss + stage3_.adversarial_weight * F::softplus(-fuse_d_->forward(nn::Augment(fake, p, 3, gen_))).mean();
+    if (stage3_.perceptual_weight > 0) loss = loss + stage3_.perceptual_weight * FeatureMatching(*fuse_d_, fake, real);
   }
   const double value = loss.item<double>();
   stats->Add("loss", value);
@@ -450,7 +452,7 @@ void DecoderTrainer::Step(int step, RunningStats* stats) {
   const Phase phase = PhaseOf(step);
   // Only the phase's own parameters take gradients.
   SetTrainable(generator_params_, phase == Phase::kPrior || phase == Phase::kTune ||
-                                      (phase == Phase::kFuse && options_.full_tune));
+                                      (phase == Phase::kFuse && stage3_.full_tune));
   if (phase == Phase::kFuse && step == tune_end_ + 1) {
     torch::NoGradGuard no_grad;
     decoder.w.copy_(pti_w_.mean(0, true));  // PTI's latents, or the mean latent without PTI
@@ -492,11 +494,11 @@ Status DecoderTrainer::Train(const fs::path& out_dir, const fs::path& checkpoint
   checkpoint_ = checkpoint;
   HF_LOG(Info) << "train: stage 3, the StyleGAN decoder at " << side_ << "x" << side_ << ": "
                << prior_end_ << " prior steps, " << (invert_end_ - prior_end_) << " + " << (tune_end_ - invert_end_)
-               << " PTI steps on " << pti_views_.size() << " extreme-pose frames, " << options_.decoder_steps
-               << " fusion steps" << (options_.full_tune ? " (full-tune: the generator trained too)" : "");
-  LoopOptions loop = TrainLoopOptions(options_, "train: stage 3", total_);
+               << " PTI steps on " << pti_views_.size() << " extreme-pose frames, " << stage3_.decoder_steps
+               << " fusion steps" << (stage3_.full_tune ? " (full-tune: the generator trained too)" : "");
+  LoopOptions loop = TrainLoopOptions(options_.loop, "train: stage 3", total_);
   loop.what = "stage 3";
-  loop.max_minutes = options_.decoder_max_minutes;
+  loop.max_minutes = stage3_.decoder_max_minutes;
   loop.tags = {{"stage", 3}};
   HF_RETURN_IF_ERROR(RunLoop(loop, this, &state_, stats, progress));
   if (state_.step < total_)

@@ -73,7 +73,8 @@ Status InitGaussians(const AvatarDataset& data, const TrainOptions& options, con
   const torch::Tensor identity = data.identity_vertices.contiguous().cpu();
   const Eigen::Matrix3Xf vertices = Eigen::Map<const Eigen::Matrix3Xf>(identity.data_ptr<float>(), 3, identity.size(0));
   SurfaceSamples samples;
-  HF_RETURN_IF_ERROR(SampleSurface(vertices, triangles, options.init_gaussians, uint64_t(options.seed) + 17, &samples)
+  HF_RETURN_IF_ERROR(SampleSurface(vertices, triangles, options.gaussian_style.init_gaussians,
+                                   uint64_t(options.seed) + 17, &samples)
                          .WithContext("initial Gaussians"));
   const Eigen::Matrix3Xf points = SamplePositions(samples, vertices, triangles);
   Eigen::Matrix3Xf normals(3, points.cols());

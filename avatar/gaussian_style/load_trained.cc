@@ -9,18 +9,21 @@ namespace headforge {
 
 Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
                    torch::Device device, int resolution, DatasetOptions* loading, GaussianStyleAvatar* avatar,
-                   TrainOptions* trained, FaceModel* model, AvatarDataset* data) {
-  HF_RETURN_IF_ERROR(LoadAvatar(model_dir, device, avatar, trained));
+                   FaceModel* model, AvatarDataset* data) {
+  DatasetOptions trained;
+  HF_RETURN_IF_ERROR(LoadAvatar(model_dir, device, avatar, &trained));
   HF_RETURN_IF_ERROR(FaceModel::Load(face_model, model));
-  loading->resolution = resolution > 0 ? resolution : trained->resolution;
+  // The frames held out as training held them out; not its held-out
+  // cameras (--holdout-cameras), which this loading has never taken.
+  loading->resolution = resolution > 0 ? resolution : trained.resolution;
   loading->min_train_frames = 1;
-  loading->holdout = trained->holdout;
-  loading->holdout_order = trained->holdout_order;
-  loading->mask = trained->MaskFor(kGaussianStyle);
-  loading->mask_hair = trained->mask_hair;
-  loading->mask_skin = trained->mask_skin;
+  loading->holdout = trained.holdout;
+  loading->holdout_order = trained.holdout_order;
+  loading->mask = trained.mask != "auto" ? trained.mask : std::string(kGaussianStyle.default_mask);
+  loading->mask_hair = trained.mask_hair;
+  loading->mask_skin = trained.mask_skin;
   HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, *model, *loading, data).WithContext("render"));
-  if (trained->mesh_riding)
+  if (avatar->model->options().mesh_riding)
     avatar->neutral = ComputeTriangleFrames(data->identity_vertices, data->triangles).To(device);
   return Status::Ok();
 }

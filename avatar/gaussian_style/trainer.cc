@@ -58,8 +58,9 @@ class Trainer : public LoopTrainer {
  public:
   Trainer(const TrainOptions& options, const AvatarDataset& data, torch::Device device)
       : options_(options), data_(data), device_(device), gen_(at::detail::createCPUGenerator(options.seed)) {
-    const int canonical = options.deform ? int(std::lround(options.canonical_fraction * options.steps)) : options.steps;
-    stage1_steps_ = std::clamp(canonical, 0, options.steps);
+    const int steps = options.loop.steps;
+    const int canonical = style_.deform ? int(std::lround(style_.canonical_fraction * steps)) : steps;
+    stage1_steps_ = std::clamp(canonical, 0, steps);
   }
 
   Status Start(const fs::path& checkpoint, StatsLog* stats);
@@ -82,9 +83,10 @@ class Trainer : public LoopTrainer {
   Status SaveCheckpoint(const fs::path& path, const LoopState& state) const;
   Status LoadCheckpoint(const fs::path& path, StatsLog* stats);
   Status WritePreview(const fs::path& dir, int step);
-  bool deform_now(int step) const { return options_.deform && step > stage1_steps_; }
+  bool deform_now(int step) const { return style_.deform && step > stage1_steps_; }
 
   TrainOptions options_;
+  const GaussianStyleTrainOptions& style_ = options_.gaussian_style;  // the model's own part of options_
   const AvatarDataset& data_;
   torch::Device device_;
   at::Generator gen_;
@@ -114,41 +116,41 @@ Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   architecture.triplane.latent_dim = options_.latent_dim;
   architecture.triplane.resolution = options_.triplane_resolution;
   architecture.expressions = int64_t(data_.expression_names.size());
-  architecture.mesh_riding = options_.mesh_riding;
+  architecture.mesh_riding = style_.mesh_riding;
   torch::manual_seed(uint64_t(options_.seed));  // the networks' initial weights
   avatar_.model = GaussianStyle(architecture, data_.num_frames);
-  avatar_.deform = options_.deform;
-  if (options_.mesh_riding) avatar_.neutral = ComputeTriangleFrames(data_.identity_vertices, data_.triangles);
+  avatar_.deform = style_.deform;
+  if (style_.mesh_riding) avatar_.neutral = ComputeTriangleFrames(data_.identity_vertices, data_.triangles);
   HF_RETURN_IF_ERROR(InitGaussians(data_, options_, avatar_, &avatar_.gaussians));
   avatar_.model->to(device_);
-  if (options_.mesh_riding) avatar_.neutral = avatar_.neutral.To(device_);
+  if (style_.mesh_riding) avatar_.neutral = avatar_.neutral.To(device_);
   GaussianParams& p = avatar_.gaussians.params;
   for (torch::Tensor* t : p.All()) *t = t->to(device_).requires_grad_(true);
   if (avatar_.gaussians.binding.defined()) avatar_.gaussians.binding = avatar_.gaussians.binding.to(device_);
   // Gaussian parameters live in metres (canonical) or in their triangles'
   // sizes (riding, about 2.5 mm): the extent scales position steps and the
   // size beyond which densification splits rather than clones.
-  const double extent = options_.mesh_riding ? 100.0 : 0.3;
-  lr_means_ = options_.lr_means * extent;
+  const double extent = style_.mesh_riding ? 100.0 : 0.3;
+  lr_means_ = style_.lr_means * extent;
   adam_.Add(&p.means, lr_means_, true);
-  adam_.Add(&p.quats, options_.lr_quats, true);
-  adam_.Add(&p.log_scales, options_.lr_scales, true);
-  adam_.Add(&p.opacity_logits, options_.lr_opacity, true);
-  adam_.Add(&p.colour_logits, options_.lr_features, true);
+  adam_.Add(&p.quats, style_.lr_quats, true);
+  adam_.Add(&p.log_scales, style_.lr_scales, true);
+  adam_.Add(&p.opacity_logits, style_.lr_opacity, true);
+  adam_.Add(&p.colour_logits, style_.lr_features, true);
   network_ = avatar_.model->parameters();
   for (torch::Tensor& t : network_) adam_.Add(&t, options_.lr_network, false);
-  if (options_.pose_lr > 0) {
+  if (style_.pose_lr > 0) {
     pose_corrections_ = torch::zeros({int64_t(data_.train.size()), 6}, torch::TensorOptions().device(device_));
     pose_corrections_.requires_grad_(true);
-    adam_.Add(&pose_corrections_, options_.pose_lr, false);
+    adam_.Add(&pose_corrections_, style_.pose_lr, false);
   }
   DefaultDensifyOptions densify;
-  densify.start = options_.densify_from;
-  densify.stop = options_.densify_until;
-  densify.interval = options_.densify_every;
+  densify.start = style_.densify_from;
+  densify.stop = style_.densify_until;
+  densify.interval = style_.densify_every;
   densify.reset_every = 0;
-  densify.grad_threshold = options_.grad_threshold;
-  densify.max_gaussians = options_.max_gaussians;
+  densify.grad_threshold = style_.grad_threshold;
+  densify.max_gaussians = style_.max_gaussians;
   densify.scene_extent = extent;
   densify.seed = uint64_t(options_.seed) + 1;
   densify_ = MakeDefaultDensify(densify);
@@ -173,21 +175,21 @@ Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
 }
 
 void Trainer::Step(int step, RunningStats* stats) {
-  if (step == stage1_steps_ + 1 && options_.deform)
-    HF_LOG(Info) << "train: stage 2 (deformation" << (options_.region_weight > 0 ? ", region loss" : "")
+  if (step == stage1_steps_ + 1 && style_.deform)
+    HF_LOG(Info) << "train: stage 2 (deformation" << (style_.region_weight > 0 ? ", region loss" : "")
                  << ") from step " << step;
   const int64_t views = int64_t(usable_.size());
   const int64_t slot = (step - 1) % views;
   if (slot == 0) order_ = torch::randperm(views, gen_);
   const int64_t index = usable_[size_t(order_[slot].item<int64_t>())];
   const AvatarView& view = data_.train[size_t(index)];
-  adam_.SetLr(0, lr_means_ * std::pow(0.01, double(step) / options_.steps));
+  adam_.SetLr(0, lr_means_ * std::pow(0.01, double(step) / options_.loop.steps));
   const bool stage2 = deform_now(step);
   // A random background each step: only the head may be opaque.
   const torch::Tensor background = torch::rand({3}, gen_).to(device_);
   // Frame 0's latent in place of the view's own, for --latent-dropout of them.
   int64_t latent = view.frame;
-  if (stage2 && options_.latent_dropout > 0 && torch::rand({1}, gen_).item<double>() < options_.latent_dropout)
+  if (stage2 && style_.latent_dropout > 0 && torch::rand({1}, gen_).item<double>() < style_.latent_dropout)
     latent = 0;
   PosedGaussians posed = avatar_.Pose(data_, view.condition, latent, stage2);
   if (pose_corrections_.defined()) posed = CorrectPose(posed, pose_corrections_[index]);
@@ -197,11 +199,11 @@ void Trainer::Step(int step, RunningStats* stats) {
   const torch::Tensor& mask = masks_[size_t(index)];
   const torch::Tensor target = images_[size_t(index)] * mask + background.view({3, 1, 1}) * (1 - mask);
   const torch::Tensor l1 = (out.image - target).abs().mean();
-  torch::Tensor loss = (1 - options_.ssim_weight) * l1 + options_.ssim_weight * (1 - Ssim(out.image, target));
+  torch::Tensor loss = (1 - style_.ssim_weight) * l1 + style_.ssim_weight * (1 - Ssim(out.image, target));
   double region = 0;
-  if (stage2 && options_.region_weight > 0 && view.has_landmarks) {
+  if (stage2 && style_.region_weight > 0 && view.has_landmarks) {
     const torch::Tensor r = (RegionCrops(out.image, view) - RegionCrops(target, view)).abs().mean();
-    loss = loss + options_.region_weight * r;
+    loss = loss + style_.region_weight * r;
     region = r.item<double>();
   }
   const double value = loss.item<double>();
@@ -259,7 +261,7 @@ bool Trainer::Evaluate(int step, nlohmann::json* line) {
 }
 
 bool Trainer::Done(int step, std::string* why) {
-  if (options_.patience <= 0 || data_.validation.empty() || !deform_now(step) || since_best_ < options_.patience)
+  if (style_.patience <= 0 || data_.validation.empty() || !deform_now(step) || since_best_ < style_.patience)
     return false;
   char text[200];
   std::snprintf(text, sizeof(text),
@@ -359,7 +361,7 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
 Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
   out_dir_ = out_dir;
   checkpoint_ = checkpoint;
-  const LoopOptions loop = TrainLoopOptions(options_, "train: gaussian-style", options_.steps);
+  const LoopOptions loop = TrainLoopOptions(options_.loop, "train: gaussian-style", options_.loop.steps);
   HF_RETURN_IF_ERROR(RunLoop(loop, this, &state_, stats, progress));
   progress->Finish(std::to_string(state_.step) + " steps, " + std::to_string(avatar_.gaussians.params.size()) +
                    " Gaussians");
@@ -375,16 +377,17 @@ Status Trainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
     const double end = MeanScores(EvaluateValidation(avatar_, data_)).psnr_masked;
     extra["validation"] = {{"views", data_.validation.size()}, {"psnr_masked", end},
                            {"best_psnr_masked", best_validation_}, {"best_step", best_validation_step_},
-                           {"stopped_at", stopped_at_}, {"patience", options_.patience}};
+                           {"stopped_at", stopped_at_}, {"patience", style_.patience}};
   }
   HF_RETURN_IF_ERROR(FinishAvatar(avatar_, options_, data_, out_dir, extra, summary));
   summary->steps = state_.step;
   summary->seconds = state_.seconds;
   if (stopped_at_ > 0)
-    summary->note = "stopped at step " + std::to_string(stopped_at_) + " of " + std::to_string(options_.steps) +
+    summary->note = "stopped at step " + std::to_string(stopped_at_) + " of " + std::to_string(options_.loop.steps) +
                     ": the validation frames' score had stopped rising (--patience " +
-                    std::to_string(options_.patience) + ")";
-  if (options_.deform && options_.max_minutes > 0 && state_.step <= stage1_steps_ && stage1_steps_ < options_.steps) {
+                    std::to_string(style_.patience) + ")";
+  if (style_.deform && options_.loop.max_minutes > 0 && state_.step <= stage1_steps_ &&
+      stage1_steps_ < options_.loop.steps) {
     // The time limit came first: the deformation never trained.
     summary->note = "stage 1 only: the time limit came before stage 2 (step " + std::to_string(stage1_steps_ + 1) +
                     "), so the avatar does not follow the expressions; give more --max-minutes or fewer --steps";
@@ -534,12 +537,13 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& load
                           StatsLog* stats, Progress* progress, TrainSummary* summary) {
   // The validation frames (--validation) leave training here, for every stage.
   AvatarDataset data = loaded;
-  if (options.validation > 0 && options.eval_every > 0 && options.pose_lr > 0) {
+  const GaussianStyleTrainOptions& style = options.gaussian_style;
+  if (style.validation > 0 && options.loop.eval_every > 0 && style.pose_lr > 0) {
     // The pose corrections are kept per training view of the workspace, as
     // render and export load it: a split would shift them.
     HF_LOG(Warning) << "train: --validation is not used with --pose-lr; training on every training frame";
-  } else if (options.validation > 0 && options.eval_every > 0) {
-    if (const int frames = SetValidationAside(options.validation, &data); frames > 0)
+  } else if (style.validation > 0 && options.loop.eval_every > 0) {
+    if (const int frames = SetValidationAside(style.validation, &data); frames > 0)
       HF_LOG(Info) << "train: " << frames << " training frames (" << data.validation.size()
                    << " views) set aside as validation frames, to choose when stage 2 stops";
     else
@@ -551,10 +555,10 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& load
   std::error_code ec;
   GaussianStyleAvatar avatar;
   // Stage 3 under way: stages 1-2 are in model.pt and eval_stage2.json.
-  if (options.decoder_steps > 0 && fs::exists(decoder_checkpoint, ec) && !fs::exists(checkpoint, ec)) {
+  if (style.decoder.decoder_steps > 0 && fs::exists(decoder_checkpoint, ec) && !fs::exists(checkpoint, ec)) {
     HF_RETURN_IF_ERROR(LoadAvatar(out_dir, device, &avatar, nullptr));
     avatar.decoder = nullptr;
-    if (options.mesh_riding) avatar.neutral = ComputeTriangleFrames(data.identity_vertices, data.triangles).To(device);
+    if (style.mesh_riding) avatar.neutral = ComputeTriangleFrames(data.identity_vertices, data.triangles).To(device);
     nlohmann::json stage2;
     HF_RETURN_IF_ERROR(ReadJson(out_dir / "eval_stage2.json", &stage2));
     summary->steps = stage2.value("steps", 0);
@@ -567,7 +571,7 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& load
     HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
     HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
     summary->resumed_from = resumed_from;
-    if (options.decoder_steps <= 0) {
+    if (style.decoder.decoder_steps <= 0) {
       fs::remove(checkpoint, ec);
       return Status::Ok();
     }

@@ -60,19 +60,24 @@ torch::Tensor RenderRgb(const PosedGaussians& posed, const SplatCamera& camera, 
 // The model file (model.pt + config.json in `dir`).
 Status SaveAvatar(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data,
                   const fs::path& dir);
-// The config.json train writes for `avatar`, which export adds to.
+// The config.json train writes for `avatar`, which export adds to: the
+// model ("architecture", "decoder", the frames and their size) and the
+// options it trained with ("options": ToJson(options), the common part, the
+// views with their mask resolved, the loop and this model's block).
 nlohmann::json ConfigJson(const GaussianStyleAvatar& avatar, const TrainOptions& options, const AvatarDataset& data);
 // The same tensors as weights.safetensors (names as in model.pt) beside `config`.
 Status SaveAvatarSafetensors(const GaussianStyleAvatar& avatar, const nlohmann::json& config, const fs::path& dir);
-// From model.pt, or from weights.safetensors where there is no model.pt.
-Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar* avatar, TrainOptions* options);
+// From model.pt, or from weights.safetensors where there is no model.pt;
+// `trained` (when given): the views it trained on, as config.json records
+// them (in files written before "options", at its top).
+Status LoadAvatar(const fs::path& dir, torch::Device device, GaussianStyleAvatar* avatar, DatasetOptions* trained);
 
 // The avatar in `model_dir` and `workspace`'s views at `resolution` (0: the
-// training resolution), ready to pose; loading->images says whether the
-// frames are read too.
+// training resolution), held out as in training, ready to pose;
+// loading->images says whether the frames are read too.
 Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
                    torch::Device device, int resolution, DatasetOptions* loading, GaussianStyleAvatar* avatar,
-                   TrainOptions* trained, FaceModel* model, AvatarDataset* data);
+                   FaceModel* model, AvatarDataset* data);
 
 // Every `stride`-th held-out (or training) view drawn as the avatar draws
 // it (inference: frame 0's latent; training views their own) and scored,

@@ -20,6 +20,7 @@
 
 #include "avatar/avatar_train.h"
 #include "avatar/splat/splat_camera.h"
+#include "avatar/train/dataset_options.h"
 #include "core/face_model.h"
 #include "core/fs.h"
 #include "core/status.h"
@@ -43,35 +44,6 @@ struct AvatarView {
   // S] uint8, u and v (0..255 over the model's UV range) and covered (255);
   // undefined unless asked for.
   torch::Tensor uv_map;
-};
-
-struct DatasetOptions {
-  int resolution = 256;       // the frames' longer side, pixels
-  double holdout = 0.2;       // the fraction of the frames held out
-  // Which: "last" (the last frames: the capture's future), "interleaved"
-  // (every round(1 / holdout)-th frame: views between training views) or
-  // "auto" (interleaved for one camera whose views spread 120 degrees or more
-  // round the head, where the last frames would be a side training never
-  // saw; else last).
-  std::string holdout_order = "auto";
-  // Cameras held out whole: every frame of theirs is a test view (a 360
-  // capture's views from sides training never saw).
-  std::vector<std::string> holdout_cameras;
-  int min_train_frames = kFewestTrainingFrames;  // fewer is refused
-  bool images = true;         // false: cameras and conditions only (rendering)
-  int uv_map_side = 0;        // > 0: the training views' UV maps on a canvas this side (stage 3)
-  // The head masks the models train and are scored on: "ingest" (the
-  // workspace's masks as they are) or "mesh" (the workspace's masks cut to
-  // the tracked mesh's silhouette grown by `mask_hair` metres over the scalp
-  // and `mask_skin` elsewhere: face, ears, neck): GrabCut takes background of the skin's
-  // colour beside the head for the head. Nothing is added: the mesh reaches
-  // below the frame's edge (the neck, the shoulders) where a crop was padded.
-  // On talking_static at 128 px the skin's margin against the simulator's
-  // masks (mean IoU; GrabCut's alone 0.963): 2 mm 0.959, 6 mm 0.966, 12 mm
-  // 0.973, 16 mm 0.976, 24 mm 0.975; the tracked mesh is a pixel or two off.
-  std::string mask = "ingest";
-  double mask_hair = 0.03;
-  double mask_skin = 0.016;
 };
 
 // `mask` (CV_8U, 0 / 255) cut to the silhouette of the mesh `vertices` [V,

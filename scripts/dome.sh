@@ -26,7 +26,7 @@ scene="${DOME_SCENE:-dome_360}"
 [ -f "$out/sim/ground_truth.json" ] || "$bin" simulate --scene "$root/scenes/$scene.toml" --out "$out/sim"
 # The rig's calibration, as a studio has it (a rig file: docs/calibration.md),
 # from the simulator's cameras. COLMAP on one synchronised instant of the
-# dome places some back cameras in front of the face (docs/benchmarks.md).
+# dome places some back cameras in front of the face (docs/benchmarks/capture_360.md).
 if [ ! -f "$out/rig.json" ]; then
   python3 - "$out/sim/ground_truth.json" "$out/rig.json" <<'PY'
 import json, sys

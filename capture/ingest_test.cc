@@ -444,9 +444,9 @@ TEST(IngestBadInput, EmptyTimeRange) {
 TEST(IngestBadInput, NonPositiveResolutionAndOtherBadOptions) {
   IngestOptions options = Defaults({GridClip("bbaf2n").string()});
   options.resolution = 0;
-  ExpectFailure(Ingest(options, ScratchDir()), Status::Code::kInvalidArgument, {"resolution"});
+  ExpectFailure(Ingest(options, ScratchDir()), Status::Code::kInvalidArgument, {"--frame-size"});
   options.resolution = -5;
-  ExpectFailure(options.Check(), Status::Code::kInvalidArgument, {"resolution"});
+  ExpectFailure(options.Check(), Status::Code::kInvalidArgument, {"--frame-size"});
   options = Defaults({});
   ExpectFailure(options.Check(), Status::Code::kInvalidArgument, {"--video"});
   options = Defaults({"a", "b"});

@@ -4,10 +4,11 @@
 Given a folder of training packs and its manifest.json (what
 `scripts/gpu_check.sh --prepare` writes), it runs the check's steps in order:
 the machine's description, the build of headforge-train (through
-scripts/train_cuda.sh, on a GPU machine), the rasterizer's GPU tests, the
-rasterizer benchmark, then each pack trained by headforge-train for its
-minutes, with its held-out scores, step time, peak memory and render speed.
-A step that fails is recorded with its error and the next one runs. The
+scripts/train_cuda.sh, on a GPU machine), the rasterizer benchmark, each
+pack trained by headforge-train for its minutes, with its held-out scores,
+step time, peak memory and render speed, then the rasterizer's GPU tests in
+the time left. A step that fails is recorded with its error and the next
+one runs. The
 report is one JSON file (gpu_check.json) and its table (gpu_check.md,
 scripts/gpu_table.py) in --out. Python 3 standard library only: the GPU
 machine has python3 (with PyTorch) and little else.
@@ -224,12 +225,14 @@ def machine(args):
         nvcc = output(["nvcc", "--version"])
         if nvcc:
             m["nvcc"] = nvcc.splitlines()[-1]
-    torch = output([sys.executable, "-c", "import torch; print(torch.__version__); print(torch.version.cuda)"], 120)
-    if torch:
-        lines = torch.splitlines()
-        m["torch"] = lines[0]
-        m["torch_cuda"] = lines[1] if len(lines) > 1 and lines[1] != "None" else None
-    elif args.headforge.exists():
+    if args.kind == "cuda":  # the LibTorch the build takes: python3's
+        torch = output([sys.executable, "-c", "import torch; print(torch.__version__); print(torch.version.cuda)"],
+                       120)
+        if torch:
+            lines = torch.splitlines()
+            m["torch"] = lines[0]
+            m["torch_cuda"] = lines[1] if len(lines) > 1 and lines[1] != "None" else None
+    elif args.headforge.exists():  # the one the programs of the build folder were built with
         version = output([str(args.headforge), "version"])
         found = re.search(r"LibTorch\s*([\w.+-]+)", version or "", re.I)
         m["torch"] = "LibTorch " + found.group(1) if found else None

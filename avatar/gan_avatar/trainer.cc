@@ -210,8 +210,11 @@ std::vector<ViewScores> GanTrainer::Evaluate(const fs::path& write_dir, int stri
   std::vector<ViewScores> scores;
   for (size_t i = 0; i < views.size(); i += size_t(std::max(stride, 1))) {
     const AvatarView& view = views[i];
+    const auto start = std::chrono::steady_clock::now();
     const torch::Tensor render = avatar_.Draw(mean_latent ? torch::Tensor() : view.condition, view.view);
+    const double ms = 1000 * SecondsSince(start);
     ViewScores s = ScoreRender(render, view.image, view.mask, background);
+    s.render_ms = ms;
     s.frame = view.frame;
     s.camera = view.camera;
     scores.push_back(s);
@@ -383,6 +386,10 @@ Status GanTrainer::Finish(const fs::path& out_dir, TrainSummary* summary) {
       {"by_camera", cameras},
       {"mean_latent", {{"psnr_masked", average.psnr_masked}, {"ssim_masked", average.ssim_masked}}},
       {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
+      // Drawing one held-out view at the output size, its image back on the
+      // CPU, on the training device (the first view, warming up, left out).
+      {"render_ms", MeanRenderMs(scores)},
+      {"device", options_.device},
       {"mapping", {{"renders", samples_.rendered}, {"tracked", samples_.w.defined() ? samples_.w.size(0) : 0},
                    {"flagged", samples_.flagged}, {"median_residual_px", samples_.median_residual_px},
                    {"loss", gan_options_.mapping_loss}, {"latents", gan_options_.mapping_latents},

@@ -504,9 +504,6 @@ Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, co
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir / "held_out"));
   const std::vector<ViewScores> scores = EvaluateAvatar(avatar, data, 1, out_dir / "held_out");
   const ViewScores mean = MeanScores(scores);
-  // Render time per frame, the first (warming up) left out.
-  double render_ms = 0;
-  for (size_t i = 1; i < scores.size(); ++i) render_ms += scores[i].render_ms / double(scores.size() - 1);
   // How well the training views themselves are fitted (every 10th): set
   // against the held-out figures, it tells underfitting from what the
   // held-out frames bring that training never saw.
@@ -522,7 +519,7 @@ Status FinishAvatar(GaussianStyleAvatar& avatar, const TrainOptions& options, co
       {"training_views", {{"psnr_masked", fitted.psnr_masked}, {"ssim_masked", fitted.ssim_masked}}},
       // Posing and drawing one held-out view, its image back on the CPU,
       // on the training device (the first view, warming up, left out).
-      {"render_ms", render_ms},
+      {"render_ms", MeanRenderMs(scores)},
       {"device", options.device},
       {"views", views}};
   eval.update(extra);

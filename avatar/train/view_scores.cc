@@ -80,4 +80,10 @@ nlohmann::json ScoresJson(const ViewScores& s, bool with_view) {
   return j;
 }
 
+double MeanRenderMs(const std::vector<ViewScores>& scores) {
+  double ms = 0;
+  for (size_t i = 1; i < scores.size(); ++i) ms += scores[i].render_ms / double(scores.size() - 1);
+  return ms;
+}
+
 }  // namespace headforge

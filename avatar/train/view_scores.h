@@ -36,6 +36,9 @@ torch::Tensor ComparisonStrip(const torch::Tensor& render, const torch::Tensor& 
                               double background);
 // Means over views; the masked figures over the views with a head.
 ViewScores MeanScores(const std::vector<ViewScores>& scores);
+// The mean time to draw one view, milliseconds, the first view (warming up)
+// left out; 0 for fewer than two views.
+double MeanRenderMs(const std::vector<ViewScores>& scores);
 // One view's entry of eval.json's "views" (frame and camera with it) or, for
 // a mean, its "mean" (`with_view` false).
 nlohmann::json ScoresJson(const ViewScores& scores, bool with_view = true);

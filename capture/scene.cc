@@ -176,6 +176,41 @@ uint64_t NameSeed(const std::string& name, int scene_seed) {
   return h;
 }
 
+// The [camera] table.
+void ReadCamera(const toml::table* t, Reader* reader, SceneCamera* camera) {
+  Reader& r = *reader;
+  SceneCamera& c = *camera;
+  r.Text(*t, "camera.", "rig", &c.rig);
+  r.Vector3(*t, "camera.", "position", &c.position);
+  r.Vector3(*t, "camera.", "target", &c.target);
+  r.Number(*t, "camera.", "radius", &c.radius);
+  r.NumberList(*t, "camera.", "elevations", &c.elevations);
+  r.Integer(*t, "camera.", "count", &c.count);
+  r.Number(*t, "camera.", "arc", &c.arc_deg);
+  r.Number(*t, "camera.", "elevation", &c.elevation_deg);
+  r.Number(*t, "camera.", "shake", &c.shake_m);
+  r.Number(*t, "camera.", "shake_deg", &c.shake_deg);
+  r.Number(*t, "camera.", "shake_timescale", &c.shake_timescale);
+  if (const toml::array* a = (*t)["positions"].as_array()) {
+    for (const auto& e : *a) {
+      const auto v = r.Numbers(e, "camera.positions");
+      if (v.size() == 3) c.positions.emplace_back(v[0], v[1], v[2]);
+      else r.Fail("camera.positions", "expected [x, y, z] per camera");
+    }
+  }
+  if (const toml::table* in = (*t)["intrinsics"].as_table()) {
+    auto& i = c.intrinsics;
+    r.Integer(*in, "camera.intrinsics.", "width", &i.width);
+    r.Integer(*in, "camera.intrinsics.", "height", &i.height);
+    r.Number(*in, "camera.intrinsics.", "focal", &i.focal);
+    r.Number(*in, "camera.intrinsics.", "fov_deg", &i.fov_deg);
+    r.Number(*in, "camera.intrinsics.", "cx", &i.cx);
+    r.Number(*in, "camera.intrinsics.", "cy", &i.cy);
+    r.Number(*in, "camera.intrinsics.", "k1", &i.k1);
+    r.Number(*in, "camera.intrinsics.", "k2", &i.k2);
+  }
+}
+
 }  // namespace
 
 Status ParseScene(const std::string& text, const std::string& source, Scene* scene) {
@@ -226,38 +261,7 @@ Status ParseScene(const std::string& text, const std::string& source, Scene* sce
     r.Number(*t, "background.", "room_size", &s.room_size);
     r.Integer(*t, "background.", "seed", &s.background_seed);
   }
-  if (const toml::table* t = root["camera"].as_table()) {
-    SceneCamera& c = s.camera;
-    r.Text(*t, "camera.", "rig", &c.rig);
-    r.Vector3(*t, "camera.", "position", &c.position);
-    r.Vector3(*t, "camera.", "target", &c.target);
-    r.Number(*t, "camera.", "radius", &c.radius);
-    r.NumberList(*t, "camera.", "elevations", &c.elevations);
-    r.Integer(*t, "camera.", "count", &c.count);
-    r.Number(*t, "camera.", "arc", &c.arc_deg);
-    r.Number(*t, "camera.", "elevation", &c.elevation_deg);
-    r.Number(*t, "camera.", "shake", &c.shake_m);
-    r.Number(*t, "camera.", "shake_deg", &c.shake_deg);
-    r.Number(*t, "camera.", "shake_timescale", &c.shake_timescale);
-    if (const toml::array* a = (*t)["positions"].as_array()) {
-      for (const auto& e : *a) {
-        const auto v = r.Numbers(e, "camera.positions");
-        if (v.size() == 3) c.positions.emplace_back(v[0], v[1], v[2]);
-        else r.Fail("camera.positions", "expected [x, y, z] per camera");
-      }
-    }
-    if (const toml::table* in = (*t)["intrinsics"].as_table()) {
-      auto& i = c.intrinsics;
-      r.Integer(*in, "camera.intrinsics.", "width", &i.width);
-      r.Integer(*in, "camera.intrinsics.", "height", &i.height);
-      r.Number(*in, "camera.intrinsics.", "focal", &i.focal);
-      r.Number(*in, "camera.intrinsics.", "fov_deg", &i.fov_deg);
-      r.Number(*in, "camera.intrinsics.", "cx", &i.cx);
-      r.Number(*in, "camera.intrinsics.", "cy", &i.cy);
-      r.Number(*in, "camera.intrinsics.", "k1", &i.k1);
-      r.Number(*in, "camera.intrinsics.", "k2", &i.k2);
-    }
-  }
+  if (const toml::table* t = root["camera"].as_table()) ReadCamera(t, &r, &s.camera);
   if (const toml::table* t = root["head"].as_table()) {
     const std::pair<const char*, Curve*> curves[] = {{"yaw", &s.yaw}, {"pitch", &s.pitch}, {"roll", &s.roll},
                                                      {"x", &s.tx},    {"y", &s.ty},         {"z", &s.tz}};

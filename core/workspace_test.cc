@@ -241,6 +241,40 @@ TEST_F(WorkspaceTest, InterruptedStageKeepsItsFolderAndIsNotResumedUnlessResumab
                   .ok());
 }
 
+// Runs stage `name` with a body that writes <name>.out and counts the stage's
+// runs in `runs`; says whether it was skipped as up to date.
+bool RunCountingStage(Workspace* ws, std::map<std::string, int>* runs, const std::string& name,
+                      const std::string& fingerprint, std::vector<std::string> upstream, bool force = false) {
+  StageRun run{name, fingerprint, "", false, force, upstream};
+  bool skipped = false;
+  const Status s = RunStage(ws, run,
+                            Body([&, name](const fs::path& staging, StageResult* result) {
+                              ++(*runs)[name];
+                              HF_RETURN_IF_ERROR(WriteFileAtomic(staging / (name + ".out"), "x"));
+                              result->outputs = {name + ".out"};
+                              return Status::Ok();
+                            }),
+                            &skipped);
+  EXPECT_TRUE(s.ok()) << s.message();
+  return skipped;
+}
+
+// Runs a resumable train stage (read from ingest) that writes a checkpoint,
+// then stops when `stop` or else finishes; `resumed`: whether its staging
+// folder came back with a checkpoint.
+Status RunCheckpointingTrain(Workspace* ws, bool stop, bool* resumed, bool* skipped) {
+  StageRun run{"train", "r", "", /*resumable=*/true, false, {"ingest"}};
+  return RunStage(ws, run,
+                  [&](const StageContext& context, StageResult* result) {
+                    *resumed = context.resumed;
+                    HF_RETURN_IF_ERROR(WriteFileAtomic(context.staging / "model", "m"));
+                    if (stop) return Status::Interrupted("stopped");
+                    result->outputs = {"model"};
+                    return Status::Ok();
+                  },
+                  skipped);
+}
+
 // A stage whose upstream stage is run again (new outputs, even with the same
 // fingerprint) is out of date: reported, never skipped, and current again
 // once redone. A failed attempt upstream leaves its outputs, so nothing goes
@@ -250,20 +284,7 @@ TEST_F(WorkspaceTest, StageIsOutOfDateWhenAnUpstreamStageRunsAgain) {
   ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
   std::map<std::string, int> runs;
   auto stage = [&](const std::string& name, const std::string& fingerprint, std::vector<std::string> upstream,
-                   bool force = false) {
-    StageRun run{name, fingerprint, "", false, force, upstream};
-    bool skipped = false;
-    const Status s = RunStage(ws.get(), run,
-                              Body([&, name](const fs::path& staging, StageResult* result) {
-                                ++runs[name];
-                                HF_RETURN_IF_ERROR(WriteFileAtomic(staging / (name + ".out"), "x"));
-                                result->outputs = {name + ".out"};
-                                return Status::Ok();
-                              }),
-                              &skipped);
-    EXPECT_TRUE(s.ok()) << s.message();
-    return skipped;
-  };
+                   bool force = false) { return RunCountingStage(ws.get(), &runs, name, fingerprint, upstream, force); };
   stage("ingest", "i1", {});
   stage("calibrate", "c", {"ingest"});
   stage("track", "t", {"ingest", "calibrate"});
@@ -340,18 +361,7 @@ TEST_F(WorkspaceTest, StageIsOutOfDateWhenAnUpstreamStageRunsAgain) {
 
   // A checkpoint made from outputs an upstream stage has replaced since is
   // not resumed, even with the same fingerprint.
-  auto train = [&](bool stop, bool* resumed) {
-    StageRun run{"train", "r", "", /*resumable=*/true, false, {"ingest"}};
-    return RunStage(ws.get(), run,
-                    [&](const StageContext& context, StageResult* result) {
-                      *resumed = context.resumed;
-                      HF_RETURN_IF_ERROR(WriteFileAtomic(context.staging / "model", "m"));
-                      if (stop) return Status::Interrupted("stopped");
-                      result->outputs = {"model"};
-                      return Status::Ok();
-                    },
-                    &skipped);
-  };
+  auto train = [&](bool stop, bool* resumed) { return RunCheckpointingTrain(ws.get(), stop, resumed, &skipped); };
   bool resumed = true;
   EXPECT_EQ(train(true, &resumed).code(), Status::Code::kInterrupted);
   EXPECT_FALSE(resumed);

@@ -277,6 +277,79 @@ void PrintRow(const Row& r) {
   std::fflush(stdout);
 }
 
+void PrintCalibrateHeader() {
+  std::printf("| scene | setting | wall time | registered | rotation error median / max (deg) | centre error median / "
+              "max (mm) | align scale error | focal error | aligned rotation (deg) | aligned centre (mm) | aligned "
+              "rotation / scale error without the surface fit |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
+}
+
+// The settings to run on `scene` (`rig`: a fixed rig, else one moving camera).
+std::vector<Setting> CalibrateSettings(const std::string& scene, bool rig, bool quick, const std::vector<int>& instants) {
+  std::vector<Setting> settings;
+  // The rig's own calibration first: what align alone leaves.
+  if (rig) settings.push_back({"rig file (the simulator's cameras)", 4096, "exhaustive", 1, 1, true, "SIMPLE_RADIAL", true});
+  if (rig && !instants.empty()) {
+    for (int n : instants)
+      settings.push_back({"4k SIFT, exhaustive, " + std::to_string(n) + (n == 1 ? " instant" : " instants"), 4096,
+                          "exhaustive", 1, n});
+  } else if (rig) {
+    settings.push_back({"4k SIFT, exhaustive, 1 instant", 4096, "exhaustive", 1, 1});
+    if (!quick) {
+      settings.push_back({"1k SIFT", 1024, "exhaustive", 1, 1});
+      settings.push_back({"8k SIFT", 8192, "exhaustive", 1, 1});
+      settings.push_back({"sequential matching", 4096, "sequential", 1, 1});
+      settings.push_back({"3 instants", 4096, "exhaustive", 1, 3});
+      settings.push_back({"6 instants", 4096, "exhaustive", 1, 6});
+    }
+  } else {
+    settings.push_back({"4k SIFT, sequential, every frame", 4096, "sequential", 1});
+    // orbit_360_lit (the same orbit with shading) shows what lighting changes: the baseline only.
+    if (!quick && scene != "orbit_360_lit") {
+      settings.push_back({"no revisit matching", 4096, "sequential", 1, 1, false});
+      // The scene's lens has no distortion: what knowing that buys.
+      settings.push_back({"pinhole camera (SIMPLE_PINHOLE)", 4096, "sequential", 1, 1, true, "SIMPLE_PINHOLE"});
+      settings.push_back({"1k SIFT", 1024, "sequential", 1});
+      settings.push_back({"8k SIFT", 8192, "sequential", 1});
+      settings.push_back({"exhaustive matching", 4096, "exhaustive", 1});
+      settings.push_back({"every 2nd frame", 4096, "sequential", 2});
+      settings.push_back({"every 4th frame", 4096, "sequential", 4});
+    }
+  }
+  return settings;
+}
+
+// Each setting `repeat` times on `scene`, a row each (printed as it comes
+// unless `json`), in dir/runs/<the setting's label>[_run<N>].
+void RunSettings(const std::string& scene, const std::vector<Setting>& settings, int repeat,
+                 const IngestedCapture& capture, const nlohmann::json& truth, const FaceModel& model,
+                 const fs::path& dir, int threads, bool json, std::vector<Row>* results) {
+  for (const auto& setting : settings) {
+    for (int run = 1; run <= repeat; ++run) {
+      Setting s = setting;
+      std::string name = s.label;
+      for (char& c : name)
+        if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+      if (repeat > 1) {
+        s.label += " (run " + std::to_string(run) + " of " + std::to_string(repeat) + ")";
+        name += "_run" + std::to_string(run);
+      }
+      results->push_back(RunSetting(scene, s, capture, truth, model, dir / "runs" / name, threads));
+      if (!json) PrintRow(results->back());
+    }
+  }
+}
+
+void PrintSubjectOffsets(const std::vector<std::pair<std::string, SubjectOffset>>& offsets) {
+  std::printf("\n| scene | subject's face size / the mean face's | subject's face tilt against the mean face |\n");
+  std::printf("|---|---|---|\n");
+  for (const auto& [scene, o] : offsets)
+    if (o.ok)
+      std::printf("| %s | %.3f | %.2f deg |\n", scene.c_str(), o.scale, o.rotation_deg);
+    else
+      std::printf("| %s | n/a (the simulated identity does not fit this face model) | |\n", scene.c_str());
+}
+
 int BenchCalibrate(const std::vector<std::string>& args) {
   OptionSet options;
   CommonOptions common;
@@ -323,12 +396,7 @@ int BenchCalibrate(const std::vector<std::string>& args) {
   FaceModel model;
   if (Status s = FaceModel::Load(settings.face_model, &model); !s.ok()) return ReportFailure(s);
   const fs::path scene_dir = fs::path(HEADFORGE_SOURCE_DIR) / "scenes";
-  if (!json) {
-    std::printf("| scene | setting | wall time | registered | rotation error median / max (deg) | centre error median / "
-                "max (mm) | align scale error | focal error | aligned rotation (deg) | aligned centre (mm) | aligned "
-                "rotation / scale error without the surface fit |\n");
-    std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
-  }
+  if (!json) PrintCalibrateHeader();
   nlohmann::json rows = nlohmann::json::array();
   std::vector<std::pair<std::string, SubjectOffset>> offsets;
   for (const auto& scene : scenes) {
@@ -370,50 +438,8 @@ int BenchCalibrate(const std::vector<std::string>& args) {
       }
     } else {
       const bool rig = capture.cameras.size() > 1;
-      std::vector<Setting> settings;
-      // The rig's own calibration first: what align alone leaves.
-      if (rig) settings.push_back({"rig file (the simulator's cameras)", 4096, "exhaustive", 1, 1, true, "SIMPLE_RADIAL", true});
-      if (rig && !instants.empty()) {
-        for (int n : instants)
-          settings.push_back({"4k SIFT, exhaustive, " + std::to_string(n) + (n == 1 ? " instant" : " instants"), 4096,
-                              "exhaustive", 1, n});
-      } else if (rig) {
-        settings.push_back({"4k SIFT, exhaustive, 1 instant", 4096, "exhaustive", 1, 1});
-        if (!quick) {
-          settings.push_back({"1k SIFT", 1024, "exhaustive", 1, 1});
-          settings.push_back({"8k SIFT", 8192, "exhaustive", 1, 1});
-          settings.push_back({"sequential matching", 4096, "sequential", 1, 1});
-          settings.push_back({"3 instants", 4096, "exhaustive", 1, 3});
-          settings.push_back({"6 instants", 4096, "exhaustive", 1, 6});
-        }
-      } else {
-        settings.push_back({"4k SIFT, sequential, every frame", 4096, "sequential", 1});
-        // orbit_360_lit (the same orbit with shading) shows what lighting changes: the baseline only.
-        if (!quick && scene != "orbit_360_lit") {
-          settings.push_back({"no revisit matching", 4096, "sequential", 1, 1, false});
-          // The scene's lens has no distortion: what knowing that buys.
-          settings.push_back({"pinhole camera (SIMPLE_PINHOLE)", 4096, "sequential", 1, 1, true, "SIMPLE_PINHOLE"});
-          settings.push_back({"1k SIFT", 1024, "sequential", 1});
-          settings.push_back({"8k SIFT", 8192, "sequential", 1});
-          settings.push_back({"exhaustive matching", 4096, "exhaustive", 1});
-          settings.push_back({"every 2nd frame", 4096, "sequential", 2});
-          settings.push_back({"every 4th frame", 4096, "sequential", 4});
-        }
-      }
-      for (const auto& setting : settings) {
-        for (int run = 1; run <= repeat; ++run) {
-          Setting s = setting;
-          std::string name = s.label;
-          for (char& c : name)
-            if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
-          if (repeat > 1) {
-            s.label += " (run " + std::to_string(run) + " of " + std::to_string(repeat) + ")";
-            name += "_run" + std::to_string(run);
-          }
-          results.push_back(RunSetting(scene, s, capture, truth, model, dir / "runs" / name, threads));
-          if (!json) PrintRow(results.back());
-        }
-      }
+      const std::vector<Setting> settings = CalibrateSettings(scene, rig, quick, instants);
+      RunSettings(scene, settings, repeat, capture, truth, model, dir, threads, json, &results);
       // align's head frame depends on how the subject's face differs from the
       // mean face: the baseline setting with other random subjects.
       for (int seed : quick || scene != "orbit_360" ? std::vector<int>{} : std::vector<int>{5, 9}) {
@@ -439,13 +465,7 @@ int BenchCalibrate(const std::vector<std::string>& args) {
   if (json) {
     std::printf("%s\n", nlohmann::json{{"settings", rows}, {"subjects", subjects}}.dump(1).c_str());
   } else {
-    std::printf("\n| scene | subject's face size / the mean face's | subject's face tilt against the mean face |\n");
-    std::printf("|---|---|---|\n");
-    for (const auto& [scene, o] : offsets)
-      if (o.ok)
-        std::printf("| %s | %.3f | %.2f deg |\n", scene.c_str(), o.scale, o.rotation_deg);
-      else
-        std::printf("| %s | n/a (the simulated identity does not fit this face model) | |\n", scene.c_str());
+    PrintSubjectOffsets(offsets);
   }
   return kExitOk;
 }

@@ -87,6 +87,151 @@ Status ParseRung(const std::string& text, Rung* rung) {
   return Status::Ok();
 }
 
+// Each variant and rung: its folder's name, its row's label and its options.
+struct Job {
+  std::string name, what;
+  TrainOptions options;
+};
+
+// The jobs of --variants, then those of --ladder, each with `train` as the
+// variant or rung sets it.
+Status MakeJobs(const OptionSet& options, const TrainOptions& train, const std::vector<std::string>& variants,
+                const std::vector<std::string>& ladder, std::vector<Job>* jobs) {
+  for (const std::string& name : variants) {
+    const Variant* found = nullptr;
+    for (const Variant& v : kVariants)
+      if (name == v.name) found = &v;
+    if (!found)
+      return Status::InvalidArgument(
+          "--variants: no variant '" + name +
+          "' (stage1, no-region, full, canonical, mesh-riding, stage3, stage3-no-ada, stage3-no-discriminator, "
+          "stage3-full-tune)");
+    if (found->stage3 && train.gaussian_style.decoder.decoder_steps <= 0)
+      return Status::InvalidArgument("--variants " + name +
+                                     ": stage 3 needs --decoder-steps N (and its --prior-steps, "
+                                     "--pti-steps, --decoder-resolution; docs/avatar.md)");
+    jobs->push_back({found->name, found->what, train});
+    // The ablation compares the variants over one budget: none stops early
+    // unless asked (--patience), and none trains on fewer frames than asked.
+    GaussianStyleTrainOptions& style = jobs->back().options.gaussian_style;
+    if (!options.WasGiven("train.patience")) style.patience = 0;
+    if (!options.WasGiven("train.validation")) style.validation = 0;
+    found->apply(&jobs->back().options);
+    if (!found->stage3) style.decoder.decoder_steps = 0;  // their rows are stages 1 and 2
+  }
+  for (const std::string& text : ladder) {
+    Rung rung;
+    if (Status s = ParseRung(text, &rung); !s.ok()) return s;
+    Job job{rung.name, rung.what, train};
+    if (!rung.preset.empty()) {
+      job.options.preset = rung.preset;
+      if (Status s = ApplyTrainPreset(options, &job.options); !s.ok()) return s;
+    } else {
+      GaussianStyleTrainOptions& style = job.options.gaussian_style;
+      job.options.loop.steps = rung.steps;
+      job.options.loop.max_minutes = 0;
+      style.patience = 0;  // a rung is its step count: it trains every step, on every training frame
+      style.validation = 0;
+      if (rung.gaussians) {
+        if (kGanAvatar.Is(train.model))
+          return Status::InvalidArgument("--ladder: '" + text + "' gives a Gaussian count, which the " +
+                                         kGanAvatar.Name() + " model has not");
+        style.max_gaussians = rung.gaussians;
+        style.init_gaussians = std::min<int64_t>(style.init_gaussians, rung.gaussians);
+      }
+    }
+    if (Status s = job.options.Check(); !s.ok()) return s.WithContext("--ladder " + text);
+    jobs->push_back(std::move(job));
+  }
+  return Status::Ok();
+}
+
+// `job`'s row: trained into `dir`, or read from there when it was trained
+// with the same options.
+Status TrainedRow(const OptionSet& options, const CommonOptions& common, const Job& job, const fs::path& dir,
+                  nlohmann::json* row_out) {
+  nlohmann::json& row = *row_out;
+  const TrainOptions& t = job.options;
+  // A variant trained earlier with the same options is not trained again.
+  const std::string key = options.ToIni("train", true) + "variant = " + job.name + "\n";
+  nlohmann::json saved;
+  if (ReadJson(dir / "bench.json", &saved).ok() && saved.value("options", "") == key) {
+    row = saved.at("row");
+    HF_LOG(Info) << "bench train: " << job.name << " was trained with these options; scoring it again";
+  } else {
+    TrainSummary s;
+    StderrProgress progress;
+    if (Status status = RunTrain(t, common.workspace, common.Settings().face_model, dir, &progress, &s);
+        !status.ok())
+      return status.WithContext("bench train: " + job.name);
+    row = {{"variant", job.name}, {"what", job.what}, {"model", t.model}, {"preset", t.preset},
+           {"steps", s.steps}, {"seconds", s.seconds}, {"gaussians", s.gaussians},
+           {"psnr_masked", s.psnr_masked}, {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full},
+           {"ssim", s.ssim_full}, {"train_psnr_masked", s.train_psnr_masked}};
+    // Sharpness, render time and, with stage 3, stage 2's figures beside the decoded image's.
+    nlohmann::json eval;
+    if (ReadJson(dir / "eval.json", &eval).ok() && eval.contains("mean")) {
+      const nlohmann::json& mean = eval.at("mean");
+      row["sd"] = mean.value("sd", 0.0);
+      row["sharpness_truth"] = mean.value("sharpness_truth", 0.0);
+      row["render_ms"] = eval.value("render_ms", 0.0);
+      if (eval.contains("stage2")) {
+        const nlohmann::json& stage2 = eval.at("stage2");
+        row["stage2"] = {{"psnr_masked", stage2.value("psnr_masked", 0.0)},
+                         {"ssim_masked", stage2.value("ssim_masked", 0.0)},
+                         {"sd", stage2.value("sd", 0.0)}};
+        row["stage3_seconds"] = eval.value("stage3_seconds", 0.0);
+      }
+    }
+    if (Status status = WriteJsonAtomic(dir / "bench.json", {{"options", key}, {"row", row}}, 1); !status.ok())
+      return status;
+  }
+  return Status::Ok();
+}
+
+// Scores `job`'s model in `dir` on the novel views of `truth`: into `row`, and
+// a table line per camera onto `novel_lines`.
+Status ScoreNovel(const CommonOptions& common, const Job& job, const fs::path& dir, const std::string& truth,
+                  nlohmann::json* row, std::vector<std::string>* novel_lines) {
+  std::vector<NovelViewScore> novel;
+  if (Status status = ScoreNovelViews(common.workspace, dir, common.Settings().face_model, truth,
+                                      dir / "novel_views", &novel);
+      !status.ok())
+    return status.WithContext("bench train: " + job.name);
+  nlohmann::json cams = nlohmann::json::array();
+  for (const NovelViewScore& n : novel) {
+    cams.push_back({{"camera", n.camera}, {"yaw_deg", n.yaw_deg}, {"pitch_deg", n.pitch_deg}, {"views", n.views},
+                    {"psnr_masked", n.psnr_masked}, {"ssim_masked", n.ssim_masked}, {"psnr", n.psnr_full}});
+    char line[256];
+    std::snprintf(line, sizeof(line), "| %s | %s | %+.0f° / %+.0f° | %d | %.2f dB / %.3f | %.2f dB |", job.what.c_str(),
+                  n.camera.c_str(), n.yaw_deg, n.pitch_deg, n.views, n.psnr_masked, n.ssim_masked, n.psnr_full);
+    novel_lines->push_back(line);
+  }
+  (*row)["novel_views"] = cams;
+  return Status::Ok();
+}
+
+// Stage 3 against stage 2 (GaussianStyle's Table 2b): SD is the render's
+// mean gradient magnitude over the head minus the frame's (negative: blurrier).
+void PrintStage3Table(const nlohmann::json& rows) {
+  bool stage3 = false;
+  for (const auto& row : rows) stage3 = stage3 || row.contains("stage2");
+  if (stage3) {
+    std::printf("\nStage 3 (held-out frames, over the head; SD: sharpness minus the frame's):\n\n"
+                "| variant | stage 2: PSNR / SSIM, SD | stage 3: PSNR / SSIM, SD | stage 3's time | render |\n"
+                "|---|---|---|---|---|\n");
+    for (const auto& row : rows) {
+      if (!row.contains("stage2")) continue;
+      const nlohmann::json& s2 = row.at("stage2");
+      const double ms = row.value("render_ms", 0.0);
+      std::printf("| %s | %.2f dB / %.3f, %+.2f | %.2f dB / %.3f, %+.2f | %.1f min | %.1f ms (%.1f frames/s) |\n",
+                  row.at("what").get<std::string>().c_str(), s2.value("psnr_masked", 0.0), s2.value("ssim_masked", 0.0),
+                  s2.value("sd", 0.0), row.value("psnr_masked", 0.0), row.value("ssim_masked", 0.0), row.value("sd", 0.0),
+                  row.value("stage3_seconds", 0.0) / 60, ms, ms > 0 ? 1000.0 / ms : 0.0);
+    }
+  }
+}
+
 }  // namespace
 
 int BenchTrain(const std::vector<std::string>& args) {
@@ -147,58 +292,8 @@ int BenchTrain(const std::vector<std::string>& args) {
         return ReportFailure(Status::InvalidArgument("--variants: '" + name + "' is a " + kGaussianStyle.Name() +
                                                      " variant; the " + kGanAvatar.Name() +
                                                      " model has 'full' and --ladder"));
-  // Each variant and rung: its folder's name, its row's label and its options.
-  struct Job {
-    std::string name, what;
-    TrainOptions options;
-  };
   std::vector<Job> jobs;
-  for (const std::string& name : variants) {
-    const Variant* found = nullptr;
-    for (const Variant& v : kVariants)
-      if (name == v.name) found = &v;
-    if (!found)
-      return ReportFailure(Status::InvalidArgument(
-          "--variants: no variant '" + name +
-          "' (stage1, no-region, full, canonical, mesh-riding, stage3, stage3-no-ada, stage3-no-discriminator, "
-          "stage3-full-tune)"));
-    if (found->stage3 && train.gaussian_style.decoder.decoder_steps <= 0)
-      return ReportFailure(Status::InvalidArgument("--variants " + name +
-                                                   ": stage 3 needs --decoder-steps N (and its --prior-steps, "
-                                                   "--pti-steps, --decoder-resolution; docs/avatar.md)"));
-    jobs.push_back({found->name, found->what, train});
-    // The ablation compares the variants over one budget: none stops early
-    // unless asked (--patience), and none trains on fewer frames than asked.
-    GaussianStyleTrainOptions& style = jobs.back().options.gaussian_style;
-    if (!options.WasGiven("train.patience")) style.patience = 0;
-    if (!options.WasGiven("train.validation")) style.validation = 0;
-    found->apply(&jobs.back().options);
-    if (!found->stage3) style.decoder.decoder_steps = 0;  // their rows are stages 1 and 2
-  }
-  for (const std::string& text : ladder) {
-    Rung rung;
-    if (Status s = ParseRung(text, &rung); !s.ok()) return ReportFailure(s);
-    Job job{rung.name, rung.what, train};
-    if (!rung.preset.empty()) {
-      job.options.preset = rung.preset;
-      if (Status s = ApplyTrainPreset(options, &job.options); !s.ok()) return ReportFailure(s);
-    } else {
-      GaussianStyleTrainOptions& style = job.options.gaussian_style;
-      job.options.loop.steps = rung.steps;
-      job.options.loop.max_minutes = 0;
-      style.patience = 0;  // a rung is its step count: it trains every step, on every training frame
-      style.validation = 0;
-      if (rung.gaussians) {
-        if (kGanAvatar.Is(train.model))
-          return ReportFailure(Status::InvalidArgument("--ladder: '" + text + "' gives a Gaussian count, which the " +
-                                                       kGanAvatar.Name() + " model has not"));
-        style.max_gaussians = rung.gaussians;
-        style.init_gaussians = std::min<int64_t>(style.init_gaussians, rung.gaussians);
-      }
-    }
-    if (Status s = job.options.Check(); !s.ok()) return ReportFailure(s.WithContext("--ladder " + text));
-    jobs.push_back(std::move(job));
-  }
+  if (Status s = MakeJobs(options, train, variants, ladder, &jobs); !s.ok()) return ReportFailure(s);
   ApplyCommonOptions(common);
   if (json) SetLogLevel(LogLevel::kWarning);
   const fs::path root = out.empty() ? fs::path(common.workspace) / "bench_train" : fs::path(out);
@@ -214,58 +309,11 @@ int BenchTrain(const std::vector<std::string>& args) {
   nlohmann::json rows = nlohmann::json::array();
   std::vector<std::string> novel_lines;
   for (const Job& job : jobs) {
-    const TrainOptions& t = job.options;
     const fs::path dir = root / job.name;
-    // A variant trained earlier with the same options is not trained again.
-    const std::string key = options.ToIni("train", true) + "variant = " + job.name + "\n";
-    nlohmann::json row, saved;
-    if (ReadJson(dir / "bench.json", &saved).ok() && saved.value("options", "") == key) {
-      row = saved.at("row");
-      HF_LOG(Info) << "bench train: " << job.name << " was trained with these options; scoring it again";
-    } else {
-      TrainSummary s;
-      StderrProgress progress;
-      if (Status status = RunTrain(t, common.workspace, common.Settings().face_model, dir, &progress, &s);
-          !status.ok())
-        return ReportFailure(status.WithContext("bench train: " + job.name));
-      row = {{"variant", job.name}, {"what", job.what}, {"model", t.model}, {"preset", t.preset},
-             {"steps", s.steps}, {"seconds", s.seconds}, {"gaussians", s.gaussians},
-             {"psnr_masked", s.psnr_masked}, {"ssim_masked", s.ssim_masked}, {"psnr", s.psnr_full},
-             {"ssim", s.ssim_full}, {"train_psnr_masked", s.train_psnr_masked}};
-      // Sharpness, render time and, with stage 3, stage 2's figures beside the decoded image's.
-      nlohmann::json eval;
-      if (ReadJson(dir / "eval.json", &eval).ok() && eval.contains("mean")) {
-        const nlohmann::json& mean = eval.at("mean");
-        row["sd"] = mean.value("sd", 0.0);
-        row["sharpness_truth"] = mean.value("sharpness_truth", 0.0);
-        row["render_ms"] = eval.value("render_ms", 0.0);
-        if (eval.contains("stage2")) {
-          const nlohmann::json& stage2 = eval.at("stage2");
-          row["stage2"] = {{"psnr_masked", stage2.value("psnr_masked", 0.0)},
-                           {"ssim_masked", stage2.value("ssim_masked", 0.0)},
-                           {"sd", stage2.value("sd", 0.0)}};
-          row["stage3_seconds"] = eval.value("stage3_seconds", 0.0);
-        }
-      }
-      if (Status status = WriteJsonAtomic(dir / "bench.json", {{"options", key}, {"row", row}}, 1); !status.ok())
-        return ReportFailure(status);
-    }
+    nlohmann::json row;
+    if (Status s = TrainedRow(options, common, job, dir, &row); !s.ok()) return ReportFailure(s);
     if (!truth.empty()) {
-      std::vector<NovelViewScore> novel;
-      if (Status status = ScoreNovelViews(common.workspace, dir, common.Settings().face_model, truth,
-                                          dir / "novel_views", &novel);
-          !status.ok())
-        return ReportFailure(status.WithContext("bench train: " + job.name));
-      nlohmann::json cams = nlohmann::json::array();
-      for (const NovelViewScore& n : novel) {
-        cams.push_back({{"camera", n.camera}, {"yaw_deg", n.yaw_deg}, {"pitch_deg", n.pitch_deg}, {"views", n.views},
-                        {"psnr_masked", n.psnr_masked}, {"ssim_masked", n.ssim_masked}, {"psnr", n.psnr_full}});
-        char line[256];
-        std::snprintf(line, sizeof(line), "| %s | %s | %+.0f° / %+.0f° | %d | %.2f dB / %.3f | %.2f dB |", job.what.c_str(),
-                      n.camera.c_str(), n.yaw_deg, n.pitch_deg, n.views, n.psnr_masked, n.ssim_masked, n.psnr_full);
-        novel_lines.push_back(line);
-      }
-      row["novel_views"] = cams;
+      if (Status s = ScoreNovel(common, job, dir, truth, &row, &novel_lines); !s.ok()) return ReportFailure(s);
     }
     rows.push_back(row);
     if (!json) {
@@ -277,24 +325,7 @@ int BenchTrain(const std::vector<std::string>& args) {
       std::fflush(stdout);
     }
   }
-  // Stage 3 against stage 2 (GaussianStyle's Table 2b): SD is the render's
-  // mean gradient magnitude over the head minus the frame's (negative: blurrier).
-  bool stage3 = false;
-  for (const auto& row : rows) stage3 = stage3 || row.contains("stage2");
-  if (!json && stage3) {
-    std::printf("\nStage 3 (held-out frames, over the head; SD: sharpness minus the frame's):\n\n"
-                "| variant | stage 2: PSNR / SSIM, SD | stage 3: PSNR / SSIM, SD | stage 3's time | render |\n"
-                "|---|---|---|---|---|\n");
-    for (const auto& row : rows) {
-      if (!row.contains("stage2")) continue;
-      const nlohmann::json& s2 = row.at("stage2");
-      const double ms = row.value("render_ms", 0.0);
-      std::printf("| %s | %.2f dB / %.3f, %+.2f | %.2f dB / %.3f, %+.2f | %.1f min | %.1f ms (%.1f frames/s) |\n",
-                  row.at("what").get<std::string>().c_str(), s2.value("psnr_masked", 0.0), s2.value("ssim_masked", 0.0),
-                  s2.value("sd", 0.0), row.value("psnr_masked", 0.0), row.value("ssim_masked", 0.0), row.value("sd", 0.0),
-                  row.value("stage3_seconds", 0.0) / 60, ms, ms > 0 ? 1000.0 / ms : 0.0);
-    }
-  }
+  if (!json) PrintStage3Table(rows);
   if (!json && !novel_lines.empty()) {
     std::printf("\nNovel views (held-out frames, the simulator's cameras):\n\n"
                 "| variant | camera | yaw / pitch | views | PSNR / SSIM, head | PSNR, frame |\n|---|---|---|---|---|---|\n");

@@ -167,8 +167,8 @@ std::vector<BadInput> CommandLineCases() {
   };
 }
 
-// The inputs (exit 1).
-std::vector<BadInput> InputCases() {
+// The inputs (exit 1): the video and what ingest reads with it.
+std::vector<BadInput> VideoInputCases() {
   const auto video = IngestArgs;
   const std::string grid = (kGrid / "bbaf2n.mpg").string();
   return {
@@ -270,6 +270,15 @@ std::vector<BadInput> InputCases() {
          return video(d, {"--video", (d / "tiny.avi").string()});
        },
        1, {"tiny.avi", "px", "too small", "--min-face"}},
+  };
+}
+
+// The inputs (exit 1): the data, the face model, a workspace's files and
+// what training needs.
+std::vector<BadInput> WorkspaceInputCases() {
+  const auto video = IngestArgs;
+  const std::string grid = (kGrid / "bbaf2n.mpg").string();
+  return {
       {"a missing data folder",
        [=](const fs::path& d) { return video(d, {"--video", grid, "--data", (d / "nowhere").string()}); }, 1,
        {"UltraFace model not found", "--data"}},
@@ -318,6 +327,13 @@ std::vector<BadInput> InputCases() {
        },
        1, {"6 frames", "at least", "longer video"}},
   };
+}
+
+// The inputs (exit 1).
+std::vector<BadInput> InputCases() {
+  std::vector<BadInput> cases = VideoInputCases();
+  for (BadInput& input : WorkspaceInputCases()) cases.push_back(std::move(input));
+  return cases;
 }
 
 std::vector<BadInput> Table() {

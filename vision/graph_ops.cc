@@ -418,202 +418,225 @@ GraphOp BinaryOp(Binary f) {
   };
 }
 
+// The ops by name; each Add*Ops adds one family of them.
+using OpTable = std::map<std::string, GraphOp>;
+
+// Plumbing and dataflow control.
+void AddPlumbingOps(OpTable* table) {
+  OpTable& m = *table;
+  m["Identity"] = [](const GraphNode&, const Tensors& in) { Need(in, 1); return Tensors{in[0]}; };
+  m["StopGradient"] = m["Identity"];
+  m["Snapshot"] = m["Identity"];
+  m["NoOp"] = [](const GraphNode&, const Tensors&) { return Tensors{}; };
+  m["Switch"] = [](const GraphNode&, const Tensors& in) {
+    Need(in, 2);
+    const bool pred = in[1].to(torch::kCPU).item<bool>();
+    return pred ? Tensors{torch::Tensor(), in[0]} : Tensors{in[0], torch::Tensor()};
+  };
+  m["Merge"] = [](const GraphNode&, const Tensors& in) {
+    for (size_t i = 0; i < in.size(); ++i)
+      if (in[i].defined()) return Tensors{in[i], torch::tensor(int32_t(i))};
+    return Tensors{};
+  };
+}
+
+// Convolutions and pools.
+void AddWindowOps(OpTable* table) {
+  OpTable& m = *table;
+  m["Conv2D"] = [](const GraphNode& n, const Tensors& in) { Need(in, 2); return Tensors{Convolve(n, in[0], in[1], false)}; };
+  m["DepthwiseConv2dNative"] = [](const GraphNode& n, const Tensors& in) {
+    Need(in, 2);
+    return Tensors{Convolve(n, in[0], in[1], true)};
+  };
+  m["_FusedConv2D"] = [](const GraphNode& n, const Tensors& in) { return FusedConvolution(n, in, false); };
+  m["FusedDepthwiseConv2dNative"] = [](const GraphNode& n, const Tensors& in) { return FusedConvolution(n, in, true); };
+  m["Conv2DBackpropInput"] = TransposedConvolution;
+  m["MaxPool"] = [](const GraphNode& n, const Tensors& in) { return Pool(n, in, true); };
+  m["AvgPool"] = [](const GraphNode& n, const Tensors& in) { return Pool(n, in, false); };
+  m["ResizeBilinear"] = ResizeBilinear;
+  m["ResizeNearestNeighbor"] = ResizeNearest;
+  m["Pad"] = [](const GraphNode& n, const Tensors& in) { return PadOp(n, in, 0.0); };
+  m["PadV2"] = [](const GraphNode& n, const Tensors& in) {
+    Need(in, 3);
+    return PadOp(n, in, in[2].to(torch::kCPU).item<double>());
+  };
+  m["MirrorPad"] = [](const GraphNode& n, const Tensors& in) { return PadOp(n, in, 0.0); };
+  m["SpaceToBatchND"] = [](const GraphNode&, const Tensors& in) { return SpaceToBatch(in); };
+  m["BatchToSpaceND"] = [](const GraphNode&, const Tensors& in) { return BatchToSpace(in); };
+  m["MatMul"] = MatMul;
+  m["BatchMatMul"] = MatMul;
+  m["BatchMatMulV2"] = MatMul;
+  m["_FusedMatMul"] = MatMul;
+}
+
+// Element-wise.
+void AddElementwiseOps(OpTable* table) {
+  OpTable& m = *table;
+  m["BiasAdd"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return a + b; });
+  m["Add"] = m["BiasAdd"];
+  m["AddV2"] = m["BiasAdd"];
+  m["AddN"] = [](const GraphNode&, const Tensors& in) {
+    Need(in, 1);
+    torch::Tensor sum = in[0];
+    for (size_t i = 1; i < in.size(); ++i) sum = sum + in[i];
+    return Tensors{sum};
+  };
+  m["Sub"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return a - b; });
+  m["Mul"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return a * b; });
+  m["RealDiv"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::div(a, b); });
+  m["Div"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) {
+    return a.is_floating_point() ? torch::div(a, b) : torch::div(a, b, "floor");
+  });
+  m["FloorDiv"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::div(a, b, "floor"); });
+  m["FloorMod"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::remainder(a, b); });
+  m["Minimum"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::minimum(a, b); });
+  m["Maximum"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::maximum(a, b); });
+  m["Pow"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::pow(a, b); });
+  m["SquaredDifference"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return (a - b) * (a - b); });
+  m["Equal"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::eq(a, b); });
+  m["NotEqual"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::ne(a, b); });
+  m["Greater"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::gt(a, b); });
+  m["GreaterEqual"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::ge(a, b); });
+  m["Less"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::lt(a, b); });
+  m["LessEqual"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::le(a, b); });
+  m["LogicalAnd"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::logical_and(a, b); });
+  m["LogicalOr"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::logical_or(a, b); });
+  m["Prelu"] = BinaryOp(Prelu);
+  m["Relu"] = UnaryOp([](const torch::Tensor& x) { return torch::relu(x); });
+  m["Relu6"] = UnaryOp([](const torch::Tensor& x) { return torch::clamp(x, 0.0, 6.0); });
+  m["Elu"] = UnaryOp([](const torch::Tensor& x) { return torch::elu(x); });
+  m["Sigmoid"] = UnaryOp([](const torch::Tensor& x) { return torch::sigmoid(x); });
+  m["Tanh"] = UnaryOp([](const torch::Tensor& x) { return torch::tanh(x); });
+  m["Neg"] = UnaryOp([](const torch::Tensor& x) { return torch::neg(x); });
+  m["Abs"] = UnaryOp([](const torch::Tensor& x) { return torch::abs(x); });
+  m["Exp"] = UnaryOp([](const torch::Tensor& x) { return torch::exp(x); });
+  m["Log"] = UnaryOp([](const torch::Tensor& x) { return torch::log(x); });
+  m["Sqrt"] = UnaryOp([](const torch::Tensor& x) { return torch::sqrt(x); });
+  m["Rsqrt"] = UnaryOp([](const torch::Tensor& x) { return torch::rsqrt(x); });
+  m["Square"] = UnaryOp([](const torch::Tensor& x) { return x * x; });
+  m["Floor"] = UnaryOp([](const torch::Tensor& x) { return torch::floor(x); });
+  m["Ceil"] = UnaryOp([](const torch::Tensor& x) { return torch::ceil(x); });
+  m["Sin"] = UnaryOp([](const torch::Tensor& x) { return torch::sin(x); });
+  m["Cos"] = UnaryOp([](const torch::Tensor& x) { return torch::cos(x); });
+  m["LogicalNot"] = UnaryOp([](const torch::Tensor& x) { return torch::logical_not(x); });
+  m["ZerosLike"] = UnaryOp([](const torch::Tensor& x) { return torch::zeros_like(x); });
+  m["OnesLike"] = UnaryOp([](const torch::Tensor& x) { return torch::ones_like(x); });
+  m["LeakyRelu"] = [](const GraphNode& n, const Tensors& in) {
+    Need(in, 1);
+    return Tensors{F::leaky_relu(in[0], F::LeakyReLUFuncOptions().negative_slope(n.Float("alpha", 0.2)))};
+  };
+  m["Softmax"] = UnaryOp([](const torch::Tensor& x) { return torch::softmax(x, -1); });
+  m["Atan2"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::atan2(a, b); });
+}
+
+void AddReductionAndShapeOps(OpTable* table) {
+  OpTable& m = *table;
+  // Reductions.
+  for (const char* r : {"Mean", "Sum", "Prod", "Max", "Min", "All", "Any"})
+    m[r] = [how = std::string(r)](const GraphNode& n, const Tensors& in) { return Reduce(n, in, how); };
+  // Shapes.
+  m["Shape"] = [](const GraphNode& n, const Tensors& in) {
+    Need(in, 1);
+    const auto sizes = in[0].sizes();
+    return Tensors{torch::tensor(std::vector<int64_t>(sizes.begin(), sizes.end()), torch::kLong)
+                       .to(DtypeOf(n.Type("out_type", "DT_INT32")))
+                       .to(in[0].device())};
+  };
+  m["Cast"] = [](const GraphNode& n, const Tensors& in) {
+    Need(in, 1);
+    return Tensors{in[0].to(DtypeOf(n.Type("DstT", "DT_FLOAT")))};
+  };
+  m["Reshape"] = [](const GraphNode&, const Tensors& in) { Need(in, 2); return Tensors{in[0].reshape(IntsOf(in[1]))}; };
+  m["Squeeze"] = [](const GraphNode& n, const Tensors& in) {
+    Need(in, 1);
+    std::vector<int64_t> dims = n.Ints("squeeze_dims");
+    if (dims.empty()) dims = n.Ints("axis");
+    if (dims.empty()) return Tensors{in[0].squeeze()};
+    for (int64_t& d : dims) d = AxisOf(d, in[0].dim());
+    std::sort(dims.rbegin(), dims.rend());
+    torch::Tensor y = in[0];
+    for (int64_t d : dims) y = y.squeeze(d);
+    return Tensors{y};
+  };
+  m["ExpandDims"] = [](const GraphNode&, const Tensors& in) {
+    Need(in, 2);
+    return Tensors{in[0].unsqueeze(AxisOf(IntsOf(in[1]).at(0), in[0].dim() + 1))};
+  };
+  m["ConcatV2"] = [](const GraphNode&, const Tensors& in) {
+    Need(in, 2);
+    const Tensors parts(in.begin(), in.end() - 1);
+    return Tensors{torch::cat(parts, AxisOf(IntsOf(in.back()).at(0), parts[0].dim()))};
+  };
+  m["Pack"] = [](const GraphNode& n, const Tensors& in) {
+    Need(in, 1);
+    return Tensors{torch::stack(in, AxisOf(n.Int("axis", 0), in[0].dim() + 1))};
+  };
+  m["Unpack"] = [](const GraphNode& n, const Tensors& in) {
+    Need(in, 1);
+    const auto parts = in[0].unbind(AxisOf(n.Int("axis", 0), in[0].dim()));
+    return Tensors(parts.begin(), parts.end());
+  };
+  m["Split"] = [](const GraphNode& n, const Tensors& in) {
+    Need(in, 2);
+    const int64_t axis = AxisOf(IntsOf(in[0]).at(0), in[1].dim());
+    const int64_t parts = n.Int("num_split", 1);
+    if (parts < 1 || in[1].size(axis) % parts) Fail("cannot split evenly");
+    return Split(in[1], axis, std::vector<int64_t>(parts, in[1].size(axis) / parts));
+  };
+  m["SplitV"] = [](const GraphNode&, const Tensors& in) {
+    Need(in, 3);
+    const int64_t axis = AxisOf(IntsOf(in[2]).at(0), in[0].dim());
+    std::vector<int64_t> sizes = IntsOf(in[1]);
+    int64_t known = 0, unknown = -1;
+    for (size_t i = 0; i < sizes.size(); ++i) {
+      if (sizes[i] < 0) unknown = int64_t(i);
+      else known += sizes[i];
+    }
+    if (unknown >= 0) sizes[unknown] = in[0].size(axis) - known;
+    return Split(in[0], axis, sizes);
+  };
+  m["Slice"] = [](const GraphNode&, const Tensors& in) {
+    Need(in, 3);
+    const std::vector<int64_t> begin = IntsOf(in[1]), size = IntsOf(in[2]);
+    torch::Tensor y = in[0];
+    for (size_t d = 0; d < begin.size(); ++d)
+      y = y.narrow(int64_t(d), begin[d], size[d] < 0 ? y.size(int64_t(d)) - begin[d] : size[d]);
+    return Tensors{y};
+  };
+  m["StridedSlice"] = StridedSlice;
+  m["BroadcastTo"] = [](const GraphNode&, const Tensors& in) { Need(in, 2); return Tensors{in[0].expand(IntsOf(in[1]))}; };
+  m["Transpose"] = [](const GraphNode&, const Tensors& in) { Need(in, 2); return Tensors{in[0].permute(IntsOf(in[1]))}; };
+  m["Tile"] = [](const GraphNode&, const Tensors& in) { Need(in, 2); return Tensors{in[0].repeat(IntsOf(in[1]))}; };
+  m["Fill"] = [](const GraphNode&, const Tensors& in) {
+    Need(in, 2);
+    return Tensors{in[1].reshape({}).expand(IntsOf(in[0])).contiguous()};
+  };
+  m["GatherV2"] = [](const GraphNode&, const Tensors& in) {
+    Need(in, 3);
+    const int64_t axis = AxisOf(IntsOf(in[2]).at(0), in[0].dim());
+    const torch::Tensor index = in[1].to(torch::kLong);
+    const torch::Tensor flat = in[0].index_select(axis, index.reshape(-1));
+    std::vector<int64_t> shape(in[0].sizes().begin(), in[0].sizes().begin() + axis);
+    for (int64_t s : index.sizes()) shape.push_back(s);
+    for (int64_t d = axis + 1; d < in[0].dim(); ++d) shape.push_back(in[0].size(d));
+    return Tensors{flat.reshape(shape)};
+  };
+  m["Range"] = [](const GraphNode& n, const Tensors& in) {
+    Need(in, 3);
+    const auto s = in[0].to(torch::kCPU), e = in[1].to(torch::kCPU), d = in[2].to(torch::kCPU);
+    return Tensors{torch::arange(s.item<double>(), e.item<double>(), d.item<double>())
+                       .to(DtypeOf(n.Type("Tidx", "DT_INT32")))
+                       .to(in[0].device())};
+  };
+}
+
 const std::map<std::string, GraphOp>& Ops() {
   static const std::map<std::string, GraphOp> ops = [] {
     std::map<std::string, GraphOp> m;
-    // Plumbing and dataflow control.
-    m["Identity"] = [](const GraphNode&, const Tensors& in) { Need(in, 1); return Tensors{in[0]}; };
-    m["StopGradient"] = m["Identity"];
-    m["Snapshot"] = m["Identity"];
-    m["NoOp"] = [](const GraphNode&, const Tensors&) { return Tensors{}; };
-    m["Switch"] = [](const GraphNode&, const Tensors& in) {
-      Need(in, 2);
-      const bool pred = in[1].to(torch::kCPU).item<bool>();
-      return pred ? Tensors{torch::Tensor(), in[0]} : Tensors{in[0], torch::Tensor()};
-    };
-    m["Merge"] = [](const GraphNode&, const Tensors& in) {
-      for (size_t i = 0; i < in.size(); ++i)
-        if (in[i].defined()) return Tensors{in[i], torch::tensor(int32_t(i))};
-      return Tensors{};
-    };
-    // Convolutions and pools.
-    m["Conv2D"] = [](const GraphNode& n, const Tensors& in) { Need(in, 2); return Tensors{Convolve(n, in[0], in[1], false)}; };
-    m["DepthwiseConv2dNative"] = [](const GraphNode& n, const Tensors& in) {
-      Need(in, 2);
-      return Tensors{Convolve(n, in[0], in[1], true)};
-    };
-    m["_FusedConv2D"] = [](const GraphNode& n, const Tensors& in) { return FusedConvolution(n, in, false); };
-    m["FusedDepthwiseConv2dNative"] = [](const GraphNode& n, const Tensors& in) { return FusedConvolution(n, in, true); };
-    m["Conv2DBackpropInput"] = TransposedConvolution;
-    m["MaxPool"] = [](const GraphNode& n, const Tensors& in) { return Pool(n, in, true); };
-    m["AvgPool"] = [](const GraphNode& n, const Tensors& in) { return Pool(n, in, false); };
-    m["ResizeBilinear"] = ResizeBilinear;
-    m["ResizeNearestNeighbor"] = ResizeNearest;
-    m["Pad"] = [](const GraphNode& n, const Tensors& in) { return PadOp(n, in, 0.0); };
-    m["PadV2"] = [](const GraphNode& n, const Tensors& in) {
-      Need(in, 3);
-      return PadOp(n, in, in[2].to(torch::kCPU).item<double>());
-    };
-    m["MirrorPad"] = [](const GraphNode& n, const Tensors& in) { return PadOp(n, in, 0.0); };
-    m["SpaceToBatchND"] = [](const GraphNode&, const Tensors& in) { return SpaceToBatch(in); };
-    m["BatchToSpaceND"] = [](const GraphNode&, const Tensors& in) { return BatchToSpace(in); };
-    m["MatMul"] = MatMul;
-    m["BatchMatMul"] = MatMul;
-    m["BatchMatMulV2"] = MatMul;
-    m["_FusedMatMul"] = MatMul;
-    // Element-wise.
-    m["BiasAdd"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return a + b; });
-    m["Add"] = m["BiasAdd"];
-    m["AddV2"] = m["BiasAdd"];
-    m["AddN"] = [](const GraphNode&, const Tensors& in) {
-      Need(in, 1);
-      torch::Tensor sum = in[0];
-      for (size_t i = 1; i < in.size(); ++i) sum = sum + in[i];
-      return Tensors{sum};
-    };
-    m["Sub"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return a - b; });
-    m["Mul"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return a * b; });
-    m["RealDiv"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::div(a, b); });
-    m["Div"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) {
-      return a.is_floating_point() ? torch::div(a, b) : torch::div(a, b, "floor");
-    });
-    m["FloorDiv"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::div(a, b, "floor"); });
-    m["FloorMod"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::remainder(a, b); });
-    m["Minimum"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::minimum(a, b); });
-    m["Maximum"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::maximum(a, b); });
-    m["Pow"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::pow(a, b); });
-    m["SquaredDifference"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return (a - b) * (a - b); });
-    m["Equal"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::eq(a, b); });
-    m["NotEqual"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::ne(a, b); });
-    m["Greater"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::gt(a, b); });
-    m["GreaterEqual"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::ge(a, b); });
-    m["Less"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::lt(a, b); });
-    m["LessEqual"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::le(a, b); });
-    m["LogicalAnd"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::logical_and(a, b); });
-    m["LogicalOr"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::logical_or(a, b); });
-    m["Prelu"] = BinaryOp(Prelu);
-    m["Relu"] = UnaryOp([](const torch::Tensor& x) { return torch::relu(x); });
-    m["Relu6"] = UnaryOp([](const torch::Tensor& x) { return torch::clamp(x, 0.0, 6.0); });
-    m["Elu"] = UnaryOp([](const torch::Tensor& x) { return torch::elu(x); });
-    m["Sigmoid"] = UnaryOp([](const torch::Tensor& x) { return torch::sigmoid(x); });
-    m["Tanh"] = UnaryOp([](const torch::Tensor& x) { return torch::tanh(x); });
-    m["Neg"] = UnaryOp([](const torch::Tensor& x) { return torch::neg(x); });
-    m["Abs"] = UnaryOp([](const torch::Tensor& x) { return torch::abs(x); });
-    m["Exp"] = UnaryOp([](const torch::Tensor& x) { return torch::exp(x); });
-    m["Log"] = UnaryOp([](const torch::Tensor& x) { return torch::log(x); });
-    m["Sqrt"] = UnaryOp([](const torch::Tensor& x) { return torch::sqrt(x); });
-    m["Rsqrt"] = UnaryOp([](const torch::Tensor& x) { return torch::rsqrt(x); });
-    m["Square"] = UnaryOp([](const torch::Tensor& x) { return x * x; });
-    m["Floor"] = UnaryOp([](const torch::Tensor& x) { return torch::floor(x); });
-    m["Ceil"] = UnaryOp([](const torch::Tensor& x) { return torch::ceil(x); });
-    m["Sin"] = UnaryOp([](const torch::Tensor& x) { return torch::sin(x); });
-    m["Cos"] = UnaryOp([](const torch::Tensor& x) { return torch::cos(x); });
-    m["LogicalNot"] = UnaryOp([](const torch::Tensor& x) { return torch::logical_not(x); });
-    m["ZerosLike"] = UnaryOp([](const torch::Tensor& x) { return torch::zeros_like(x); });
-    m["OnesLike"] = UnaryOp([](const torch::Tensor& x) { return torch::ones_like(x); });
-    m["LeakyRelu"] = [](const GraphNode& n, const Tensors& in) {
-      Need(in, 1);
-      return Tensors{F::leaky_relu(in[0], F::LeakyReLUFuncOptions().negative_slope(n.Float("alpha", 0.2)))};
-    };
-    m["Softmax"] = UnaryOp([](const torch::Tensor& x) { return torch::softmax(x, -1); });
-    m["Atan2"] = BinaryOp([](const torch::Tensor& a, const torch::Tensor& b) { return torch::atan2(a, b); });
-    // Reductions.
-    for (const char* r : {"Mean", "Sum", "Prod", "Max", "Min", "All", "Any"})
-      m[r] = [how = std::string(r)](const GraphNode& n, const Tensors& in) { return Reduce(n, in, how); };
-    // Shapes.
-    m["Shape"] = [](const GraphNode& n, const Tensors& in) {
-      Need(in, 1);
-      const auto sizes = in[0].sizes();
-      return Tensors{torch::tensor(std::vector<int64_t>(sizes.begin(), sizes.end()), torch::kLong)
-                         .to(DtypeOf(n.Type("out_type", "DT_INT32")))
-                         .to(in[0].device())};
-    };
-    m["Cast"] = [](const GraphNode& n, const Tensors& in) {
-      Need(in, 1);
-      return Tensors{in[0].to(DtypeOf(n.Type("DstT", "DT_FLOAT")))};
-    };
-    m["Reshape"] = [](const GraphNode&, const Tensors& in) { Need(in, 2); return Tensors{in[0].reshape(IntsOf(in[1]))}; };
-    m["Squeeze"] = [](const GraphNode& n, const Tensors& in) {
-      Need(in, 1);
-      std::vector<int64_t> dims = n.Ints("squeeze_dims");
-      if (dims.empty()) dims = n.Ints("axis");
-      if (dims.empty()) return Tensors{in[0].squeeze()};
-      for (int64_t& d : dims) d = AxisOf(d, in[0].dim());
-      std::sort(dims.rbegin(), dims.rend());
-      torch::Tensor y = in[0];
-      for (int64_t d : dims) y = y.squeeze(d);
-      return Tensors{y};
-    };
-    m["ExpandDims"] = [](const GraphNode&, const Tensors& in) {
-      Need(in, 2);
-      return Tensors{in[0].unsqueeze(AxisOf(IntsOf(in[1]).at(0), in[0].dim() + 1))};
-    };
-    m["ConcatV2"] = [](const GraphNode&, const Tensors& in) {
-      Need(in, 2);
-      const Tensors parts(in.begin(), in.end() - 1);
-      return Tensors{torch::cat(parts, AxisOf(IntsOf(in.back()).at(0), parts[0].dim()))};
-    };
-    m["Pack"] = [](const GraphNode& n, const Tensors& in) {
-      Need(in, 1);
-      return Tensors{torch::stack(in, AxisOf(n.Int("axis", 0), in[0].dim() + 1))};
-    };
-    m["Unpack"] = [](const GraphNode& n, const Tensors& in) {
-      Need(in, 1);
-      const auto parts = in[0].unbind(AxisOf(n.Int("axis", 0), in[0].dim()));
-      return Tensors(parts.begin(), parts.end());
-    };
-    m["Split"] = [](const GraphNode& n, const Tensors& in) {
-      Need(in, 2);
-      const int64_t axis = AxisOf(IntsOf(in[0]).at(0), in[1].dim());
-      const int64_t parts = n.Int("num_split", 1);
-      if (parts < 1 || in[1].size(axis) % parts) Fail("cannot split evenly");
-      return Split(in[1], axis, std::vector<int64_t>(parts, in[1].size(axis) / parts));
-    };
-    m["SplitV"] = [](const GraphNode&, const Tensors& in) {
-      Need(in, 3);
-      const int64_t axis = AxisOf(IntsOf(in[2]).at(0), in[0].dim());
-      std::vector<int64_t> sizes = IntsOf(in[1]);
-      int64_t known = 0, unknown = -1;
-      for (size_t i = 0; i < sizes.size(); ++i) {
-        if (sizes[i] < 0) unknown = int64_t(i);
-        else known += sizes[i];
-      }
-      if (unknown >= 0) sizes[unknown] = in[0].size(axis) - known;
-      return Split(in[0], axis, sizes);
-    };
-    m["Slice"] = [](const GraphNode&, const Tensors& in) {
-      Need(in, 3);
-      const std::vector<int64_t> begin = IntsOf(in[1]), size = IntsOf(in[2]);
-      torch::Tensor y = in[0];
-      for (size_t d = 0; d < begin.size(); ++d)
-        y = y.narrow(int64_t(d), begin[d], size[d] < 0 ? y.size(int64_t(d)) - begin[d] : size[d]);
-      return Tensors{y};
-    };
-    m["StridedSlice"] = StridedSlice;
-    m["BroadcastTo"] = [](const GraphNode&, const Tensors& in) { Need(in, 2); return Tensors{in[0].expand(IntsOf(in[1]))}; };
-    m["Transpose"] = [](const GraphNode&, const Tensors& in) { Need(in, 2); return Tensors{in[0].permute(IntsOf(in[1]))}; };
-    m["Tile"] = [](const GraphNode&, const Tensors& in) { Need(in, 2); return Tensors{in[0].repeat(IntsOf(in[1]))}; };
-    m["Fill"] = [](const GraphNode&, const Tensors& in) {
-      Need(in, 2);
-      return Tensors{in[1].reshape({}).expand(IntsOf(in[0])).contiguous()};
-    };
-    m["GatherV2"] = [](const GraphNode&, const Tensors& in) {
-      Need(in, 3);
-      const int64_t axis = AxisOf(IntsOf(in[2]).at(0), in[0].dim());
-      const torch::Tensor index = in[1].to(torch::kLong);
-      const torch::Tensor flat = in[0].index_select(axis, index.reshape(-1));
-      std::vector<int64_t> shape(in[0].sizes().begin(), in[0].sizes().begin() + axis);
-      for (int64_t s : index.sizes()) shape.push_back(s);
-      for (int64_t d = axis + 1; d < in[0].dim(); ++d) shape.push_back(in[0].size(d));
-      return Tensors{flat.reshape(shape)};
-    };
-    m["Range"] = [](const GraphNode& n, const Tensors& in) {
-      Need(in, 3);
-      const auto s = in[0].to(torch::kCPU), e = in[1].to(torch::kCPU), d = in[2].to(torch::kCPU);
-      return Tensors{torch::arange(s.item<double>(), e.item<double>(), d.item<double>())
-                         .to(DtypeOf(n.Type("Tidx", "DT_INT32")))
-                         .to(in[0].device())};
-    };
+    AddPlumbingOps(&m);
+    AddWindowOps(&m);
+    AddElementwiseOps(&m);
+    AddReductionAndShapeOps(&m);
     return m;
   }();
   return ops;

@@ -134,6 +134,9 @@ struct TrainSummary {
   double train_psnr_masked = 0;  // every 10th training view, with its own frame latent
   std::vector<std::string> outputs;  // relative to the output folder
   std::string note;                  // what the user should know of the run ("" or a clause)
+  // Stopped by its time limit, its checkpoint kept with the model: train
+  // --extend with a longer --max-minutes goes on from it.
+  bool extendable = false;
   std::string OneLine() const;
 };
 

@@ -154,7 +154,9 @@ std::string TrainSummary::OneLine() const {
                 "%.2f dB / %.3f over the frame",
                 steps, seconds, resumed.c_str(), count.c_str(), test_views, psnr_masked, ssim_masked, psnr_full,
                 ssim_full);
-  return note.empty() ? std::string(text) : std::string(text) + "; " + note;
+  std::string line = note.empty() ? std::string(text) : std::string(text) + "; " + note;
+  if (extendable) line += "; stopped by the time limit (train --extend --max-minutes M goes on from there)";
+  return line;
 }
 
 LoopOptions TrainLoopOptions(const TrainLoopSettings& settings, const std::string& label, int steps) {

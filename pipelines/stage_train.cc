@@ -1,18 +1,67 @@
 // The train stage's job: the avatar model trained on the tracked workspace,
 // into models/<model>/. Its --model defaults to auto: the model is chosen
 // from the aligned cameras when the stage runs (ChooseModel), and said.
+#include <nlohmann/json.hpp>
+
 #include "avatar/avatar_train.h"
 #include "avatar/model_table.h"
+#include "core/fs.h"
+#include "core/json_io.h"
 #include "core/log.h"
 #include "pipelines/stage_jobs.h"
 
 namespace headforge {
 namespace {
 
+// train --extend: the trained model in `trained` (a run its time limit
+// stopped, its checkpoint kept) copied into `staging`, where training goes on
+// from the checkpoint under `options`, which may differ from the recorded
+// run's only in the time limit.
+Status PrepareExtension(const fs::path& trained, const TrainOptions& options, const fs::path& staging) {
+  std::error_code ec;
+  if (!fs::exists(trained / "checkpoint.pt", ec))
+    return Status::InvalidArgument(
+        "train --extend: " + trained.string() + " holds no checkpoint to go on from: only a gaussian-style training "
+        "that its time limit stopped keeps one (without stage 3); train without --extend starts afresh");
+  nlohmann::json config;
+  HF_RETURN_IF_ERROR(ReadJson(trained / "config.json", &config));
+  if (!config.contains("options"))
+    return Status::InvalidArgument("train --extend: " + (trained / "config.json").string() +
+                                      " does not record its options (an older model); train without --extend");
+  TrainOptions recorded = TrainOptionsFromJson(config.at("options"));
+  if (recorded.loop.max_minutes <= 0 || (options.loop.max_minutes > 0 && options.loop.max_minutes <= recorded.loop.max_minutes))
+    return Status::InvalidArgument("train --extend: give a --max-minutes above the " +
+                                   std::to_string(recorded.loop.max_minutes).substr(0, 5) +
+                                   " the training stopped at (0: no limit)");
+  recorded.loop.max_minutes = options.loop.max_minutes;
+  TrainOptions asked = options;
+  asked.data = options.DataFor(kGaussianStyle);
+  const nlohmann::json was = ToJson(recorded), now = ToJson(asked);
+  if (was != now) {
+    std::string differ;
+    for (const auto& [key, value] : now.items())
+      if (!was.contains(key) || was.at(key) != value) differ += (differ.empty() ? "" : ", ") + key;
+    return Status::InvalidArgument("train --extend goes on with the same training: only --max-minutes may change (" +
+                                   (differ.empty() ? std::string("the options") : differ) +
+                                   " differ from the recorded run's); train without --extend starts afresh");
+  }
+  HF_RETURN_IF_ERROR(EnsureDirectory(staging.parent_path()));
+  fs::copy(trained, staging, fs::copy_options::recursive, ec);
+  if (ec) return Status::IoError("train --extend: cannot copy " + trained.string() + ": " + ec.message());
+  HF_LOG(Info) << "train: --extend: going on from the checkpoint of the training the time limit stopped";
+  return Status::Ok();
+}
+
 class TrainJob : public StageJob {
  public:
   TrainJob() { options_.model = "auto"; }
-  void AddOptions(OptionSet* options) override { AddTrainOptions(options, &options_); }
+  void AddOptions(OptionSet* options) override {
+    AddTrainOptions(options, &options_);
+    options->Add("train.extend", &extend_,
+                 "Go on with a gaussian-style training its time limit stopped, from the checkpoint kept with its "
+                 "model, under a longer --max-minutes (0: none); every other option as it trained.",
+                 "extend", OptionSet::Effect::kRuntime);
+  }
   void Resolve(const StageSettings&, const OptionSet& parsed) override {
     // Each model's preset differs: resolve both now, while `parsed` says
     // which options were given, and pick one when the cameras are known.
@@ -56,6 +105,12 @@ class TrainJob : public StageJob {
     HF_LOG(Info) << "train: " << model << " (" << (options_.model == "auto" ? "--model auto: " : "") << why
                  << (options_.model == "auto" ? "; --model " + AvatarModelNames() + " chooses" : "") << ")";
     const std::string folder(FindAvatarModel(model)->folder);
+    if (extend_ && !context.resumed) {
+      if (!kGaussianStyle.Is(model))
+        return Status::InvalidArgument("train --extend goes on with a gaussian-style training, not " + model);
+      HF_RETURN_IF_ERROR(PrepareExtension(env.workspace->root() / "models" / folder, *options,
+                                          context.staging / "models" / folder));
+    }
     TrainSummary summary;
     HF_RETURN_IF_ERROR(RunTrain(*options, env.workspace->root(), env.settings->face_model,
                                 context.staging / "models" / folder, env.progress, &summary));
@@ -69,6 +124,7 @@ class TrainJob : public StageJob {
 
  private:
   TrainOptions options_;
+  bool extend_ = false;
   std::vector<TrainOptions> resolved_;  // per model that may run
   Status preset_;
 };

@@ -370,7 +370,7 @@ TEST(TrainHardCases, FramesTheTrackerFlaggedAreLeftOutOfTraining) {
 
 // A time limit that ends training before the deformation's stage says so,
 // in the log and in the stage's summary: that avatar does not animate.
-TEST(TrainHardCases, ATimeLimitBeforeStageTwoIsSaid) {
+TEST(TrainHardCases, ATimeLimitBeforeStageTwoIsSaidAndExtendGoesOnFromThere) {
   const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("time_limit"));
   std::vector<std::string> args = TrainArgs(ws);
   *(std::find(args.begin(), args.end(), "--max-minutes") + 1) = "0.0001";  // 6 ms: after the first step
@@ -383,6 +383,33 @@ TEST(TrainHardCases, ATimeLimitBeforeStageTwoIsSaid) {
     if (!line.contains("stage")) continue;
     EXPECT_EQ(line["stage"], 1) << line;
   }
+
+  // The checkpoint where the limit stopped it stays with the model, and
+  // --extend with a longer limit goes on from it to the model an
+  // uninterrupted run makes; nothing but the limit may change.
+  EXPECT_TRUE(fs::exists(ws / kModelDir / "checkpoint.pt"));
+  EXPECT_NE(r.err.find("train --extend --max-minutes M goes on"), std::string::npos) << r.err;
+  std::vector<std::string> extend = TrainArgs(ws);
+  extend.push_back("--extend");
+  std::vector<std::string> changed = extend;
+  changed.insert(changed.end(), {"--ssim-weight", "0.3"});
+  const Result refused = Headforge(changed);
+  EXPECT_NE(refused.code, 0);
+  EXPECT_NE(refused.err.find("only --max-minutes may change (gaussian_style differ"), std::string::npos)
+      << refused.err;
+  const Result extended = Headforge(extend);
+  ASSERT_EQ(extended.code, 0) << extended.err;
+  EXPECT_NE(extended.err.find("going on from the checkpoint"), std::string::npos) << extended.err;
+  EXPECT_NE(extended.err.find("resuming from the checkpoint at step 1 "), std::string::npos) << extended.err;
+  Result made;
+  const fs::path reference = TrainedTalkingStatic(&made);
+  ASSERT_EQ(made.code, 0) << made.err;
+  EXPECT_EQ(FileHash(ws / kModelDir / "model.pt"), FileHash(reference / kModelDir / "model.pt"));
+  EXPECT_FALSE(fs::exists(ws / kModelDir / "checkpoint.pt"));
+  // Extending a training that ran to its end: nothing to go on from.
+  const Result again = Headforge({"train", "--workspace", ws.string(), "--extend", "--max-minutes", "5"});
+  EXPECT_NE(again.code, 0);
+  EXPECT_NE(again.err.find("holds no checkpoint to go on from"), std::string::npos) << again.err;
 }
 
 // --validation sets the last training frames aside (the held-out frames

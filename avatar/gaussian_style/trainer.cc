@@ -67,6 +67,7 @@ class Trainer : public LoopTrainer {
   Status Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress);
   Status Finish(const fs::path& out_dir, TrainSummary* summary);
   int step() const { return state_.step; }
+  bool out_of_time() const { return state_.out_of_time; }
   const GaussianStyleAvatar& avatar() const { return avatar_; }
 
   // The loop's side (loop.h).
@@ -361,7 +362,10 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
 Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, StatsLog* stats, Progress* progress) {
   out_dir_ = out_dir;
   checkpoint_ = checkpoint;
-  const LoopOptions loop = TrainLoopOptions(options_.loop, "train: gaussian-style", options_.loop.steps);
+  LoopOptions loop = TrainLoopOptions(options_.loop, "train: gaussian-style", options_.loop.steps);
+  // Without stage 3 after it, a run the time limit stopped keeps its
+  // checkpoint with the model, for train --extend.
+  loop.save_at_time_limit = style_.decoder.decoder_steps <= 0;
   HF_RETURN_IF_ERROR(RunLoop(loop, this, &state_, stats, progress));
   progress->Finish(std::to_string(state_.step) + " steps, " + std::to_string(avatar_.gaussians.params.size()) +
                    " Gaussians");
@@ -569,7 +573,13 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& load
     HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
     summary->resumed_from = resumed_from;
     if (style.decoder.decoder_steps <= 0) {
-      fs::remove(checkpoint, ec);
+      // Stopped by the time limit: the checkpoint there stays with the
+      // model, and train --extend with a longer limit goes on from it.
+      if (trainer.out_of_time() && fs::exists(checkpoint, ec)) {
+        summary->extendable = true;
+      } else {
+        fs::remove(checkpoint, ec);
+      }
       return Status::Ok();
     }
     // What stage 3 is measured against.
@@ -600,6 +610,7 @@ Status TrainGaussianStyleRun(const TrainOptions& options, const AvatarDataset& d
   *summary = TrainSummary();
   HF_RETURN_IF_ERROR(TrainGaussianStyle(options, data, out_dir, &stats, progress, summary));
   summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json"};
+  if (summary->extendable) summary->outputs.push_back("checkpoint.pt");
   std::error_code ec;
   for (const char* extra : {"held_out", "previews", "eval_stage2.json"})
     if (fs::exists(out_dir / extra, ec)) summary->outputs.push_back(extra);

@@ -142,6 +142,13 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
     if (out_of_time) {
       HF_LOG(Info) << options.label << ": time limit of " << Number(options.max_minutes) << " min reached at step "
                    << step;
+      state->out_of_time = true;
+      if (options.save_at_time_limit && step < options.steps) {
+        LoopState now = *state;
+        now.seconds = elapsed();
+        now.stats_lines = stats->size();
+        HF_RETURN_IF_ERROR(trainer->Save(now));
+      }
       break;
     }
     const bool stop = InterruptRequested();

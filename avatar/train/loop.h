@@ -64,6 +64,7 @@ struct LoopState {
   double seconds = 0;   // training time so far (all attempts)
   RunningStats stats;   // since the last log line
   size_t stats_lines = 0;  // stats.jsonl's lines at the checkpoint
+  bool out_of_time = false;  // this attempt stopped at the time limit (not saved)
 
   void Save(Checkpoint* checkpoint) const;
   // False when the checkpoint has no loop state (another layout).
@@ -76,6 +77,10 @@ struct LoopOptions {
   std::string step_key = "step";   // the stats lines' step field
   nlohmann::json tags = nlohmann::json::object();  // fields of every line it writes ({"stage": 3})
   int steps = 0;
+  // A checkpoint where the time limit stops training, which the trainer may
+  // keep beside its model for a later attempt with a longer limit
+  // (train --extend).
+  bool save_at_time_limit = false;
   double max_minutes = 0;     // > 0: stop after this much training time (all attempts)
   double clock_offset = 0;    // seconds added to the lines' "seconds" (an earlier loop's time)
   int log_every = 100;

@@ -594,6 +594,8 @@ def main(argv):
     t = time.monotonic()
     try:
         report["machine"] = machine(args)
+        if not report["machine"].get("commit") and manifest:  # a copy of the tree without .git
+            report["machine"]["commit"] = f"{manifest.get('commit')} (the packs')"
         m["ok"] = True
     except Exception as e:
         report["machine"] = {"device": args.device}

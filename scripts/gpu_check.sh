@@ -95,10 +95,11 @@ pack_run() {
 # The manifest the measuring steps read: each run's pack and what it is.
 write_manifest() {
   local dir="$1" kind="$2"
-  python3 - "$dir" "$kind" "$(cd "$root" && git rev-parse --short=12 HEAD 2>/dev/null || echo unknown)" <<'EOF'
+  python3 - "$dir" "$kind" "$(cd "$root" && git rev-parse --short=12 HEAD 2>/dev/null || echo unknown)" \
+    "$headforge" <<'EOF'
 import json, sys, time
 from pathlib import Path
-folder, kind, commit = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
+folder, kind, commit, program = Path(sys.argv[1]), sys.argv[2], sys.argv[3], Path(sys.argv[4])
 runs = []
 for line in (folder / "runs.tsv").read_text().splitlines():
     name, model, preset, capture, pack, size = line.split("\t")
@@ -106,7 +107,9 @@ for line in (folder / "runs.tsv").read_text().splitlines():
              "pack_bytes": int(size), "xz_bytes": (folder / pack).stat().st_size}
     runs.append(entry)
 (folder / "manifest.json").write_text(json.dumps(
-    {"kind": kind, "made": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "commit": commit, "runs": runs}, indent=1) + "\n")
+    {"kind": kind, "made": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "commit": commit,
+     "made_with": f"{program.resolve()} (built {time.strftime('%Y-%m-%dT%H:%M', time.gmtime(program.stat().st_mtime))})",
+     "runs": runs}, indent=1) + "\n")
 EOF
   rm -f "$dir/runs.tsv"
 }

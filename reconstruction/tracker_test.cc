@@ -349,45 +349,6 @@ TEST(IdentityLandmarks, RidgeRecoversHowPointsSlideWithIdentity) {
   EXPECT_NE(few.message().find("landmark 5"), std::string::npos) << few.message();
 }
 
-// The shipped identity columns (data/ict_dlib68_landmark_embedding_identity.json,
-// `headforge embed-landmarks --identity`) against subjects they were not
-// fitted to: three new faces, skins and lights, measured by the detector on
-// renders, are predicted closer than by the plain points riding on the surface.
-TEST(IdentityLandmarks, ShippedColumnsPredictNewSubjects) {
-  LandmarkEmbedding shipped;
-  ASSERT_TRUE(ReadLandmarkEmbedding(IdentityLandmarkEmbedding(), &shipped).ok());
-  ASSERT_EQ(shipped.identity.size(), 68u);
-  const int modes = int(shipped.identity[0].cols());
-  LandmarkBasis plain;
-  ASSERT_TRUE(BuildLandmarkBasis(Model(), DetectorLandmarkPoints(Model(), DefaultLandmarkEmbedding()), modes, &plain).ok());
-  FaceDetectorOptions detector;
-  detector.ultraface_dir = std::string(HEADFORGE_TEST_SHARED_DATA) + "/models/ultraface";
-  std::vector<double> with_columns, riding;
-  for (int s = 0; s < 3; ++s) {
-    std::mt19937_64 rng(5000 + s);
-    std::normal_distribution<double> normal;
-    SubjectLook look;
-    look.alpha = Eigen::VectorXd::NullaryExpr(modes, [&] { return normal(rng); });
-    look.skin = s == 1 ? Eigen::Vector3d(0.50, 0.34, 0.25) : Eigen::Vector3d(0.82, 0.63, 0.52);
-    look.light = Eigen::Vector3d(-0.3 + 0.3 * s, 0.4, 0.9);
-    std::vector<Eigen::Vector3d> points;
-    std::vector<int> seen;
-    ASSERT_TRUE(MeasureSubjectLandmarks(Model(), detector, DefaultLandmarkModel(), 2, look, &points, &seen).ok());
-    for (int i = 0; i < 68; ++i) {
-      if (seen[i] < 10) continue;
-      with_columns.push_back((shipped.points[i] + shipped.identity[i] * look.alpha - points[i]).norm());
-      riding.push_back((plain.Point(i, look.alpha, Eigen::VectorXd()) - points[i]).norm());
-    }
-  }
-  ASSERT_GT(with_columns.size(), 150u);
-  std::sort(with_columns.begin(), with_columns.end());
-  std::sort(riding.begin(), riding.end());
-  const double a = with_columns[with_columns.size() / 2], b = riding[riding.size() / 2];
-  std::printf("new subjects' detector points: %.2f mm from the identity columns' prediction, %.2f mm from the plain "
-              "points on the surface (medians)\n", 1e3 * a, 1e3 * b);
-  EXPECT_LT(a, 0.8 * b);
-}
-
 // The detector's points differ with the view: here each turned camera sees
 // the jaw contour 8 mm toward itself and the eye corners 2 mm lower. Fitted
 // with one set of points for every view, no head fits all views (the

@@ -96,6 +96,13 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
     line["seconds"] = options.clock_offset + elapsed();
     stats->Append(line.dump());
   };
+  // A checkpoint of where the loop stands now.
+  auto save = [&] {
+    LoopState now = *state;
+    now.seconds = elapsed();
+    now.stats_lines = stats->size();
+    return trainer->Save(now);
+  };
   std::string label = options.label;
   if (options.max_minutes > 0)
     label += " (" + std::to_string(options.steps) + " steps or " + Number(options.max_minutes) +
@@ -143,21 +150,12 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
       HF_LOG(Info) << options.label << ": time limit of " << Number(options.max_minutes) << " min reached at step "
                    << step;
       state->out_of_time = true;
-      if (options.save_at_time_limit && step < options.steps) {
-        LoopState now = *state;
-        now.seconds = elapsed();
-        now.stats_lines = stats->size();
-        HF_RETURN_IF_ERROR(trainer->Save(now));
-      }
+      if (options.save_at_time_limit && step < options.steps) HF_RETURN_IF_ERROR(save());
       break;
     }
     const bool stop = InterruptRequested();
-    if (options.checkpoint_every > 0 && !last && (stop || step % options.checkpoint_every == 0)) {
-      LoopState now = *state;
-      now.seconds = elapsed();
-      now.stats_lines = stats->size();
-      HF_RETURN_IF_ERROR(trainer->Save(now));
-    }
+    if (options.checkpoint_every > 0 && !last && (stop || step % options.checkpoint_every == 0))
+      HF_RETURN_IF_ERROR(save());
     if (stop) {
       progress->Finish("interrupted");
       state->seconds = elapsed();

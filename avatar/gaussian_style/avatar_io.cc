@@ -27,7 +27,8 @@ PosedGaussians GaussianStyleAvatar::Pose(const AvatarDataset& data, const torch:
   {
     torch::NoGradGuard no_grad;  // the mesh is data, not trained
     const int64_t e = model->options().expressions;
-    mesh = ComputeTriangleFrames(data.Vertices(condition.slice(0, 0, e)).to(device), data.triangles.to(device));
+    mesh = ComputeTriangleFrames(data.Vertices(condition.slice(0, 0, e)).to(device), data.triangles.to(device),
+                                 gaussians.binding);
   }
   return model->Pose(gaussians, condition.to(device), latent, &mesh, &neutral, deform_now);
 }

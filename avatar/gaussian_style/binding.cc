@@ -51,6 +51,19 @@ TriangleFrames ComputeTriangleFrames(const torch::Tensor& vertices, const torch:
   return f;
 }
 
+TriangleFrames ComputeTriangleFrames(const torch::Tensor& vertices, const torch::Tensor& triangles,
+                                     const torch::Tensor& wanted) {
+  const torch::Tensor rows = std::get<0>(at::_unique(wanted, /*sorted=*/true));
+  const TriangleFrames some = ComputeTriangleFrames(vertices, triangles.index_select(0, rows));
+  const int64_t t = triangles.size(0);
+  auto spread = [&](const torch::Tensor& values) {
+    std::vector<int64_t> shape = values.sizes().vec();
+    shape[0] = t;
+    return torch::zeros(shape, values.options()).index_copy_(0, rows, values);
+  };
+  return {spread(some.origin), spread(some.rotation), spread(some.quat), spread(some.scale)};
+}
+
 BoundGaussians ApplyBinding(const TriangleFrames& frames, const torch::Tensor& binding,
                             const torch::Tensor& local_means, const torch::Tensor& local_quats,
                             const torch::Tensor& local_log_scales) {

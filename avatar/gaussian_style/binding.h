@@ -24,6 +24,13 @@ struct TriangleFrames {
 // triangle (no area, a zero edge) gets the identity rotation and the floor
 // scale, so Gaussians bound to it stay finite.
 TriangleFrames ComputeTriangleFrames(const torch::Tensor& vertices, const torch::Tensor& triangles);
+// The same frames for the triangles `wanted` ([K] int64, repeats allowed)
+// only, at their rows of [T] tensors (every other row zero): all that
+// ApplyBinding reads for Gaussians bound to them, for a fraction of the work
+// where few of the mesh's triangles carry Gaussians. Each row equals the
+// whole mesh's to the bit.
+TriangleFrames ComputeTriangleFrames(const torch::Tensor& vertices, const torch::Tensor& triangles,
+                                     const torch::Tensor& wanted);
 
 struct BoundGaussians {
   torch::Tensor means;       // [N, 3]

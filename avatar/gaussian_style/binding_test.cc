@@ -138,5 +138,32 @@ TEST(MeshBinding, GradientsMatchFiniteDifferences) {
   }
 }
 
+// The frames of the bound triangles alone (as a posed avatar takes them) are
+// the whole mesh's at those rows to the bit, in float32 as trained, with a
+// degenerate triangle among them; the rows no Gaussian reads are zero.
+TEST(MeshBinding, TheBoundTrianglesFramesAreTheWholeMeshsRows) {
+  torch::manual_seed(3);
+  const int64_t v = 400, t = 700;
+  torch::Tensor vertices = torch::randn({v, 3}) * 0.1;
+  torch::Tensor triangles = torch::randint(0, v, {t, 3}, torch::kLong);
+  triangles[5][1] = triangles[5][0];  // a zero edge
+  const torch::Tensor wanted = torch::tensor({5, 17, 17, 3, 699, 250, 5, 0}, torch::kLong);
+  const TriangleFrames all = ComputeTriangleFrames(vertices, triangles);
+  const TriangleFrames some = ComputeTriangleFrames(vertices, triangles, wanted);
+  for (const auto& [whole, part] : {std::pair(all.origin, some.origin), std::pair(all.rotation, some.rotation),
+                                    std::pair(all.quat, some.quat), std::pair(all.scale, some.scale)}) {
+    ASSERT_EQ(whole.sizes(), part.sizes());
+    EXPECT_TRUE(torch::equal(whole.index_select(0, wanted), part.index_select(0, wanted)));
+    EXPECT_EQ(part.index_select(0, torch::tensor({1, 2, 4, 698}, torch::kLong)).abs().sum().item<float>(), 0.0f);
+  }
+  // What a Gaussian bound to them gets is then the same too.
+  const torch::Tensor means = torch::randn({8, 3}), quats = torch::randn({8, 4}), scales = torch::randn({8, 3});
+  const BoundGaussians a = ApplyBinding(all, wanted, means, quats, scales);
+  const BoundGaussians b = ApplyBinding(some, wanted, means, quats, scales);
+  EXPECT_TRUE(torch::equal(a.means, b.means));
+  EXPECT_TRUE(torch::equal(a.quats, b.quats));
+  EXPECT_TRUE(torch::equal(a.log_scales, b.log_scales));
+}
+
 }  // namespace
 }  // namespace headforge

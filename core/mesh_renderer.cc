@@ -39,14 +39,20 @@ Eigen::Vector3f Texture::Sample(float u, float v) const {
   const float y = (1.0f - (v - std::floor(v))) * h - 0.5f;
   const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
   const float fx = x - x0, fy = y - y0;
-  auto at = [&](int yy, int xx) {
-    xx = ((xx % w) + w) % w;
-    yy = ((yy % h) + h) % h;
-    const cv::Vec3f& c = image.at<cv::Vec3f>(yy, xx);
-    return Eigen::Vector3f(c[0], c[1], c[2]);
+  // The texture repeats. The corners sit one texel outside it at most, so
+  // one step wraps them; anything else (a non-finite coordinate) takes the
+  // general remainder.
+  auto wrap = [](int i, int n) {
+    if (i < 0) i += n;
+    else if (i >= n) i -= n;
+    return (i >= 0 && i < n) ? i : ((i % n) + n) % n;
   };
-  return (1 - fy) * ((1 - fx) * at(y0, x0) + fx * at(y0, x0 + 1)) +
-         fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1));
+  const int xa = wrap(x0, w), xb = wrap(x0 + 1, w);
+  const cv::Vec3f* row_a = image.ptr<cv::Vec3f>(wrap(y0, h));
+  const cv::Vec3f* row_b = image.ptr<cv::Vec3f>(wrap(y0 + 1, h));
+  auto at = [](const cv::Vec3f* row, int xx) { return Eigen::Vector3f(row[xx][0], row[xx][1], row[xx][2]); };
+  return (1 - fy) * ((1 - fx) * at(row_a, xa) + fx * at(row_a, xb)) +
+         fy * ((1 - fx) * at(row_b, xa) + fx * at(row_b, xb));
 }
 
 Mesh MakeQuad(const Eigen::Vector3f& origin, const Eigen::Vector3f& du, const Eigen::Vector3f& dv,

@@ -192,7 +192,9 @@ SimulatedScores RunSimulated(const std::string& scene, int frames, const std::ve
   if (shared) {
     fs::create_directory_symlink(SharedRun(name + "_run", SimulatedInputs(capture)), root / "ws");
   } else {
-    std::vector<std::string> args = {"run", "--until", "track", "--workspace", (root / "ws").string(), "--video"};
+    // Nothing here reads the overlay videos (GridTrack checks them).
+    std::vector<std::string> args = {"run",         "--until",         "track", "--workspace",
+                                     (root / "ws").string(), "--overlay=false", "--video"};
     for (const auto& input : SimulatedInputs(capture)) args.push_back(input);
     const Result run = Headforge(args);
     EXPECT_EQ(run.code, 0) << run.err;
@@ -324,49 +326,51 @@ TEST(TruthWorkspace, DrawsTheTrueMeshWhereTheSimulatorDid) {
   EXPECT_FALSE(fs::exists(from_stale));
 }
 
-// Eight fixed cameras on a 120-degree arc, the whole scene (2 s), through the
-// default `headforge run`: several videos are ingested whole, COLMAP places
-// the cameras from one instant, align puts them in the head frame, and every
-// frame is fitted from all views jointly.
+// Eight fixed cameras on a 120-degree arc, the scene's first 20 frames
+// (0.8 s; 160 views, 30 s of the suite where the whole scene took 220),
+// through the default `headforge run`: several videos are ingested whole,
+// COLMAP places the cameras from one instant, align puts them in the head
+// frame, and every frame is fitted from all views jointly.
+constexpr int kRigFrames = 20;
 TEST(SimulatedTrack, Rig8Cam) {
   const std::vector<std::string> animated = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"};
-  const SimulatedScores s = RunSimulated("rig_8cam", 50, animated, false);
+  const SimulatedScores s = RunSimulated("rig_8cam", kRigFrames, animated, false);
   // The cameras of a frame see the head from 120 deg apart, so each view uses the
   // detector's points as seen from its side (the shipped view grid) and the
   // jaw contour, which each view draws on its own silhouette, weighs 0.05
-  // (--multiview-contour-weight). Over ten runs: residual 1.37-1.43 px,
-  // rotation 1.29-1.50 deg (1.50 in CI beside the rest of the suite: COLMAP's
-  // cameras differ from run to run, and with them the head frame's constant
-  // rotation, 1.27-1.40 deg), jawOpen 0.061-0.066, eyeBlink L/R 0.091-0.093
-  // / 0.081-0.083, mouthSmile L/R 0.053-0.059 / 0.044-0.048. The bounds
-  // leave a run's spread again above the highest seen. With the contour at
-  // 0.5, as for a single camera, the rotation was 2.0-2.2 deg, mostly a
-  // constant pitch of the head frame.
-  // The one blink of the scene is missed (at this face size the detector
-  // draws a closed eye as open); it is short enough that the mean error stays
-  // under 0.1.
-  for (const auto& [name, mae] : s.mae) EXPECT_LT(mae, 0.1) << name;
+  // (--multiview-contour-weight). Over five runs: residual 1.39-1.45 px,
+  // rotation 0.90-1.35 deg (COLMAP's cameras differ from run to run, and
+  // with them the head frame's constant rotation, 0.91-1.36 deg), jawOpen
+  // 0.062-0.064, eyeBlink L/R 0.039-0.040 / 0.030-0.031, mouthSmile L/R
+  // 0.107-0.124 / 0.093-0.106: the smile's constant part (0.3) is partly
+  // taken for the face's shape in 20 frames (0.053-0.059 over the whole
+  // scene, docs/tracking.md). The scene's one blink comes later.
+  for (const char* name : {"jawOpen", "eyeBlink_L", "eyeBlink_R"}) EXPECT_LT(s.mae.at(name), 0.1) << name;
+  for (const char* name : {"mouthSmile_L", "mouthSmile_R"}) EXPECT_LT(s.mae.at(name), 0.15) << name;
   EXPECT_LT(s.residual_px, 1.55);
   EXPECT_LT(s.rotation_deg, 1.7);
-  // The eight cameras mostly agree: 5-7 of the 400 views are left out.
-  EXPECT_LE(s.dropped_views, 20);
+  // The eight cameras mostly agree: 0 of the 160 views were left out.
+  EXPECT_LE(s.dropped_views, 8);
   EXPECT_DOUBLE_EQ(s.contour_weight, 0.05);
 
   // The same workspace tracked again with one set of points for every view
   // (the plain embedding, measured within 25 deg of frontal): the turned
   // views' contour and inner points then disagree with the frontal ones.
-  // Over nine runs: residual 1.56-1.60 px (each run 0.17-0.18 px above the
-  // default's on the same cameras), rotation 2.87-3.24 deg, jawOpen
-  // 0.089-0.091, mouthSmile_L 0.094-0.101.
+  // Over five runs: rotation 1.91-2.53 deg (0.56-1.63 above the default's
+  // on the same cameras), jawOpen 0.081-0.101, mouthSmile_L 0.168-0.259,
+  // residual 1.46-1.50 px (0.01-0.11 above the default's; over the whole
+  // scene 0.17-0.18 above).
   const fs::path root = fs::temp_directory_path() / "hf_track_rig_8cam";  // RunSimulated's
   const Result track = Headforge({"track", "--workspace", (root / "ws").string(), "--overlay=false",
                                   "--track-landmark-embedding",
                                   (fs::path(HEADFORGE_TEST_SOURCE_DIR) / "data" / "ict_dlib68_landmark_embedding.json").string()});
   ASSERT_EQ(track.code, 0) << track.err;
-  const SimulatedScores plain = ScoreSimulated(root, "rig_8cam (one set of points for every view)", 50, animated);
-  EXPECT_GT(plain.residual_px, s.residual_px + 0.08);
+  const SimulatedScores plain =
+      ScoreSimulated(root, "rig_8cam (one set of points for every view)", kRigFrames, animated);
+  EXPECT_GT(plain.residual_px, s.residual_px);
   EXPECT_GT(plain.rotation_deg, s.rotation_deg + 0.3);
   EXPECT_GT(plain.mae.at("jawOpen"), s.mae.at("jawOpen"));
+  EXPECT_GT(plain.mae.at("mouthSmile_L"), s.mae.at("mouthSmile_L") + 0.03);
 }
 
 }  // namespace

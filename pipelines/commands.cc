@@ -31,6 +31,7 @@ const std::vector<Command>& Commands() {
       {"simulate", "Render a synthetic head capture with ground truth from a scene file.",
        SimulateCommand},
       {"status", "Show the stages of a workspace: status, wall time, summary.", StatusCommand},
+      {"batch", "Many captures on a cluster (Slurm): batch submit MANIFEST, batch status DIR.", BatchCommand},
       {"embed-landmarks", "Measure where the landmark detector's points sit on the face model.",
        EmbedLandmarksCommand},
       {"face-model", "Face model tools: import-ict converts ICT-FaceKit's folder into the model file; inspect summarises one.",

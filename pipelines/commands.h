@@ -74,5 +74,7 @@ int RenderCommand(const std::vector<std::string>& args);
 int PackCommand(const std::vector<std::string>& args);
 int StatusCommand(const std::vector<std::string>& args);
 int VersionCommand(const std::vector<std::string>& args);
+// `headforge batch submit|status|job` (pipelines/commands_batch.cc).
+int BatchCommand(const std::vector<std::string>& args);
 
 }  // namespace headforge

@@ -23,6 +23,9 @@ PACKAGES=(
   libopenblas0-openmp
   # The viewers the exports are checked in (three.js, PlayCanvas), headless.
   chromium
+  # headforge batch's cluster test brings up a one-node Slurm 22.05 of its own
+  # (tests/slurm_test.cc); no service is enabled or configured here.
+  slurmctld slurmd slurm-client munge
 )
 
 missing=()

@@ -47,4 +47,20 @@ Status ExportAvatarWeights(const fs::path& workspace, const fs::path& model_dir,
 Status ExportGanWeights(const fs::path& workspace, const fs::path& model_dir, const fs::path& out_dir,
                         std::vector<std::string>* files);
 
+// Linear Gaussian blendshapes distilled from the gaussian-style avatar in
+// `model_dir` (avatar/gaussian_style/blendshapes.h), written to `out_dir`
+// as blendshapes.bin (little-endian float32: opacities [N], the neutral
+// attributes [N, 13], then each expression's offsets [N, 13]) and
+// blendshapes.json (its layout, the expressions' names, the scores);
+// `*scores` the held-out frames drawn by the networks and by the
+// blendshapes (RGB splats, frame 0's latent, each view's tracked expression).
+struct BlendshapeScores {
+  int gaussians = 0, expressions = 0, samples = 0, held_out_views = 0;
+  double psnr_network = 0, psnr_blendshapes = 0;  // over the head, mean of the held-out views
+  double ms_network = 0, ms_blendshapes = 0;      // posing and drawing one view
+  double fit_seconds = 0;
+};
+Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
+                               const fs::path& out_dir, BlendshapeScores* scores, std::vector<std::string>* files);
+
 }  // namespace headforge

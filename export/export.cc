@@ -105,8 +105,9 @@ const char* const ExportOptions::kDefaultSplatTransform = HEADFORGE_WEB_TOOLS "/
 void AddExportOptions(OptionSet* o, ExportOptions* e) {
   o->Add("export.formats", &e->formats,
          "What to write: mesh (glTF avatar with blendshapes, animation, texture), gaussians (PLY and "
-         "KHR_gaussian_splatting GLB), weights (safetensors + config.json), videos, viewer (viewer/index.html), "
-         "report (report.html); or all.",
+         "KHR_gaussian_splatting GLB), weights (safetensors + config.json), blendshapes (the Gaussian avatar as linear Gaussian "
+         "blendshapes any renderer poses with a weighted sum, fitted to its networks; blendshapes/), videos, viewer "
+         "(viewer/index.html), report (report.html); or all.",
          "formats");
   o->Add("export.splat_frame", &e->splat_frame,
          "The frame whose Gaussians are written (-1: every expression weight 0, frame 0's head pose).", "splat-frame");
@@ -165,8 +166,8 @@ std::vector<fs::path> BenchResultFiles(const ExportOptions& options, const fs::p
 }
 
 bool ExportNeedsModel(const ExportOptions& options) {
-  return Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "videos") ||
-         !options.frames.empty();
+  return Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "blendshapes") ||
+         Wants(options, "videos") || !options.frames.empty();
 }
 
 std::string ExportSummary::OneLine() const {
@@ -271,6 +272,17 @@ Status WriteWeights(ExportJob* job) {
   return Status::Ok();
 }
 
+// Linear Gaussian blendshapes of the gaussian-style avatar: any renderer
+// poses them with a weighted sum (docs/export.md).
+Status WriteBlendshapes(ExportJob* job) {
+  std::vector<std::string> files;
+  BlendshapeScores scores;
+  HF_RETURN_IF_ERROR(ExportAvatarBlendshapes(job->workspace, job->model_dir, job->face_model,
+                                             job->out_dir / "blendshapes", &scores, &files));
+  for (const std::string& f : files) job->out.files.push_back("blendshapes/" + f);
+  return Status::Ok();
+}
+
 // The track stage's overlays (the fitted mesh on the frames), one per
 // camera, copied beside the avatar's videos, where the report shows them.
 Status CopyTrackingOverlays(ExportJob* job, const fs::path& videos) {
@@ -369,8 +381,8 @@ struct FormatWriter {
   Status (*write)(ExportJob* job);
 };
 const FormatWriter kWriters[] = {{"mesh", WriteMesh},       {"gaussians", WriteGaussians}, {"clip", WriteClip},
-                                 {"weights", WriteWeights}, {"videos", WriteVideos},       {"viewer", WriteViewerPage},
-                                 {"report", WriteReportPage}};
+                                 {"weights", WriteWeights}, {"blendshapes", WriteBlendshapes},
+                                 {"videos", WriteVideos},   {"viewer", WriteViewerPage},   {"report", WriteReportPage}};
 
 // The names --formats takes: every writer's but the clip's.
 std::vector<std::string> FormatNames() {
@@ -396,13 +408,14 @@ Status ChooseModel(ExportJob* job) {
              (options.model == "auto" && gan_trained && LatestModelFolder(job->workspace) == gan_dir);
   job->model_dir = job->gan ? gan_dir : gaussian_dir;
   job->trained = job->gan ? gan_trained : gaussian_trained;
-  if (job->gan && Wants(options, "gaussians")) {
-    if (options.formats == std::vector<std::string>{"gaussians"})
-      return Status::InvalidArgument("export: the gan-avatar model is a volume and has no Gaussians to write");
-    HF_LOG(Info) << "export: the gan-avatar model is a volume, not Gaussians: no gaussians.ply or gaussians.glb";
+  if (job->gan && (Wants(options, "gaussians") || Wants(options, "blendshapes"))) {
     std::vector<std::string> kept;
     for (const std::string& f : FormatNames())
-      if (f != "gaussians" && Wants(options, f)) kept.push_back(f);
+      if (f != "gaussians" && f != "blendshapes" && Wants(options, f)) kept.push_back(f);
+    if (kept.empty())
+      return Status::InvalidArgument("export: the gan-avatar model is a volume and has no Gaussians to write");
+    HF_LOG(Info) << "export: the gan-avatar model is a volume, not Gaussians: no gaussians.ply, gaussians.glb or "
+                    "blendshapes";
     options.formats = kept;
   }
   if (job->gan && !options.frames.empty())

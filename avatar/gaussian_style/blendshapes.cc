@@ -1,0 +1,85 @@
+#include "avatar/gaussian_style/blendshapes.h"
+
+namespace headforge {
+
+torch::Tensor FitLinearModel(const torch::Tensor& inputs, const torch::Tensor& outputs, double ridge) {
+  TORCH_CHECK(inputs.dim() == 2 && outputs.dim() == 2 && inputs.size(0) == outputs.size(0),
+              "FitLinearModel: inputs [S, K] and outputs [S, M]");
+  const torch::Tensor x = inputs.to(torch::kFloat64), y = outputs.to(torch::kFloat64);
+  // Centred, the intercept separates from the slopes: slopes from the
+  // (damped) normal equations of the centred samples, then the intercept.
+  const torch::Tensor x_mean = x.mean(0, true), y_mean = y.mean(0, true);
+  const torch::Tensor xc = x - x_mean, yc = y - y_mean;
+  torch::Tensor gram = xc.t().matmul(xc);
+  gram = gram + ridge * double(x.size(0)) * torch::eye(x.size(1), gram.options());
+  const torch::Tensor slopes = torch::linalg::solve(gram, xc.t().matmul(yc), true);
+  const torch::Tensor intercept = y_mean - x_mean.matmul(slopes);
+  return torch::cat({intercept, slopes}, 0);
+}
+
+namespace {
+
+// A posed avatar's attributes [N, 13] (kBlendshapeAttributes); rotations as
+// unit quaternions on the side of `reference` [N, 4] where given.
+torch::Tensor Attributes(const PosedGaussians& posed, const torch::Tensor& reference) {
+  torch::Tensor q = posed.quats / posed.quats.norm(2, 1, true).clamp_min(1e-12);
+  if (reference.defined()) q = torch::where((q * reference).sum(1, true) < 0, -q, q);
+  return torch::cat({posed.means, q, posed.log_scales, posed.features.slice(1, 0, 3)}, 1);
+}
+
+}  // namespace
+
+GaussianBlendshapes DistilBlendshapes(GaussianStyleAvatar& avatar, const AvatarDataset& data,
+                                      const DistilOptions& options) {
+  torch::NoGradGuard no_grad;
+  const int64_t k = int64_t(data.expression_names.size());
+  TORCH_CHECK(!data.train.empty(), "DistilBlendshapes: no training views");
+  std::vector<torch::Tensor> expressions, poses;
+  for (const AvatarView& view : data.train) {
+    expressions.push_back(view.condition.slice(0, 0, k).to(torch::kFloat32));
+    poses.push_back(view.condition.slice(0, k).to(torch::kFloat32));
+  }
+  const torch::Tensor tracked = torch::stack(expressions);
+  auto generator = at::detail::createCPUGenerator(options.seed);
+  std::vector<torch::Tensor> samples = {torch::zeros({1, k}), tracked};
+  for (int r = 0; r < options.perturbed_per_view; ++r)
+    samples.push_back((tracked + options.spread * torch::randn(tracked.sizes(), generator)).clamp(0, 1));
+  const torch::Tensor inputs = torch::cat(samples, 0);  // [S, K], the neutral expression first
+
+  GaussianBlendshapes out;
+  out.names = data.expression_names;
+  out.pose_condition = torch::stack(poses).mean(0);
+  const torch::Device device = avatar.gaussians.params.means.device();
+  std::vector<torch::Tensor> rows;
+  torch::Tensor reference;
+  for (int64_t s = 0; s < inputs.size(0); ++s) {
+    const torch::Tensor condition = torch::cat({inputs[s], out.pose_condition});
+    const PosedGaussians posed = avatar.Pose(data, condition.to(device), 0, avatar.deform);
+    if (s == 0) {
+      reference = posed.quats / posed.quats.norm(2, 1, true).clamp_min(1e-12);
+      out.opacities = posed.opacities.cpu();
+    }
+    rows.push_back(Attributes(posed, reference).reshape({-1}).cpu());
+  }
+  const int64_t n = out.opacities.size(0);
+  const torch::Tensor model = FitLinearModel(inputs, torch::stack(rows), options.ridge).to(torch::kFloat32);
+  out.neutral = model[0].reshape({n, kBlendshapeAttributes});
+  out.offsets = model.slice(0, 1).reshape({k, n, kBlendshapeAttributes});
+  return out;
+}
+
+PosedGaussians PoseBlendshapes(const GaussianBlendshapes& shapes, const torch::Tensor& expression) {
+  const int64_t k = shapes.offsets.size(0), n = shapes.neutral.size(0);
+  const torch::Tensor weights = expression.to(torch::kFloat32).to(shapes.neutral.device()).reshape({1, k});
+  const torch::Tensor a =
+      shapes.neutral + weights.matmul(shapes.offsets.reshape({k, n * kBlendshapeAttributes})).reshape({n, -1});
+  PosedGaussians posed;
+  posed.means = a.slice(1, 0, 3);
+  posed.quats = a.slice(1, 3, 7);
+  posed.log_scales = a.slice(1, 7, 10);
+  posed.features = a.slice(1, 10, 13).clamp(0, 1);
+  posed.opacities = shapes.opacities;
+  return posed;
+}
+
+}  // namespace headforge

@@ -1,0 +1,50 @@
+// Linear Gaussian blendshapes distilled from a trained gaussian-style avatar:
+// every Gaussian's position, rotation, scale and colour in the head frame as
+// a neutral value plus one offset per expression blendshape, so that any
+// renderer (a game engine's morph targets) poses it with a weighted sum
+// instead of the avatar's networks. The offsets are fitted by least squares
+// to what the networks give over the training frames' tracked expressions
+// and expressions sampled round them; the head's rigid motion goes on top,
+// as for the networks' output. Opacity does not change with the expression.
+#pragma once
+
+#include <torch/torch.h>
+
+#include "avatar/gaussian_style/trainer.h"
+
+namespace headforge {
+
+// The attributes of one Gaussian, in this order, in a blendshape's rows.
+inline constexpr int64_t kBlendshapeAttributes = 13;  // position 3, rotation (w, x, y, z) 4, log-scale 3, RGB 3
+
+struct GaussianBlendshapes {
+  torch::Tensor neutral;    // [N, 13] at every expression weight 0
+  torch::Tensor offsets;    // [K, N, 13] per unit of each expression's weight
+  torch::Tensor opacities;  // [N] in [0, 1]
+  torch::Tensor pose_condition;  // [9] the head-pose input the networks were evaluated at
+  std::vector<std::string> names;  // the K expressions (the face model's, ARKit's names)
+};
+
+// The least-squares linear map from `inputs` [S, K] to `outputs` [S, M]
+// (float64): [K + 1, M], its first row the intercept; `ridge` >= 0 damps
+// the K slopes (not the intercept) where the samples leave them loose.
+torch::Tensor FitLinearModel(const torch::Tensor& inputs, const torch::Tensor& outputs, double ridge);
+
+// What the distillation samples: each training view's expression, and
+// `perturbed_per_view` more round it (Gaussian, `spread` in weight, clamped
+// to [0, 1]), all at the training views' mean head-pose input.
+struct DistilOptions {
+  int perturbed_per_view = 2;
+  double spread = 0.15;
+  double ridge = 1e-4;
+  uint64_t seed = 1;
+};
+
+// The blendshapes of `avatar` (frame 0's latent, as inference takes it).
+GaussianBlendshapes DistilBlendshapes(GaussianStyleAvatar& avatar, const AvatarDataset& data,
+                                      const DistilOptions& options);
+
+// The Gaussians at `expression` [K], ready for the rasterizer (features: RGB).
+PosedGaussians PoseBlendshapes(const GaussianBlendshapes& shapes, const torch::Tensor& expression);
+
+}  // namespace headforge

@@ -79,10 +79,30 @@ Status WriteBlendshapeFiles(const GaussianBlendshapes& shapes, const BlendshapeS
   return Status::Ok();
 }
 
+std::vector<float> Floats(const torch::Tensor& t) {
+  const torch::Tensor c = t.detach().to(torch::kFloat32).cpu().contiguous();
+  return std::vector<float>(c.data_ptr<float>(), c.data_ptr<float>() + c.numel());
+}
+
+AvatarBlendshapes Arrays(const GaussianBlendshapes& shapes) {
+  AvatarBlendshapes out;
+  const torch::Tensor a = shapes.neutral;
+  out.neutral.means = Floats(a.slice(1, 0, 3));
+  out.neutral.rotations = Floats(a.slice(1, 3, 7) / a.slice(1, 3, 7).norm(2, 1, true).clamp_min(1e-12));
+  out.neutral.scales = Floats(a.slice(1, 7, 10).exp());
+  out.neutral.opacities = Floats(shapes.opacities);
+  out.neutral.colours = Floats(a.slice(1, 10, 13).clamp(0, 1));
+  out.names = shapes.names;
+  out.offsets = Floats(shapes.offsets);
+  out.neutral_attributes = Floats(a);
+  return out;
+}
+
 }  // namespace
 
 Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
-                               const fs::path& out_dir, BlendshapeScores* scores, std::vector<std::string>* files) {
+                               const fs::path& out_dir, BlendshapeScores* scores, std::vector<std::string>* files,
+                               AvatarBlendshapes* arrays) {
   GaussianStyleAvatar avatar;
   FaceModel model;
   DatasetOptions loading;
@@ -114,7 +134,9 @@ Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_
                << scores->samples << " poses of the networks in " << scores->fit_seconds << " s; held out "
                << scores->psnr_blendshapes << " dB over the head against the networks' " << scores->psnr_network
                << " dB (" << scores->ms_blendshapes << " ms a view against " << scores->ms_network << ")";
-  return WriteBlendshapeFiles(shapes, *scores, out_dir, files);
+  HF_RETURN_IF_ERROR(WriteBlendshapeFiles(shapes, *scores, out_dir, files));
+  if (arrays) *arrays = Arrays(shapes);
+  return Status::Ok();
 }
 
 }  // namespace headforge

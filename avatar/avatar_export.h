@@ -60,7 +60,17 @@ struct BlendshapeScores {
   double ms_network = 0, ms_blendshapes = 0;      // posing and drawing one view
   double fit_seconds = 0;
 };
+// The blendshapes as plain arrays: the Gaussians with every weight 0 and
+// each expression's offsets of the 13 attributes (position 3, rotation w, x,
+// y, z 4, log-scale 3, RGB 3), expression-major [K, N, 13].
+struct AvatarBlendshapes {
+  AvatarSplats neutral;
+  std::vector<std::string> names;
+  std::vector<float> offsets;
+  std::vector<float> neutral_attributes;  // [N, 13]: the neutral state before normalising, exp and clamping
+};
 Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
-                               const fs::path& out_dir, BlendshapeScores* scores, std::vector<std::string>* files);
+                               const fs::path& out_dir, BlendshapeScores* scores, std::vector<std::string>* files,
+                               AvatarBlendshapes* arrays);
 
 }  // namespace headforge

@@ -277,8 +277,12 @@ Status WriteWeights(ExportJob* job) {
 Status WriteBlendshapes(ExportJob* job) {
   std::vector<std::string> files;
   BlendshapeScores scores;
-  HF_RETURN_IF_ERROR(ExportAvatarBlendshapes(job->workspace, job->model_dir, job->face_model,
-                                             job->out_dir / "blendshapes", &scores, &files));
+  AvatarBlendshapes shapes;
+  const fs::path dir = job->out_dir / "blendshapes";
+  HF_RETURN_IF_ERROR(
+      ExportAvatarBlendshapes(job->workspace, job->model_dir, job->face_model, dir, &scores, &files, &shapes));
+  HF_RETURN_IF_ERROR(WriteGaussianBlendshapeGlb(dir / "blendshapes.glb", shapes));
+  files.push_back("blendshapes.glb");
   for (const std::string& f : files) job->out.files.push_back("blendshapes/" + f);
   return Status::Ok();
 }

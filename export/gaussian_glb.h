@@ -14,4 +14,13 @@ namespace headforge {
 
 Status WriteGaussianGlb(const fs::path& path, const AvatarSplats& splats);
 
+// The Gaussian blendshapes as one GLB: the neutral Gaussians as
+// WriteGaussianGlb writes them, and a morph target per expression, named in
+// the mesh's extras.targetNames (ARKit's names): POSITION (sparse),
+// KHR_gaussian_splatting:ROTATION (x, y, z, w over the neutral quaternion's
+// length: normalise after the weighted sum), :SCALE (linearised at the
+// neutral scale, exp(log-scale) times the log-scale's offset) and
+// :SH_DEGREE_0_COEF_0 (the colour's offset / 0.2820948).
+Status WriteGaussianBlendshapeGlb(const fs::path& path, const AvatarBlendshapes& shapes);
+
 }  // namespace headforge

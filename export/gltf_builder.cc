@@ -52,11 +52,17 @@ int GltfBuilder::SparseVec3(const std::vector<float>& values, float epsilon) {
   std::vector<uint32_t> indices;
   std::vector<float> kept;
   tinygltf::Accessor accessor;
-  accessor.minValues.assign(3, 0.0);
-  accessor.maxValues.assign(3, 0.0);
+  // Bounds over the elements as stored: the kept ones, and zero when any is
+  // left out.
+  accessor.minValues.assign(3, std::numeric_limits<double>::infinity());
+  accessor.maxValues.assign(3, -std::numeric_limits<double>::infinity());
+  bool zero = false;
   for (size_t i = 0; i + 2 < values.size(); i += 3) {
     const float* v = &values[i];
-    if (std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])}) <= epsilon) continue;
+    if (std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])}) <= epsilon) {
+      zero = true;
+      continue;
+    }
     indices.push_back(uint32_t(i / 3));
     kept.insert(kept.end(), v, v + 3);
     for (int c = 0; c < 3; ++c) {
@@ -67,6 +73,10 @@ int GltfBuilder::SparseVec3(const std::vector<float>& values, float epsilon) {
   if (indices.empty()) {  // the specification wants at least one sparse element
     indices.push_back(0);
     kept.assign(3, 0.0f);
+  }
+  for (size_t c = 0; c < 3; ++c) {
+    if (zero || !std::isfinite(accessor.minValues[c])) accessor.minValues[c] = std::min(accessor.minValues[c], 0.0);
+    if (zero || !std::isfinite(accessor.maxValues[c])) accessor.maxValues[c] = std::max(accessor.maxValues[c], 0.0);
   }
   accessor.bufferView = -1;  // every element zero but the sparse ones
   accessor.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;

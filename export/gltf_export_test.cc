@@ -183,6 +183,55 @@ TEST(GaussianGltf, AttributesFollowKhrGaussianSplatting) {
 #endif
 }
 
+// Two Gaussians, two expressions: a morph target each, named, holding each
+// attribute's offset as the header comment gives it; one target moves every
+// Gaussian down (all its stored values negative: the bounds are theirs).
+TEST(GaussianGltf, BlendshapesAreMorphTargetsNamedAfterTheExpressions) {
+  AvatarBlendshapes b;
+  b.neutral.means = {0, 0, 0, 0.1f, -0.2f, 0.3f};
+  b.neutral.rotations = {1, 0, 0, 0, 0, 0, 0, 1};
+  b.neutral.scales = {0.01f, 0.02f, 0.03f, 0.001f, 0.001f, 0.004f};
+  b.neutral.opacities = {0.25f, 0.99f};
+  b.neutral.colours = {0.5f, 0.0f, 1.0f, 0.2f, 0.4f, 0.6f};
+  b.names = {"jawOpen", "eyeBlink_L"};
+  // Before normalising: the first rotation has length 2, the second 1.
+  b.neutral_attributes = {0, 0, 0, 2, 0, 0, 0, std::log(0.01f), std::log(0.02f), std::log(0.03f), 0.5f, 0, 1,
+                          0.1f, -0.2f, 0.3f, 0, 0, 0, 1, std::log(0.001f), std::log(0.001f), std::log(0.004f), 0.2f,
+                          0.4f, 0.6f};
+  b.offsets.assign(2 * 2 * 13, 0.0f);
+  auto offset = [&](int e, int i, int a) -> float& { return b.offsets[size_t((e * 2 + i) * 13 + a)]; };
+  offset(0, 0, 1) = -0.01f;  // jawOpen: both down, the first turned, the second redder and wider
+  offset(0, 1, 1) = -0.02f;
+  offset(0, 0, 4) = 0.2f;    // x of (w, x, y, z)
+  offset(0, 1, 10) = 0.1f;
+  offset(0, 1, 7) = 0.5f;    // log-scale x
+  offset(1, 1, 2) = 0.005f;  // eyeBlink_L: the second forward
+  ASSERT_TRUE(WriteGaussianBlendshapeGlb(Temp("blendshapes.glb"), b).ok());
+  const tinygltf::Model m = Load(Temp("blendshapes.glb"));
+  const tinygltf::Mesh& mesh = m.meshes[0];
+  const tinygltf::Primitive& p = mesh.primitives[0];
+  ASSERT_EQ(p.targets.size(), 2u);
+  EXPECT_EQ(mesh.weights, (std::vector<double>{0, 0}));
+  EXPECT_EQ(mesh.extras.Get("targetNames").Get(0).Get<std::string>(), "jawOpen");
+  EXPECT_EQ(mesh.extras.Get("targetNames").Get(1).Get<std::string>(), "eyeBlink_L");
+  EXPECT_EQ(Read(m, p.attributes.at("POSITION")), b.neutral.means);
+  const auto& jaw = p.targets[0];
+  EXPECT_EQ(Read(m, jaw.at("POSITION")), (std::vector<float>{0, -0.01f, 0, 0, -0.02f, 0}));
+  EXPECT_EQ(m.accessors[size_t(jaw.at("POSITION"))].maxValues, (std::vector<double>{0, double(-0.01f), 0}));
+  // x, y, z, w over the neutral quaternion's length (2 for the first).
+  EXPECT_EQ(Read(m, jaw.at("KHR_gaussian_splatting:ROTATION")), (std::vector<float>{0.1f, 0, 0, 0, 0, 0, 0, 0}));
+  const std::vector<float> scale = Read(m, jaw.at("KHR_gaussian_splatting:SCALE"));
+  EXPECT_NEAR(scale[3], 0.001f * 0.5f, 1e-9f);  // linearised at the neutral scale
+  const std::vector<float> sh = Read(m, jaw.at("KHR_gaussian_splatting:SH_DEGREE_0_COEF_0"));
+  EXPECT_NEAR(0.28209479f * sh[3], 0.1f, 1e-6f);
+  EXPECT_EQ(Read(m, p.targets[1].at("POSITION")), (std::vector<float>{0, 0, 0, 0, 0, 0.005f}));
+  b.offsets.pop_back();
+  EXPECT_FALSE(WriteGaussianBlendshapeGlb(Temp("bad_blendshapes.glb"), b).ok());
+#ifdef HEADFORGE_GLTF_VALIDATOR
+  EXPECT_EQ(Validate(Temp("blendshapes.glb"), "--extension-attributes KHR_gaussian_splatting"), 0);
+#endif
+}
+
 TEST(GaussianGltf, MismatchedArraysAreRefused) {
   AvatarSplats s;
   s.means = {0, 0, 0};

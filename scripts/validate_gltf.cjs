@@ -4,7 +4,8 @@
 // Prints the error and warning counts and every message; exits 1 when the
 // validator reports an error. The validator does not know every extension:
 // --extension-attributes NAME sets apart its "invalid attribute name" errors
-// on attributes NAME defines ("NAME:..."), which are reported but not counted.
+// on attributes NAME defines ("NAME:..."), on a primitive or in its morph
+// targets, which are reported but not counted.
 //   node scripts/validate_gltf.cjs FILE [--validator DIR] [--extension-attributes NAME]
 const fs = require('fs');
 const path = require('path');
@@ -22,20 +23,23 @@ if (!file) {
 const validator = require(validatorDir);
 validator
   .validateBytes(new Uint8Array(fs.readFileSync(file)), {
-    maxIssues: 100,
+    maxIssues: 10000,
     // Extensions the validator does not know are reported as info, not errors.
     externalResourceFunction: () => Promise.reject(new Error('no external resources')),
   })
   .then((report) => {
     const issues = report.issues;
+    // The extension's attributes on the primitive and in its morph targets.
     const setApart = (m) => extension && m.severity === 0 && m.code === 'MESH_PRIMITIVE_INVALID_ATTRIBUTE' &&
-                            (m.pointer || '').includes(`/attributes/${extension}:`);
+                            /\/(attributes|targets\/\d+)\//.test(m.pointer || '') &&
+                            (m.pointer || '').includes(`/${extension}:`);
     const errors = issues.messages.filter((m) => m.severity === 0 && !setApart(m)).length;
     const apart = issues.messages.filter(setApart).length;
     console.log(`${path.basename(file)}: ${errors} errors, ${issues.numWarnings} warnings, ` +
                 `${issues.numInfos} infos, ${issues.numHints} hints (glTF-Validator ${report.validatorVersion})` +
                 (apart ? `; ${apart} attributes of ${extension}, which this validator does not know, set apart` : ''));
-    for (const m of issues.messages) console.log(`  severity ${m.severity} ${m.code}: ${m.message} (${m.pointer || ''})`);
+    for (const m of issues.messages.filter((m) => !setApart(m)))
+      console.log(`  severity ${m.severity} ${m.code}: ${m.message} (${m.pointer || ''})`);
     process.exit(errors > 0 ? 1 : 0);
   })
   .catch((error) => {

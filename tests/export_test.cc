@@ -153,7 +153,8 @@ TEST_F(ExportStage, TheExportedGaussiansLieWhereTheMasksShowThePerson) {
 // neutral state and one offset per expression for every Gaussian), fitted
 // to its networks. On the held-out frames they score within 0.5 dB of the
 // networks (0.02 dB below them here) in less time a view; the binary holds
-// what its JSON lays out, and with every weight 0 the Gaussians sit where
+// what its JSON lays out (and blendshapes.glb as morph targets, validated),
+// and with every weight 0 the Gaussians sit where
 // the exported neutral ones do (0.04 mm RMS here; those are posed at frame
 // 0's head pose, the blendshapes at the training views' mean).
 TEST_F(ExportStage, BlendshapesPoseTheAvatarAsItsNetworksDo) {
@@ -193,6 +194,15 @@ TEST_F(ExportStage, BlendshapesPoseTheAvatarAsItsNetworksDo) {
   const double rms_mm = 1000 * std::sqrt(squares / double(n));
   std::printf("neutral positions %.3f mm (RMS) from the exported neutral Gaussians\n", rms_mm);
   EXPECT_LT(rms_mm, 1.0);
+  // The glTF asset: a morph target per expression, on the neutral Gaussians.
+  EXPECT_TRUE(fs::exists(dir / "blendshapes.glb"));
+#ifdef HEADFORGE_GLTF_VALIDATOR
+  EXPECT_EQ(std::system((std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
+                         "/scripts/validate_gltf.cjs' '" + (dir / "blendshapes.glb").string() + "' --validator '" +
+                         HEADFORGE_GLTF_VALIDATOR + "' --extension-attributes KHR_gaussian_splatting")
+                            .c_str()),
+            0);
+#endif
 }
 
 TEST_F(ExportStage, WritesEveryFormatAndEachReadsBack) {

@@ -39,8 +39,8 @@ std::vector<ViewScores> ScoreHeldOut(const AvatarDataset& data,
   return scores;
 }
 
-Status WriteBlendshapeFiles(const GaussianBlendshapes& shapes, const BlendshapeScores& scores, const fs::path& dir,
-                            std::vector<std::string>* files) {
+Status WriteBlendshapeFiles(const GaussianBlendshapes& shapes, const BlendshapeScores& scores,
+                            const DatasetOptions& data, const fs::path& dir, std::vector<std::string>* files) {
   const int64_t n = shapes.neutral.size(0), k = shapes.offsets.size(0);
   std::string bytes;
   for (const torch::Tensor& t : {shapes.opacities, shapes.neutral, shapes.offsets}) {
@@ -72,6 +72,7 @@ Status WriteBlendshapeFiles(const GaussianBlendshapes& shapes, const BlendshapeS
         {"psnr_masked_blendshapes", scores.psnr_blendshapes},
         {"ms_network", scores.ms_network},
         {"ms_blendshapes", scores.ms_blendshapes}}},
+      {"data", ToJson(data)},
       {"samples", scores.samples},
       {"fit_seconds", scores.fit_seconds}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(dir / "blendshapes.json", layout, 1));
@@ -134,7 +135,7 @@ Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_
                << scores->samples << " poses of the networks in " << scores->fit_seconds << " s; held out "
                << scores->psnr_blendshapes << " dB over the head against the networks' " << scores->psnr_network
                << " dB (" << scores->ms_blendshapes << " ms a view against " << scores->ms_network << ")";
-  HF_RETURN_IF_ERROR(WriteBlendshapeFiles(shapes, *scores, out_dir, files));
+  HF_RETURN_IF_ERROR(WriteBlendshapeFiles(shapes, *scores, loading, out_dir, files));
   if (arrays) *arrays = Arrays(shapes);
   return Status::Ok();
 }

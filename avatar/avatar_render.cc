@@ -18,6 +18,7 @@
 
 #include "avatar/gan_avatar/avatar_io.h"
 #include "avatar/model_folder.h"
+#include "avatar/gaussian_style/blendshapes.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/model_table.h"
 #include "avatar/torch_runtime.h"
@@ -52,6 +53,7 @@ struct DrawableAvatar {
 
   GaussianStyleAvatar gaussian;
   GanAvatar gan;
+  GaussianBlendshapes blendshapes;
   FaceModel model;
   DatasetOptions loading;  // how `data` was read (and a driving workspace is)
   AvatarDataset data;      // its workspace's views, held out as in training
@@ -80,6 +82,31 @@ Status LoadDrawableAvatar(const fs::path& workspace, fs::path model_dir, const s
     HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, a->model, a->loading, &a->data).WithContext("render"));
     a->background = a->gan.background;
     a->draw = [a](const torch::Tensor& condition, const SplatCamera& camera) { return a->gan.Draw(condition, camera); };
+    return Status::Ok();
+  }
+  if (IsBlendshapeFolder(model_dir)) {
+    // Gaussian blendshapes (export --formats blendshapes): the tracked
+    // expression's weighted sum, RGB splats.
+    HF_RETURN_IF_ERROR(ReadGaussianBlendshapes(model_dir, &a->blendshapes, &a->loading).WithContext("render"));
+    HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &a->model));
+    a->loading.images = images;
+    if (resolution > 0) a->loading.resolution = resolution;
+    a->loading.min_train_frames = 1;
+    HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, a->model, a->loading, &a->data).WithContext("render"));
+    if (int64_t(a->data.expression_names.size()) != a->blendshapes.offsets.size(0))
+      return Status::DataError("render: the blendshapes in " + model_dir.string() + " have " +
+                               std::to_string(a->blendshapes.offsets.size(0)) + " expressions, the workspace's tracking " +
+                               std::to_string(a->data.expression_names.size()));
+    a->blendshapes.neutral = a->blendshapes.neutral.to(device);
+    a->blendshapes.offsets = a->blendshapes.offsets.to(device);
+    a->blendshapes.opacities = a->blendshapes.opacities.to(device);
+    a->background = background;
+    const torch::Tensor grey = torch::full({3}, background, torch::TensorOptions().device(device));
+    const int64_t k = a->blendshapes.offsets.size(0);
+    a->draw = [a, grey, k](const torch::Tensor& condition, const SplatCamera& camera) {
+      torch::NoGradGuard no_grad;
+      return RenderRgb(PoseBlendshapes(a->blendshapes, condition.slice(0, 0, k)), camera, grey).clamp(0, 1).cpu();
+    };
     return Status::Ok();
   }
   HF_RETURN_IF_ERROR(LoadTrained(workspace, model_dir, face_model, device, resolution, &a->loading, &a->gaussian,

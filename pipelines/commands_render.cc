@@ -34,7 +34,10 @@ int RenderCommand(const std::vector<std::string>& args) {
   options.Add("render.orbit_steps", &render.orbit_steps, "Renders in an --orbit.", "orbit-steps");
   options.Add("render.background", &render.background, "Grey level behind the head, in [0, 1].", "background");
   options.Add("render.device", &render.device, "cpu, or cuda with a CUDA LibTorch.", "device");
-  options.Add("render.model", &render.model, "The model folder (default: WORKSPACE/models/gaussian_style).", "model");
+  options.Add("render.model", &render.model,
+              "The model folder (default: the workspace's model trained last): a trained or exported model "
+              "(export/weights), or exported Gaussian blendshapes (export/blendshapes).",
+              "model");
   options.Add("render.truth", &truth,
               "Score instead of render: a simulated capture of the workspace's scene with more cameras "
               "(scenes/talking_static_novel.toml); the held-out frames from each of its cameras against its "

@@ -154,6 +154,7 @@ TEST_F(ExportStage, TheExportedGaussiansLieWhereTheMasksShowThePerson) {
 // to its networks. On the held-out frames they score within 0.5 dB of the
 // networks (0.02 dB below them here) in less time a view; the binary holds
 // what its JSON lays out (and blendshapes.glb as morph targets, validated),
+// render --model draws a frame with them as the networks do,
 // and with every weight 0 the Gaussians sit where
 // the exported neutral ones do (0.04 mm RMS here; those are posed at frame
 // 0's head pose, the blendshapes at the training views' mean).
@@ -194,6 +195,28 @@ TEST_F(ExportStage, BlendshapesPoseTheAvatarAsItsNetworksDo) {
   const double rms_mm = 1000 * std::sqrt(squares / double(n));
   std::printf("neutral positions %.3f mm (RMS) from the exported neutral Gaussians\n", rms_mm);
   EXPECT_LT(rms_mm, 1.0);
+  // render --model draws them: a held-out frame as the networks draw it.
+  const fs::path renders = Scratch("blendshape_renders");
+  for (const std::string& model : {std::string(), dir.string()}) {
+    std::vector<std::string> args = {"render", "--workspace", ws.string(), "--frames", "110", "--out",
+                                     (renders / (model.empty() ? "networks" : "blendshapes")).string()};
+    if (!model.empty()) args.insert(args.end(), {"--model", model});
+    const Result render = Headforge(args);
+    ASSERT_EQ(render.code, 0) << render.err;
+  }
+  const cv::Mat by_networks = cv::imread((renders / "networks" / "frame_000110.png").string());
+  const cv::Mat by_blendshapes = cv::imread((renders / "blendshapes" / "frame_000110.png").string());
+  ASSERT_FALSE(by_networks.empty() || by_blendshapes.empty());
+  const double agreement = cv::PSNR(by_networks, by_blendshapes);
+  std::printf("frame 110 drawn by the blendshapes against the networks: %.1f dB\n", agreement);
+  EXPECT_GT(agreement, 45.0);  // 54.9 dB here
+  // Blendshapes whose binary lost its end are refused, saying what to do.
+  std::filesystem::resize_file(dir / "blendshapes.bin", fs::file_size(dir / "blendshapes.bin") - 4);
+  const Result cut = Headforge({"render", "--workspace", ws.string(), "--frames", "110", "--model", dir.string(),
+                                "--out", (renders / "cut").string()});
+  EXPECT_EQ(cut.code, 1) << cut.err;
+  EXPECT_NE(cut.err.find("export them again"), std::string::npos) << cut.err;
+
   // The glTF asset: a morph target per expression, on the neutral Gaussians.
   EXPECT_TRUE(fs::exists(dir / "blendshapes.glb"));
 #ifdef HEADFORGE_GLTF_VALIDATOR

@@ -1,5 +1,11 @@
 #include "avatar/gaussian_style/blendshapes.h"
 
+#include <cstring>
+
+#include <nlohmann/json.hpp>
+
+#include "core/json_io.h"
+
 namespace headforge {
 
 torch::Tensor FitLinearModel(const torch::Tensor& inputs, const torch::Tensor& outputs, double ridge) {
@@ -80,6 +86,36 @@ PosedGaussians PoseBlendshapes(const GaussianBlendshapes& shapes, const torch::T
   posed.features = a.slice(1, 10, 13).clamp(0, 1);
   posed.opacities = shapes.opacities;
   return posed;
+}
+
+bool IsBlendshapeFolder(const fs::path& dir) {
+  std::error_code ec;
+  return fs::exists(dir / "blendshapes.json", ec);
+}
+
+Status ReadGaussianBlendshapes(const fs::path& dir, GaussianBlendshapes* shapes, DatasetOptions* data) {
+  nlohmann::json layout;
+  HF_RETURN_IF_ERROR(ReadJson(dir / "blendshapes.json", &layout));
+  if (layout.value("format", "") != "headforge-gaussian-blendshapes" || layout.value("version", 0) != 1)
+    return Status::DataError(dir.string() + "/blendshapes.json is not a version-1 Gaussian blendshape file");
+  const int64_t n = layout.value("gaussians", int64_t(0));
+  shapes->names = layout.value("expressions", std::vector<std::string>());
+  const int64_t k = int64_t(shapes->names.size());
+  std::string bytes;
+  HF_RETURN_IF_ERROR(ReadFileToString(dir / "blendshapes.bin", &bytes));
+  const size_t expected = sizeof(float) * size_t(n * (1 + kBlendshapeAttributes * (1 + k)));
+  if (n <= 0 || bytes.size() != expected)
+    return Status::DataError(dir.string() + "/blendshapes.bin holds " + std::to_string(bytes.size()) +
+                             " bytes where blendshapes.json lays out " + std::to_string(expected) +
+                             "; export them again (headforge export --formats blendshapes)");
+  const torch::Tensor all = torch::empty({int64_t(bytes.size() / sizeof(float))}, torch::kFloat32);
+  std::memcpy(all.data_ptr<float>(), bytes.data(), bytes.size());
+  shapes->opacities = all.slice(0, 0, n).clone();
+  shapes->neutral = all.slice(0, n, n * (1 + kBlendshapeAttributes)).reshape({n, kBlendshapeAttributes}).clone();
+  shapes->offsets = all.slice(0, n * (1 + kBlendshapeAttributes)).reshape({k, n, kBlendshapeAttributes}).clone();
+  shapes->pose_condition = torch::tensor(layout.value("pose_condition", std::vector<double>()), torch::kFloat32);
+  if (data) FromJson(layout.value("data", nlohmann::json::object()), data);
+  return Status::Ok();
 }
 
 }  // namespace headforge

@@ -47,4 +47,10 @@ GaussianBlendshapes DistilBlendshapes(GaussianStyleAvatar& avatar, const AvatarD
 // The Gaussians at `expression` [K], ready for the rasterizer (features: RGB).
 PosedGaussians PoseBlendshapes(const GaussianBlendshapes& shapes, const torch::Tensor& expression);
 
+// Whether `dir` holds exported blendshapes (blendshapes.json).
+bool IsBlendshapeFolder(const fs::path& dir);
+// Reads what ExportAvatarBlendshapes wrote into `dir`; `*data` the dataset
+// options of the avatar they came from (its frames held out as it held them).
+Status ReadGaussianBlendshapes(const fs::path& dir, GaussianBlendshapes* shapes, DatasetOptions* data);
+
 }  // namespace headforge

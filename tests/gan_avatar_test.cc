@@ -210,15 +210,17 @@ TEST_F(GanAvatarTrain, APackTrainsTheGanAndTheWorkspaceAddsTheMapping) {
 
 TEST_F(GanAvatarTrain, TheLatentLossAblationMapsToo) {
   ASSERT_EQ(first_.code, 0) << first_.err;
+  // The mapping trained on the reference's GAN (the loss changes the mapping
+  // alone; the GAN's own training is the reference's, tested above).
   const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("latent"));
   std::vector<std::string> args = TrainArgs(ws);
-  args.insert(args.end(), {"--mapping-loss", "latent"});
+  args.insert(args.end(), {"--generator-from", (reference_ / kModelDir).string(), "--mapping-loss", "latent"});
   const Result r = Headforge(args);
   ASSERT_EQ(r.code, 0) << r.err;
   const std::vector<nlohmann::json> stats = StatsLines(ws / kModelDir / "stats.jsonl");
-  ASSERT_GE(stats.size(), 2u);
+  ASSERT_GE(stats.size(), 1u);
   EXPECT_EQ(stats.back()["mapping_loss_kind"], "latent");
-  // The same GAN (same seed and steps) as the reference's: only the mapping differs.
+  // The reference's GAN: only the mapping differs.
   nlohmann::json a, b;
   ASSERT_TRUE(ReadJson(ws / kModelDir / "eval.json", &a).ok());
   ASSERT_TRUE(ReadJson(reference_ / kModelDir / "eval.json", &b).ok());

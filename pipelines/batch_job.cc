@@ -2,10 +2,12 @@
 // status` (the captures' stages from their workspaces and squeue).
 #include <signal.h>
 #include <spawn.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -39,8 +41,8 @@ std::string Env(const char* name) {
 
 // Starts `args` (args[0] a path) with this process's stdout and stderr, and
 // waits for it, forwarding SIGTERM and SIGINT. Its exit code, or 128 + the
-// signal that ended it, or -1 when it could not start.
-int SpawnForwarding(const std::vector<std::string>& args) {
+// signal that ended it, or -1 when it could not start; its CPU time in *cpu_s.
+int SpawnForwarding(const std::vector<std::string>& args, double* cpu_s) {
   g_signal = 0;
   struct sigaction action {}, previous_term {}, previous_int {};
   action.sa_handler = Forward;
@@ -65,8 +67,10 @@ int SpawnForwarding(const std::vector<std::string>& args) {
   g_child = pid;
   if (g_signal != 0) ::kill(pid, g_signal);  // it came before the child had a pid
   int status = 0;
-  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  rusage usage{};
+  while (::wait4(pid, &status, 0, &usage) < 0 && errno == EINTR) {
   }
+  *cpu_s = usage.ru_utime.tv_sec + usage.ru_stime.tv_sec + 1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
   g_child = 0;
   restore();
   return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
@@ -142,7 +146,12 @@ int RunBatchJob(const BatchPlan& plan, const std::string& stage, size_t index) {
   // One thread per CPU Slurm gave the job, not one per core of the node.
   if (!Env("SLURM_CPUS_PER_TASK").empty() && Env("HEADFORGE_THREADS").empty())
     ::setenv("HEADFORGE_THREADS", Env("SLURM_CPUS_PER_TASK").c_str(), 1);
-  const int code = SpawnForwarding(args);
+  const auto start = std::chrono::steady_clock::now();
+  double cpu_s = 0;
+  const int code = SpawnForwarding(args, &cpu_s);
+  std::printf("headforge batch: stage %s of '%s' exited %d after %.1f s (%.1f s of CPU)\n", stage.c_str(),
+              row.name.c_str(), code, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(),
+              cpu_s);
   if (g_signal != 0 && code != 0) {
     std::printf("headforge batch: stage %s of '%s' stopped by signal %d (exit %d)\n", stage.c_str(), row.name.c_str(),
                 static_cast<int>(g_signal), code);

@@ -9,6 +9,14 @@
 namespace headforge {
 namespace {
 
+// The tracked capture the training tests start from, made by ctest's
+// fixture entry before they start (tests/CMakeLists.txt), while unrelated
+// tests run beside it, instead of by whichever starts first while the rest
+// wait idle.
+TEST(SharedWorkspaces, TheTrackedCaptureIsMade) {
+  EXPECT_TRUE(fs::exists(TrackedTalkingStatic() / "tracking.json"));
+}
+
 TEST_F(TrainStage, TheLossFallsAndTheHeldOutFramesAreScored) {
   ASSERT_EQ(first_.code, 0) << first_.err;
   const fs::path model = reference_ / kModelDir;

@@ -61,7 +61,8 @@ Status WriteBlendshapeFiles(const GaussianBlendshapes& shapes, const BlendshapeS
                   {"type", "float32 little-endian"},
                   {"opacities", {{"offset", 0}, {"shape", {n}}}},
                   {"neutral", {{"offset", 4 * n}, {"shape", {n, kBlendshapeAttributes}}}},
-                  {"offsets", {{"offset", 4 * n * (1 + kBlendshapeAttributes)}, {"shape", {k, n, kBlendshapeAttributes}}}}}},
+                  {"offsets",
+                   {{"offset", 4 * n * (1 + kBlendshapeAttributes)}, {"shape", {k, n, kBlendshapeAttributes}}}}}},
       {"pose", "attributes = neutral + sum_k weight_k * offsets[k], in the head frame (metres, +y up, the face "
                "toward +z); normalise the rotation, scale = exp(log_scale), clamp the colour to [0, 1]; the head's "
                "rigid motion goes on top"},

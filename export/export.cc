@@ -105,9 +105,9 @@ const char* const ExportOptions::kDefaultSplatTransform = HEADFORGE_WEB_TOOLS "/
 void AddExportOptions(OptionSet* o, ExportOptions* e) {
   o->Add("export.formats", &e->formats,
          "What to write: mesh (glTF avatar with blendshapes, animation, texture), gaussians (PLY and "
-         "KHR_gaussian_splatting GLB), weights (safetensors + config.json), blendshapes (the Gaussian avatar as linear Gaussian "
-         "blendshapes any renderer poses with a weighted sum, fitted to its networks; blendshapes/), videos, viewer "
-         "(viewer/index.html), report (report.html); or all.",
+         "KHR_gaussian_splatting GLB), weights (safetensors + config.json), blendshapes (the Gaussian avatar as "
+         "linear Gaussian blendshapes any renderer poses with a weighted sum, fitted to its networks; blendshapes/), "
+         "videos, viewer (viewer/index.html), report (report.html); or all.",
          "formats");
   o->Add("export.splat_frame", &e->splat_frame,
          "The frame whose Gaussians are written (-1: every expression weight 0, frame 0's head pose).", "splat-frame");

@@ -105,8 +105,9 @@ Status WriteGaussianBlendshapeGlb(const fs::path& path, const AvatarBlendshapes&
       }
       rotation[4 * i + 3] = d[3] / length;  // w
     }
+    const int rotations = gltf.Floats(rotation, 4, false, TINYGLTF_TARGET_ARRAY_BUFFER);
     primitive.targets.push_back({{"POSITION", gltf.SparseVec3(position, kMorphEpsilon)},
-                                 {"KHR_gaussian_splatting:ROTATION", gltf.Floats(rotation, 4, false, TINYGLTF_TARGET_ARRAY_BUFFER)},
+                                 {"KHR_gaussian_splatting:ROTATION", rotations},
                                  {"KHR_gaussian_splatting:SCALE", gltf.SparseVec3(scale, kMorphEpsilon)},
                                  {"KHR_gaussian_splatting:SH_DEGREE_0_COEF_0", gltf.SparseVec3(sh, kMorphEpsilon)}});
   }

@@ -88,19 +88,21 @@ const std::vector<StageEntry>& StageTable() {
     // Not train: the mesh avatar and the report need only tracking; the
     // trained model's files enter export's fingerprint as its inputs.
     t[5].upstream = {"ingest", "calibrate", "align", "track"};
-    t[5].summary = "Export the avatar: PLY, glTF, weights, videos and a report.";
+    t[5].version = 2;  // 2: the Gaussian blendshapes (--formats blendshapes or all) with their GLB
+    t[5].summary = "Export the avatar: PLY, glTF, weights, Gaussian blendshapes, videos and a report.";
     t[5].usage = "headforge export --workspace DIR [options]";
     t[5].description =
         "Writes the avatar in the formats other tools open: the mesh avatar as glTF (the tracked\n"
         "identity's mesh, the 53 blendshapes as morph targets with ARKit-style names, the tracked\n"
         "sequence as an animation, a texture baked from the frames), the Gaussians of one pose as\n"
         "PLY and as glTF with KHR_gaussian_splatting, the networks as safetensors with config.json,\n"
+        "the Gaussian avatar as linear Gaussian blendshapes (--formats blendshapes; not by default),\n"
         "H.264 videos (the held-out frames beside their renders, an orbit round the head, and a\n"
         "cross-reenactment when --drive names another tracked workspace), a viewer page and\n"
         "report.html, both self-contained. The mesh avatar and the report need only tracking.";
     t[5].reads = {"models/gaussian_style/", "tracking.json", "cameras_head.json", "capture.json", "frames/", "masks/"};
-    t[5].writes = {"export/ (avatar_mesh.glb, gaussians.ply, gaussians.glb, weights/, videos/, viewer/index.html, "
-                   "report.html, export.json)"};
+    t[5].writes = {"export/ (avatar_mesh.glb, gaussians.ply, gaussians.glb, weights/, blendshapes/, videos/, "
+                   "viewer/index.html, report.html, export.json)"};
     t[5].uses_face_model = true;
     t[5].make = MakeExportJob;
     return t;

@@ -191,7 +191,7 @@ TEST_F(ExportStage, BlendshapesPoseTheAvatarAsItsNetworksDo) {
   std::memcpy(values.data(), bytes.data() + 4 * n, values.size() * sizeof(float));
   double squares = 0;
   for (size_t i = 0; i < n; ++i)
-    for (int c = 0; c < 3; ++c) squares += std::pow(double(values[i * a + size_t(c)]) - neutral.means[3 * i + size_t(c)], 2);
+    for (size_t c = 0; c < 3; ++c) squares += std::pow(double(values[i * a + c]) - neutral.means[3 * i + c], 2);
   const double rms_mm = 1000 * std::sqrt(squares / double(n));
   std::printf("neutral positions %.3f mm (RMS) from the exported neutral Gaussians\n", rms_mm);
   EXPECT_LT(rms_mm, 1.0);

@@ -91,12 +91,17 @@ Status WriteGaussianBlendshapeGlb(const fs::path& path, const AvatarBlendshapes&
   GltfBuilder gltf;
   tinygltf::Primitive primitive;
   HF_RETURN_IF_ERROR(SplatPrimitive(shapes.neutral, &gltf, &primitive));
+  // The neutral quaternions' lengths, by which the rotation offsets are divided.
+  std::vector<float> lengths(n);
+  for (size_t i = 0; i < n; ++i) {
+    const float* a = &shapes.neutral_attributes[i * kAttributes];
+    lengths[i] = std::max(std::sqrt(a[3] * a[3] + a[4] * a[4] + a[5] * a[5] + a[6] * a[6]), 1e-12f);
+  }
   std::vector<float> position(3 * n), rotation(4 * n), scale(3 * n), sh(3 * n);
   for (size_t e = 0; e < k; ++e) {
     for (size_t i = 0; i < n; ++i) {
       const float* d = &shapes.offsets[(e * n + i) * kAttributes];
-      const float* a = &shapes.neutral_attributes[i * kAttributes];
-      const float length = std::max(std::sqrt(a[3] * a[3] + a[4] * a[4] + a[5] * a[5] + a[6] * a[6]), 1e-12f);
+      const float length = lengths[i];
       for (int c = 0; c < 3; ++c) {
         position[3 * i + size_t(c)] = d[c];
         rotation[4 * i + size_t(c)] = d[4 + c] / length;  // x, y, z

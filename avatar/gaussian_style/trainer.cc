@@ -28,8 +28,6 @@ namespace {
 
 namespace F = torch::nn::functional;
 
-// The evaluation's background, in the render and the target alike.
-constexpr double kEvalBackground = 0.5;
 // Side of the eye and mouth crops of the region loss, pixels.
 constexpr int64_t kCropSize = 24;
 

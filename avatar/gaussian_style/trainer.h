@@ -44,6 +44,8 @@ struct GaussianStyleAvatar {
 
 // The splat image's background in stage 3 and after: grey RGB, zero features.
 inline constexpr double kDecoderBackground = 0.5;
+// The grey behind the head where held-out and training views are scored.
+inline constexpr double kEvalBackground = 0.5;
 // `posed`'s C-channel features splatted on the decoder's square canvas and
 // decoded, cut back to `camera`'s image (resized when its size differs) -> [3, H, W].
 torch::Tensor DecodeRender(StyleDecoderImpl& decoder, const PosedGaussians& posed, const SplatCamera& camera);

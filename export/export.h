@@ -43,6 +43,8 @@ struct ExportOptions {
   std::string device = "cpu";
   std::string chart_js = kDefaultChartJs;            // inlined into report.html
   std::string playcanvas_js = kDefaultPlayCanvasJs;  // inlined into viewer/index.html
+  std::string tfjs_js = kDefaultTfjs;                // inlined into drive/index.html
+  std::string vision_models;                         // the face mesh's folder ("": DefaultVisionModelsDir())
   // node_modules holding @vladmandic/face-api, whose recognition network's
   // weights give the identity score the report shows beside the landmark
   // distance (avatar/face_metrics.h); empty: neither is scored. The faces
@@ -59,6 +61,7 @@ struct ExportOptions {
   static const char* const kDefaultPlayCanvasJs;
   static const char* const kDefaultFaceApi;
   static const char* const kDefaultSplatTransform;
+  static const char* const kDefaultTfjs;
   Status Check() const;
 };
 

@@ -1,0 +1,158 @@
+#!/usr/bin/env node
+// The drive page driven by a webcam, checked against the pipeline: the
+// workspace's own frames become a fake camera (a Y4M file Chromium plays in
+// a loop), the page (WS/export/drive/index.html, export --formats drive)
+// finds the face mesh and solves the weights and head pose in each frame it
+// sees, and each of its solves is matched to the frame it saw (by the
+// frame's 8 x 8 thumbnail) and compared with `headforge track`'s result for
+// that frame; the page's last drawing is compared with `headforge render`
+// of its frame through the Gaussian blendshapes.
+//   node scripts/web/drive_webcam_check.cjs --workspace WS --out DIR [--seconds 30] [--hold 3]
+//        [--max-weight-error 0.1] [--max-rotation-deg 3] [--min-psnr 28]
+//        [--headforge build/pipelines/headforge] [--chromium /usr/bin/chromium]
+// Writes DIR/check.json and prints a table; exits 1 when a bound is missed.
+const fs = require('fs');
+const path = require('path');
+const { execFileSync } = require('child_process');
+const { comparePixels } = require('./compare_pixels.cjs');
+
+const args = {};
+for (let i = 2; i < process.argv.length; i += 2) args[process.argv[i].replace(/^--/, '')] = process.argv[i + 1];
+if (!args.workspace || !args.out) {
+  console.error('usage: drive_webcam_check.cjs --workspace WS --out DIR [--seconds 30]');
+  process.exit(2);
+}
+const root = path.join(__dirname, '..', '..');
+const ws = args.workspace, out = args.out;
+const headforge = args.headforge || path.join(root, 'build', 'pipelines', 'headforge');
+const bounds = { weight: Number(args['max-weight-error'] || 0.1), rotation: Number(args['max-rotation-deg'] || 3),
+                 psnr: Number(args['min-psnr'] || 28) };
+fs.mkdirSync(out, { recursive: true });
+
+// The fake camera's file and each of its frames' thumbnails, from the Y4M
+// itself (the pixels Chromium shows the page).
+const frameDir = path.join(ws, 'frames', 'cam0');
+const frameFiles = fs.readdirSync(frameDir).filter((f) => f.endsWith('.png')).sort();
+// The driver first holds still as the avatar's rest (the capture's first
+// frame, for --hold seconds: the page calibrates on it), then plays the clip.
+const y4m = path.join(out, 'camera.y4m');
+const sequence = path.join(out, 'sequence');
+fs.rmSync(sequence, { recursive: true, force: true });
+fs.mkdirSync(sequence);
+const held = Math.round(25 * Number(args.hold || 3));
+[...Array(held).fill(frameFiles[0]), ...frameFiles].forEach((f, i) =>
+  fs.symlinkSync(path.resolve(frameDir, f), path.join(sequence, String(i).padStart(6, '0') + '.png')));
+execFileSync('ffmpeg', ['-loglevel', 'error', '-y', '-framerate', '25', '-i', path.join(sequence, '%06d.png'),
+                        '-pix_fmt', 'yuv420p', y4m]);
+const probe = execFileSync('ffprobe', ['-v', 'error', '-select_streams', 'v:0', '-show_entries', 'stream=width,height',
+                                       '-of', 'csv=p=0', y4m]).toString().trim().split(',').map(Number);
+const [width, height] = probe;
+const rgb = execFileSync('ffmpeg', ['-loglevel', 'error', '-i', y4m, '-f', 'rawvideo', '-pix_fmt', 'rgba', '-'],
+                         { maxBuffer: 2 ** 31 - 1 });
+const thumbnail = (data) => {
+  // As the page computes it (drive_page.js).
+  const t = [];
+  for (let by = 0; by < 8; ++by)
+    for (let bx = 0; bx < 8; ++bx) {
+      let sum = 0, count = 0;
+      for (let y = Math.floor(by * height / 8); y < Math.floor((by + 1) * height / 8); y += 2)
+        for (let x = Math.floor(bx * width / 8); x < Math.floor((bx + 1) * width / 8); x += 2) {
+          const p = 4 * (y * width + x);
+          sum += data[p] + data[p + 1] + data[p + 2];
+          count += 3;
+        }
+      t.push(sum / Math.max(1, count));
+    }
+  return t;
+};
+const frameBytes = 4 * width * height;
+const thumbs = frameFiles.map((_, i) => thumbnail(rgb.subarray((held + i) * frameBytes, (held + i + 1) * frameBytes)));
+const frameNumbers = frameFiles.map((f) => Number(path.basename(f, '.png')));
+
+// The page, driven for --seconds.
+const page = path.join(ws, 'export', 'drive', 'index.html');
+execFileSync(process.execPath, [path.join(__dirname, 'drive_page.cjs'), '--page', page, '--out', out, '--webcam', y4m,
+                                '--seconds', String(args.seconds || 30),
+                                '--chromium', args.chromium || '/usr/bin/chromium'], { stdio: 'inherit' });
+const state = JSON.parse(fs.readFileSync(path.join(out, 'state.json')));
+const tracking = JSON.parse(fs.readFileSync(path.join(ws, 'tracking.json')));
+const basis = JSON.parse(fs.readFileSync(path.join(ws, 'export', 'drive', 'face_basis.json')));
+const tracked = new Map(tracking.frames.map((f) => [f.frame, f]));
+const poses = new Map(basis.frames.map((f) => [f.frame, f.cam_from_head]));
+
+const match = (thumb) => {
+  let best = -1, bestD = Infinity, second = Infinity;
+  thumbs.forEach((t, i) => {
+    const d = Math.sqrt(t.reduce((s, v, j) => s + (v - thumb[j]) ** 2, 0) / t.length);
+    if (d < bestD) { second = bestD; bestD = d; best = i; } else if (d < second) second = d;
+  });
+  return { frame: frameNumbers[best], distance: bestD, second };
+};
+const angleDeg = (a, b) => {
+  // The angle of a^T b, both row-major 3 x 4 poses.
+  let trace = 0;
+  for (let i = 0; i < 3; ++i) for (let r = 0; r < 3; ++r) trace += a[4 * r + i] * b[4 * r + i];
+  return Math.acos(Math.max(-1, Math.min(1, (trace - 1) / 2))) * 180 / Math.PI;
+};
+const shiftMm = (a, b) => 1000 * Math.hypot(a[3] - b[3], a[7] - b[7], a[11] - b[11]);
+const watched = ['jawOpen', 'eyeBlink_L', 'eyeBlink_R'];
+const index = Object.fromEntries(state.names.map((n, i) => [n, i]));
+const rows = [];
+for (const solve of state.solves) {
+  const m = match(solve.thumb);
+  const f = tracked.get(m.frame);
+  if (!f || solve.calibrating) continue;
+  const errors = Object.fromEntries(watched.map((n) => [n, Math.abs(solve.weights[index[n]] - f.expression[n])]));
+  const all = state.names.reduce((s, n, i) => s + Math.abs(solve.weights[i] - f.expression[n]), 0) / state.names.length;
+  rows.push({ frame: m.frame, match_distance: m.distance, errors, all, rotation_deg: angleDeg(solve.cam_from_head, poses.get(m.frame)),
+              shift_mm: shiftMm(solve.cam_from_head, poses.get(m.frame)),
+              residual_px: solve.residual_px, ms_network: solve.ms_network, ms_solve: solve.ms_solve });
+}
+const mean = (xs) => xs.reduce((s, x) => s + x, 0) / Math.max(1, xs.length);
+const median = (xs) => { const s = [...xs].sort((a, b) => a - b); return s.length ? (s[(s.length - 1) >> 1] + s[s.length >> 1]) / 2 : NaN; };
+const summary = {
+  solves: state.solves.length, compared: rows.length, calibration: state.solves.filter((s) => s.calibrating).length,
+  mae: Object.fromEntries(watched.map((n) => [n, mean(rows.map((r) => r.errors[n]))])),
+  mae_all53: mean(rows.map((r) => r.all)),
+  rotation_deg_median: median(rows.map((r) => r.rotation_deg)),
+  shift_mm_median: median(rows.map((r) => r.shift_mm)),
+  ms_network_median: median(rows.map((r) => r.ms_network)), ms_solve_median: median(rows.map((r) => r.ms_solve)),
+  match_distance_max: Math.max(...rows.map((r) => r.match_distance)),
+  fps: state.fps, user_agent: state.user_agent,
+};
+
+// The last drawing (the page's canvas when it stopped) against headforge
+// render of the frame it showed.
+(async () => {
+  const last = state.solves.length ? match(state.solves[state.solves.length - 1].thumb).frame : -1;
+  if (last >= 0) {
+    const renderDir = path.join(out, 'render');
+    execFileSync(headforge, ['render', '--workspace', ws, '--model', path.join(ws, 'export', 'blendshapes'), '--frames',
+                             String(last), '--out', renderDir], { stdio: ['ignore', 'ignore', 'inherit'] });
+    const pad = String(last).padStart(6, '0');
+    const dataUrl = (file) => 'data:image/png;base64,' + fs.readFileSync(file).toString('base64');
+    const puppeteer = require(path.join(root, '.tools', 'node', 'node_modules', 'puppeteer-core'));
+    const browser = await puppeteer.launch({ executablePath: args.chromium || '/usr/bin/chromium', headless: true,
+                                             args: ['--no-sandbox'] });
+    const blank = await browser.newPage();
+    const compared = await blank.evaluate(comparePixels, [path.join(out, 'canvas.png'),
+                                                          path.join(renderDir, `frame_${pad}.png`),
+                                                          path.join(ws, 'masks', 'cam0', `${pad}.png`)].map(dataUrl));
+    await browser.close();
+    summary.last_frame = last;
+    summary.psnr_last = compared.psnr;
+  }
+  const pass = rows.length > 0 && watched.every((n) => summary.mae[n] <= bounds.weight) &&
+               summary.rotation_deg_median <= bounds.rotation && summary.psnr_last >= bounds.psnr;
+  summary.bounds = bounds;
+  summary.pass = pass;
+  fs.writeFileSync(path.join(out, 'check.json'), JSON.stringify({ summary, rows }, null, 1));
+  console.log(`webcam solves: ${summary.solves} (${summary.calibration} calibrating), ${rows.length} matched to tracked frames`);
+  console.log('mean absolute error against track: ' + watched.map((n) => `${n} ${summary.mae[n].toFixed(3)}`).join(', ') +
+              `, all 53 ${summary.mae_all53.toFixed(3)}`);
+  console.log(`head pose against track: median ${summary.rotation_deg_median.toFixed(2)} deg, ` +
+              `${summary.shift_mm_median.toFixed(1)} mm; network ` +
+              `${summary.ms_network_median.toFixed(1)} ms, solve ${summary.ms_solve_median.toFixed(1)} ms a frame`);
+  console.log(`the page's drawing of frame ${last} against headforge render: ${summary.psnr_last.toFixed(2)} dB over the head`);
+  process.exit(pass ? 0 : 1);
+})();

@@ -16,6 +16,7 @@
 
 #include <Eigen/Geometry>
 
+#include "avatar/drive_remedy.h"
 #include "avatar/gan_avatar/avatar_io.h"
 #include "avatar/model_folder.h"
 #include "avatar/gaussian_style/blendshapes.h"
@@ -121,6 +122,39 @@ Status LoadDrawableAvatar(const fs::path& workspace, fs::path model_dir, const s
   return Status::Ok();
 }
 
+Eigen::VectorXd ExpressionWeights(const torch::Tensor& condition, int64_t expressions) {
+  const torch::Tensor w = condition.slice(0, 0, expressions).to(torch::kCPU, torch::kFloat64).contiguous();
+  return Eigen::Map<const Eigen::VectorXd>(w.data_ptr<double>(), expressions);
+}
+
+// The driver's weights with options.drive_remedy applied, one tensor a
+// frame (left empty without a remedy): its neutral from its whole take
+// (one view a frame), re-based on the mean (and span) of the avatar's
+// training frames.
+Status RemedyDriving(const AvatarRenderOptions& options, const AvatarDataset& own,
+                     const std::map<int, const AvatarView*>& driver, int64_t expressions,
+                     std::map<int, torch::Tensor>* remedied) {
+  DriveRemedy remedy = DriveRemedy::kNone;
+  HF_RETURN_IF_ERROR(ParseDriveRemedy(options.drive_remedy, &remedy).WithContext("render --drive-remedy"));
+  if (remedy == DriveRemedy::kNone) return Status::Ok();
+  if (options.drive.empty())
+    return Status::InvalidArgument("render: --drive-remedy re-bases another workspace's expressions; give --drive");
+  std::vector<Eigen::VectorXd> training, take;
+  for (const AvatarView& v : own.train) training.push_back(ExpressionWeights(v.condition, expressions));
+  for (const auto& [frame, view] : driver) take.push_back(ExpressionWeights(view->condition, expressions));
+  DriveRemedyOptions remedy_options;
+  remedy_options.neutral_percentile = options.drive_neutral_percentile;
+  remedy_options.span_variance = options.drive_span_variance;
+  HF_RETURN_IF_ERROR(ApplyDriveRemedy(remedy, remedy_options, training, &take).WithContext("render"));
+  size_t i = 0;
+  for (const auto& [frame, view] : driver) {
+    const Eigen::VectorXd& w = take[i++];
+    remedied->emplace(frame, torch::from_blob(const_cast<double*>(w.data()), {expressions}, torch::kFloat64).clone()
+                                 .to(view->condition.options()));
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 std::string RenderFileName(const AvatarRenderOptions& options, int frame, int orbit_step) {
@@ -133,6 +167,7 @@ std::string RenderFileName(const AvatarRenderOptions& options, int frame, int or
   std::snprintf(text, sizeof(text), "frame_%06d", frame);
   std::string name = text;
   if (!options.drive.empty()) name += "_driven";
+  if (!options.drive.empty() && options.drive_remedy != "none") name += "_" + options.drive_remedy;
   if (options.side_by_side) name += "_side_by_side";
   // Renders from another camera sit beside the frame's own without replacing them.
   if (options.yaw_deg != 0 || options.pitch_deg != 0)
@@ -172,6 +207,9 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
   }
   std::map<int, const AvatarView*> by_frame;
   for (const AvatarView* v : drivers) by_frame.emplace(v->frame, v);
+  const int64_t expressions = int64_t(own.expression_names.size());
+  std::map<int, torch::Tensor> remedied;  // frame -> the driver's expression weights, remedied
+  HF_RETURN_IF_ERROR(RemedyDriving(options, own, by_frame, expressions, &remedied));
   std::vector<int> frames;
   if (!options.frames.empty() && !by_frame.empty())
     HF_RETURN_IF_ERROR(
@@ -191,7 +229,6 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     }
   }
   HF_RETURN_IF_ERROR(EnsureDirectory(out_dir));
-  const int64_t expressions = int64_t(own.expression_names.size());
   VideoFileWriter video;
   double posing = 0;
   progress->Start("render", int64_t(frames.size()));
@@ -205,7 +242,9 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
     // Driven by another capture: its expressions, this avatar's first camera and head pose.
     const AvatarView& own_view = options.drive.empty() ? driver : *own_views.front();
     torch::Tensor condition = own_view.condition.clone();
-    condition.slice(0, 0, expressions).copy_(driver.condition.slice(0, 0, expressions));
+    const auto remedy = remedied.find(frame);
+    condition.slice(0, 0, expressions)
+        .copy_(remedy != remedied.end() ? remedy->second : driver.condition.slice(0, 0, expressions));
     const SplatCamera camera = OrbitCamera(own_view.view, yaws[i], options.pitch_deg);
     const auto start = std::chrono::steady_clock::now();
     torch::Tensor render = draw(condition, camera);

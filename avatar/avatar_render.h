@@ -17,6 +17,13 @@ struct AvatarRenderOptions {
   // where only that was trained); its config.json says which model it holds.
   std::string model;
   std::string drive;            // a workspace whose tracked expressions drive the avatar ("": its own)
+  // What is done to the driver's expression weights (avatar/drive_remedy.h):
+  // none, relative (taken from the driver's own neutral to the avatar's
+  // training mean) or relative+span (then onto the span of the avatar's
+  // training expressions). Only with `drive`.
+  std::string drive_remedy = "none";
+  double drive_neutral_percentile = 10;  // the driver's neutral: this percentile of each weight over its take
+  double drive_span_variance = 0.99;     // the span's principal components cover this fraction of the variance
   // Frames to render (of `drive` when given), as ParseFrameList reads them
   // ("110,20", "0-49", "0-124:5", "all"); empty: all.
   std::vector<std::string> frames;
@@ -42,7 +49,8 @@ struct AvatarRenderSummary {
 
 // A PNG render's file name, which says what was drawn so that renders into
 // one folder do not replace each other: frame_000070.png from the frame's
-// own camera, then what differs: _driven (by --drive's frame 70),
+// own camera, then what differs: _driven (by --drive's frame 70;
+// _driven_relative, _driven_relative+span with a --drive-remedy),
 // _side_by_side, _yaw+20_pitch+0 (the camera moved round the head),
 // _orbit30_012 (an --orbit 30's render 12; `orbit_step` counts them).
 std::string RenderFileName(const AvatarRenderOptions& options, int frame, int orbit_step);

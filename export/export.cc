@@ -141,6 +141,11 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "export-model");
   o->Add("export.drive", &e->drive,
          "A tracked workspace whose expressions drive this avatar in a cross-reenactment video.", "drive");
+  o->Add("export.drive_remedy", &e->drive_remedy,
+         "What is done to --drive's expression weights: none, relative (from the driver's own neutral to the "
+         "avatar's training mean) or relative+span (then onto the span of the avatar's training expressions); "
+         "headforge render --help says more.",
+         "drive-remedy");
   o->Add("export.chart_js", &e->chart_js, "Chart.js's UMD build, inlined into report.html for its plots.",
          "chart-js", OptionSet::Effect::kRuntime);
   o->Add("export.playcanvas_js", &e->playcanvas_js, "PlayCanvas's UMD build, inlined into viewer/index.html.",
@@ -384,6 +389,7 @@ Status WriteVideos(ExportJob* job) {
   if (!options.drive.empty()) {
     render = render_options();
     render.drive = options.drive;
+    render.drive_remedy = options.drive_remedy;
     HF_RETURN_IF_ERROR(render_video(render, "cross_reenactment.mp4"));
   }
   return CopyTrackingOverlays(job, videos);

@@ -36,6 +36,7 @@ struct ExportOptions {
   // cameras go more than half way round the head.
   double orbit_deg = 0;
   std::string drive;         // a tracked workspace whose expressions drive a cross-reenactment video
+  std::string drive_remedy = "none";  // what is done to its weights: none, relative, relative+span (avatar_render.h)
   // Which trained model the Gaussians, weights and videos come from:
   // gaussian-style, gan-avatar, or auto (gaussian-style when it is trained,
   // else gan-avatar).

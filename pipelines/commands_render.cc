@@ -23,6 +23,19 @@ int RenderCommand(const std::vector<std::string>& args) {
               "resolution");
   options.Add("render.drive", &render.drive,
               "Another tracked workspace whose expressions drive this avatar (cross-reenactment).", "drive");
+  options.Add("render.drive_remedy", &render.drive_remedy,
+              "With --drive, what is done to the driver's expression weights: none (as tracked); relative (each "
+              "weight minus the driver's own neutral, plus the avatar's mean over its training frames, clamped to "
+              "[0, 1]); relative+span (then projected onto the span of the avatar's training expressions, their "
+              "mean plus the principal components covering --drive-span-variance, and clamped again).",
+              "drive-remedy");
+  options.Add("render.drive_neutral_percentile", &render.drive_neutral_percentile,
+              "The driver's neutral for --drive-remedy: this percentile (0-100) of each weight over the driver's "
+              "take (a weight rests at its neutral and moves up from it).",
+              "drive-neutral-percentile");
+  options.Add("render.drive_span_variance", &render.drive_span_variance,
+              "relative+span: the fraction of the avatar's training expressions' variance its span covers.",
+              "drive-span-variance");
   options.Add("render.video", &render.video, "Write render.mp4 instead of one PNG per frame.", "video");
   options.Add("render.side_by_side", &render.side_by_side,
               "Each render beside its frame and the error between them (x4): render | frame | error.", "side-by-side");

@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 
+#include <Eigen/Geometry>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -107,6 +109,39 @@ double MeanLandmarkDistance(const Landmarks68& a, const Landmarks68& b) {
   return sum / double(a.size());
 }
 
+double AlignedExpressionDistance(const Landmarks68& render, const Landmarks68& frame) {
+  // iBUG 68: 27-35 nose, 36/39 and 42/45 the eyes' corners; 36-47 eyes, 48-67 mouth.
+  constexpr int kRigid[] = {27, 28, 29, 30, 31, 32, 33, 34, 35, 36, 39, 42, 45};
+  // Dynamic sizes: GCC 12 warns falsely inside umeyama's fixed-size 2-D path.
+  Eigen::MatrixXd from(2, std::size(kRigid)), to(2, std::size(kRigid));
+  for (size_t i = 0; i < std::size(kRigid); ++i) {
+    from.col(Eigen::Index(i)) << render[size_t(kRigid[i])].x, render[size_t(kRigid[i])].y;
+    to.col(Eigen::Index(i)) << frame[size_t(kRigid[i])].x, frame[size_t(kRigid[i])].y;
+  }
+  const Eigen::MatrixXd frame_from_render = Eigen::umeyama(from, to, true);  // [3, 3]
+  double sum = 0;
+  for (size_t i = 36; i < 68; ++i) {
+    const Eigen::Vector2d moved =
+        frame_from_render.topLeftCorner(2, 2) * Eigen::Vector2d(render[i].x, render[i].y) +
+        frame_from_render.topRightCorner(2, 1);
+    sum += (moved - Eigen::Vector2d(frame[i].x, frame[i].y)).norm();
+  }
+  const double eyes = std::hypot(double(frame[36].x) - frame[45].x, double(frame[36].y) - frame[45].y);
+  return eyes > 0 ? 100 * sum / 32 / eyes : 0;
+}
+
+FaceScore ScoreFaceInPlace(FaceMetrics& metrics, const cv::Mat& render, const cv::Mat& frame) {
+  FaceScore score;
+  FaceMetrics::Face face;
+  score.face = metrics.FindFace(frame, &face);
+  if (!score.face) return score;
+  const std::vector<std::vector<float>> d =
+      metrics.Describe({FaceMetrics::Crop(frame, face.square), FaceMetrics::Crop(render, face.square)});
+  score.cosine = DescriptorCosine(d[0], d[1]);
+  score.landmark_px = MeanLandmarkDistance(face.landmarks, metrics.LandmarksAt(render, face.landmark_box));
+  return score;
+}
+
 Status ScoreHeldOutFaces(FaceMetrics& metrics, const fs::path& held_out_dir, HeldOutFaceScores* out) {
   std::vector<fs::path> strips;
   std::error_code ec;
@@ -125,15 +160,9 @@ Status ScoreHeldOutFaces(FaceMetrics& metrics, const fs::path& held_out_dir, Hel
     const cv::Mat render = image(cv::Rect(0, 0, w, image.rows)).clone();
     const cv::Mat frame = image(cv::Rect(w, 0, w, image.rows)).clone();
     result.image_size = std::max(w, image.rows);
-    FaceScore score;
+    FaceScore score = ScoreFaceInPlace(metrics, render, frame);
     score.view = strip.stem().string();
-    FaceMetrics::Face face;
-    score.face = metrics.FindFace(frame, &face);
     if (score.face) {
-      const std::vector<std::vector<float>> d =
-          metrics.Describe({FaceMetrics::Crop(frame, face.square), FaceMetrics::Crop(render, face.square)});
-      score.cosine = DescriptorCosine(d[0], d[1]);
-      score.landmark_px = MeanLandmarkDistance(face.landmarks, metrics.LandmarksAt(render, face.landmark_box));
       result.mean_cosine += score.cosine;
       result.mean_landmark_px += score.landmark_px;
       ++result.scored;

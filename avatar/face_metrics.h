@@ -66,12 +66,25 @@ double DescriptorCosine(const std::vector<float>& a, const std::vector<float>& b
 // The mean distance between corresponding points.
 double MeanLandmarkDistance(const Landmarks68& a, const Landmarks68& b);
 
+// F-LMD of the expression alone, for a render that does not sit where its
+// frame's face does (another person drives it, or its camera is another):
+// `render`'s landmarks moved onto `frame`'s by the similarity (Umeyama
+// 1991) that best fits their rigid points (nose and eye corners), then the
+// mean distance over the eyes' and the mouth's 32 points, in units of the
+// frame's outer-eye-corner distance (x 100: percent of it). Pose, position
+// and size of the face leave it; the shapes of eyes and mouth stay, so two
+// people making the same expression do not score 0.
+double AlignedExpressionDistance(const Landmarks68& render, const Landmarks68& frame);
+
 struct FaceScore {
   std::string view;
   bool face = false;         // a face was found in the frame; the scores are set when it was
   double cosine = 0;         // CSIM, render against frame
   double landmark_px = 0;    // F-LMD, pixels
 };
+
+// `render` against `frame`, both cropped at the frame's face (ScoreHeldOutFaces' score).
+FaceScore ScoreFaceInPlace(FaceMetrics& metrics, const cv::Mat& render, const cv::Mat& frame);
 
 struct HeldOutFaceScores {
   int views = 0, scored = 0;  // held-out views, and those whose frame shows a face

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
+#include <cmath>
 #include <cstdlib>
 
 #include <nlohmann/json.hpp>
@@ -171,6 +172,26 @@ TEST(FaceRecognition, MissingWeightsSayHowToInstallThem) {
   const Status s = FaceMetrics::Load(options, &metrics);
   EXPECT_EQ(s.code(), Status::Code::kNotFound);
   EXPECT_NE(s.message().find("install_deps"), std::string::npos) << s.message();
+}
+
+// The expression's landmark distance ignores where the face is, its size
+// and its roll, and sees a mouth that opens.
+TEST(FaceLandmarks, AlignedExpressionDistanceSeesTheExpressionAlone) {
+  Landmarks68 face;
+  for (int i = 0; i < 68; ++i)  // any layout; the rigid points must not be collinear
+    face[size_t(i)] = cv::Point2f(100 + 40 * std::cos(0.37 * i) + i, 120 + 30 * std::sin(0.53 * i));
+  Landmarks68 moved;
+  const double c = std::cos(0.2), s = std::sin(0.2);
+  for (size_t i = 0; i < 68; ++i)
+    moved[i] = cv::Point2f(float(1.7 * (c * face[i].x - s * face[i].y) + 31),
+                           float(1.7 * (s * face[i].x + c * face[i].y) - 12));
+  EXPECT_NEAR(AlignedExpressionDistance(moved, face), 0.0, 1e-3);
+  // The lower lip's 8 points down by a tenth of the eye-corner distance:
+  // (8 * 10%) / 32 points = 2.5%.
+  const double eyes = cv::norm(face[36] - face[45]);
+  Landmarks68 open = face;
+  for (int i : {55, 56, 57, 58, 59, 64, 65, 66}) open[size_t(i)].y += float(0.1 * eyes);
+  EXPECT_NEAR(AlignedExpressionDistance(open, face), 2.5, 1e-3);
 }
 
 }  // namespace

@@ -262,6 +262,29 @@
     }
     return m;
   };
+  // The basis weighted toward the points expressions hardly move (the
+  // third of the points whose largest offset is smallest; the rest at 0.05):
+  // the head's pose from them first, then the expression with the pose held
+  // close, so an expression is not taken for a turn of the head.
+  const rigidBasis = (basis) => {
+    const reach = basis.neutral.map((_, i) => Math.max(...basis.offsets.map((o) => Math.hypot(...o[i]))));
+    const cut = [...reach].sort((a, b) => a - b)[Math.floor(reach.length / 3)];
+    return Object.assign({}, basis, { pointWeights: reach.map((r) => (r <= cut ? 1 : 0.05)) });
+  };
+  // A frame after calibration: the pose from the rigid points, then the
+  // expression with the pose held close; `scale` weakens the pull toward
+  // `previous` (1: the frame just before).
+  const solveLive = (session, points, camera, previous, scale) => {
+    const d = HeadforgeFaceDrive.kSolveDefaults, iterations = scale < 0.5 ? 3 * d.iterations : d.iterations;
+    const head = HeadforgeFaceDrive.solveFace(points, session.rigid, camera, previous, {
+      poseOnly: true, temporalRotation: d.temporalRotation * scale, temporalTranslation: d.temporalTranslation * scale,
+      iterations });
+    return HeadforgeFaceDrive.solveFace(points, session.basis, camera,
+                                        { rotation: head.rotation, translation: head.translation,
+                                          weights: previous ? previous.weights : rest.weights },
+                                        { temporalWeights: d.temporalWeights * scale, temporalRotation: 100 * d.temporalRotation,
+                                          temporalTranslation: 100 * d.temporalTranslation, iterations });
+  };
   // One frame's solve. The first frames calibrate: the driver is taken to
   // hold the avatar's rest (its expression and its pose in its camera): the
   // face model's points are moved to where the face mesh puts them on the
@@ -281,11 +304,11 @@
       if (session.calibration.length === calibrationFrames) {
         const fits = session.calibration.map((c) => c[1]);
         session.basis = HeadforgeFaceDrive.calibrateNeutral(session.calibration.map((c) => c[0]), data.face, camera, fits);
+        session.rigid = rigidBasis(session.basis);
         // The rest pose as the live solve sees it: the calibration frames
         // solved again with the expression free.
         let previous = null;
-        const free = session.calibration.map(([p]) => (previous = HeadforgeFaceDrive.solveFace(p, session.basis, camera,
-                                                                                               previous, {})));
+        const free = session.calibration.map(([p]) => (previous = solveLive(session, p, camera, previous, 1)));
         session.toAvatar = compose(invert(meanPose(free)), rest.pose);
         session.previous = null;
         state.status = 'calibrated';
@@ -294,11 +317,9 @@
     }
     // The pull toward the previous frame weakens with the time since it
     // (a slow page sees frames far apart), and a stale start gets more steps.
-    const now = performance.now(), d = HeadforgeFaceDrive.kSolveDefaults;
+    const now = performance.now();
     const scale = session.previous ? Math.min(1, 1000 / 30 / Math.max(1, now - session.previousAt)) : 1;
-    const fit = HeadforgeFaceDrive.solveFace(points, session.basis, camera, session.previous, {
-      temporalWeights: d.temporalWeights * scale, temporalRotation: d.temporalRotation * scale,
-      temporalTranslation: d.temporalTranslation * scale, iterations: scale < 0.5 ? 3 * d.iterations : d.iterations });
+    const fit = solveLive(session, points, camera, session.previous, scale);
     session.previous = fit;
     session.previousAt = now;
     return { weights: fit.weights, pose: session.toAvatar ? compose(poseOf(fit), session.toAvatar) : poseOf(fit), fit,

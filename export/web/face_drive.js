@@ -224,8 +224,10 @@ const HeadforgeFaceDrive = (() => {
       for (let k = 0; k < K; k++)
         for (let c = 0; c < 3; c++) offsets[(i * K + k) * 3 + c] = basis.offsets[k][i][c];
     }
-    const weight = new Float64Array(kPoints).fill(1);
-    for (const i of basis.oval || kFaceOval) weight[i] = ovalWeight;
+    // basis.pointWeights, where given, weighs the points (e.g. the ones
+    // expressions hardly move, for the head's pose alone).
+    const weight = basis.pointWeights ? Float64Array.from(basis.pointWeights) : new Float64Array(kPoints).fill(1);
+    for (const i of basis.oval || kFaceOval) weight[i] *= ovalWeight;
     const weightSum = weight.reduce((a, b) => a + b, 0);
     p = { K, neutral, offsets, weight, weightSum, ovalWeight, offsetProducts: offsetProducts(offsets, weight, weightSum, K) };
     packed.set(basis, p);

@@ -9,7 +9,10 @@
 // of its frame through the Gaussian blendshapes.
 //   node scripts/web/drive_webcam_check.cjs --workspace WS --out DIR [--seconds 30] [--hold 3]
 //        [--max-weight-error 0.1] [--max-rotation-deg 3] [--min-psnr 28]
-//        [--headforge build/pipelines/headforge] [--chromium /usr/bin/chromium]
+//        [--truth ground_truth.json] [--headforge build/pipelines/headforge] [--chromium /usr/bin/chromium]
+// --truth (a simulated capture's): the page's and track's weights are both
+// compared with the simulator's too, and the bounds apply to the page's
+// error against the truth.
 // Writes DIR/check.json and prints a table; exits 1 when a bound is missed.
 const fs = require('fs');
 const path = require('path');
@@ -78,6 +81,24 @@ const state = JSON.parse(fs.readFileSync(path.join(out, 'state.json')));
 const tracking = JSON.parse(fs.readFileSync(path.join(ws, 'tracking.json')));
 const basis = JSON.parse(fs.readFileSync(path.join(ws, 'export', 'drive', 'face_basis.json')));
 const tracked = new Map(tracking.frames.map((f) => [f.frame, f]));
+const truth = args.truth ? JSON.parse(fs.readFileSync(args.truth)).frames : null;
+// The truth's camera-from-head rotation of a frame (row-major 3 x 4), and
+// the turn from frame 0 to frame k in the camera's frame, R_k R_0^T, which
+// is the same whatever head frame a pose is given in.
+const truthPose = (k) => {
+  const c = truth[k].views.cam0.cam_from_world, w = truth[k].world_from_head, out = [];
+  for (let i = 0; i < 3; ++i)
+    for (let j = 0; j < 4; ++j) out.push(c[i][0] * w[0][j] + c[i][1] * w[1][j] + c[i][2] * w[2][j] + (j === 3 ? c[i][3] : 0));
+  return out;
+};
+const turn = (a, b) => {
+  const out = [];
+  for (let i = 0; i < 3; ++i) {
+    for (let j = 0; j < 3; ++j) out.push(a[4 * i] * b[4 * j] + a[4 * i + 1] * b[4 * j + 1] + a[4 * i + 2] * b[4 * j + 2]);
+    out.push(0);
+  }
+  return out;
+};
 const poses = new Map(basis.frames.map((f) => [f.frame, f.cam_from_head]));
 
 const match = (thumb) => {
@@ -96,6 +117,8 @@ const angleDeg = (a, b) => {
 };
 const shiftMm = (a, b) => 1000 * Math.hypot(a[3] - b[3], a[7] - b[7], a[11] - b[11]);
 const watched = ['jawOpen', 'eyeBlink_L', 'eyeBlink_R'];
+// The page's poses are placed on the capture's frame 0 pose (its rest).
+const firstPoseOf = (b) => b.frames.find((f) => f.frame === 0).cam_from_head;
 const index = Object.fromEntries(state.names.map((n, i) => [n, i]));
 const rows = [];
 for (const solve of state.solves) {
@@ -104,7 +127,16 @@ for (const solve of state.solves) {
   if (!f || solve.calibrating) continue;
   const errors = Object.fromEntries(watched.map((n) => [n, Math.abs(solve.weights[index[n]] - f.expression[n])]));
   const all = state.names.reduce((s, n, i) => s + Math.abs(solve.weights[i] - f.expression[n]), 0) / state.names.length;
-  rows.push({ frame: m.frame, match_distance: m.distance, errors, all, rotation_deg: angleDeg(solve.cam_from_head, poses.get(m.frame)),
+  const t = truth ? truth[m.frame].expression : null;
+  const truthErrors = t ? Object.fromEntries(watched.map((n) => [n, Math.abs(solve.weights[index[n]] - t[n])])) : null;
+  const trackTruthErrors = t ? Object.fromEntries(watched.map((n) => [n, Math.abs(f.expression[n] - t[n])])) : null;
+  // The head's turn since frame 0: the page's and track's against the truth's.
+  const truthTurn = t ? turn(truthPose(m.frame), truthPose(0)) : null;
+  const pageTurnError = t ? angleDeg(turn(solve.cam_from_head, firstPoseOf(basis)), truthTurn) : null;
+  const trackTurnError = t ? angleDeg(turn(poses.get(m.frame), poses.get(0)), truthTurn) : null;
+  rows.push({ frame: m.frame, match_distance: m.distance, errors, truth_errors: truthErrors,
+              track_truth_errors: trackTruthErrors, page_turn_error_deg: pageTurnError,
+              track_turn_error_deg: trackTurnError, all, rotation_deg: angleDeg(solve.cam_from_head, poses.get(m.frame)),
               shift_mm: shiftMm(solve.cam_from_head, poses.get(m.frame)),
               residual_px: solve.residual_px, ms_network: solve.ms_network, ms_solve: solve.ms_solve });
 }
@@ -114,6 +146,10 @@ const summary = {
   solves: state.solves.length, compared: rows.length, calibration: state.solves.filter((s) => s.calibrating).length,
   mae: Object.fromEntries(watched.map((n) => [n, mean(rows.map((r) => r.errors[n]))])),
   mae_all53: mean(rows.map((r) => r.all)),
+  mae_truth: truth ? Object.fromEntries(watched.map((n) => [n, mean(rows.map((r) => r.truth_errors[n]))])) : null,
+  turn_error_deg_median: truth ? { page: median(rows.map((r) => r.page_turn_error_deg)),
+                                    track: median(rows.map((r) => r.track_turn_error_deg)) } : null,
+  mae_track_truth: truth ? Object.fromEntries(watched.map((n) => [n, mean(rows.map((r) => r.track_truth_errors[n]))])) : null,
   rotation_deg_median: median(rows.map((r) => r.rotation_deg)),
   shift_mm_median: median(rows.map((r) => r.shift_mm)),
   ms_network_median: median(rows.map((r) => r.ms_network)), ms_solve_median: median(rows.map((r) => r.ms_solve)),
@@ -142,7 +178,8 @@ const summary = {
     summary.last_frame = last;
     summary.psnr_last = compared.psnr;
   }
-  const pass = rows.length > 0 && watched.every((n) => summary.mae[n] <= bounds.weight) &&
+  const judged = truth ? summary.mae_truth : summary.mae;
+  const pass = rows.length > 0 && watched.every((n) => judged[n] <= bounds.weight) &&
                summary.rotation_deg_median <= bounds.rotation && summary.psnr_last >= bounds.psnr;
   summary.bounds = bounds;
   summary.pass = pass;
@@ -150,6 +187,12 @@ const summary = {
   console.log(`webcam solves: ${summary.solves} (${summary.calibration} calibrating), ${rows.length} matched to tracked frames`);
   console.log('mean absolute error against track: ' + watched.map((n) => `${n} ${summary.mae[n].toFixed(3)}`).join(', ') +
               `, all 53 ${summary.mae_all53.toFixed(3)}`);
+  if (truth) {
+    console.log('against the simulator\'s truth: the page ' + watched.map((n) => `${n} ${summary.mae_truth[n].toFixed(3)}`).join(', ') +
+                '; track ' + watched.map((n) => `${n} ${summary.mae_track_truth[n].toFixed(3)}`).join(', '));
+    console.log(`the head's turn since frame 0 against the truth's: the page ${summary.turn_error_deg_median.page.toFixed(2)} ` +
+                `deg, track ${summary.turn_error_deg_median.track.toFixed(2)} deg (medians)`);
+  }
   console.log(`head pose against track: median ${summary.rotation_deg_median.toFixed(2)} deg, ` +
               `${summary.shift_mm_median.toFixed(1)} mm; network ` +
               `${summary.ms_network_median.toFixed(1)} ms, solve ${summary.ms_solve_median.toFixed(1)} ms a frame`);

@@ -1,0 +1,257 @@
+// The drive page (export --formats drive): the Gaussian blendshapes posed in
+// the page by a recorded take or the webcam. Its face basis against the
+// face mesh ingest found; in headless Chromium, where installed: its
+// drawing against headforge render, the takes it plays, and a fake webcam
+// fed with the capture's own frames, its weights against the simulator's
+// truth and track's.
+#include <cctype>
+#include <cstdio>
+#include <fstream>
+#include <map>
+
+#include <nlohmann/json.hpp>
+
+#include "tests/train_fixture.h"
+
+namespace headforge {
+namespace {
+
+class DrivePage : public TrainStage {
+ protected:
+  static void SetUpTestSuite() {
+    CopyReference("drive_reference");
+    exported_ = Headforge({"export", "--workspace", reference_.string(), "--formats", "blendshapes", "drive"});
+  }
+  static Result exported_;
+};
+Result DrivePage::exported_;
+
+// The page's data block (the JSON inlined in drive/index.html).
+nlohmann::json PageData(const fs::path& page) {
+  const std::string html = Slurp(page);
+  const std::string open = "<script id=\"drive-data\" type=\"application/json\">";
+  const size_t begin = html.find(open);
+  if (begin == std::string::npos) return nlohmann::json();
+  const size_t start = begin + open.size(), end = html.find("</script>", start);
+  return nlohmann::json::parse(html.substr(start, end - start), nullptr, false);
+}
+
+// The face basis posed by frame k's tracked weights and pose lands on the
+// face mesh ingest found in frame k: the median distance in pixels.
+double BasisToMeshPixels(const nlohmann::json& basis, const nlohmann::json& tracking, const nlohmann::json& landmarks,
+                         int frame) {
+  const auto& names = basis["expression_names"];
+  const auto& weights = tracking["frames"][frame]["expression"];
+  std::vector<double> pose;
+  for (const auto& f : basis["frames"])
+    if (f["frame"] == frame) pose = f["cam_from_head"].get<std::vector<double>>();
+  const auto& mesh = landmarks["cameras"]["cam0"][frame]["mesh"];
+  const auto& c = basis["camera"];
+  std::vector<double> distances;
+  for (size_t i = 0; i < 468; ++i) {
+    double p[3];
+    for (int a = 0; a < 3; ++a) {
+      p[a] = basis["neutral"][i][a].get<double>();
+      for (size_t k = 0; k < names.size(); ++k)
+        p[a] += weights[names[k].get<std::string>()].get<double>() * basis["offsets"][k][i][a].get<double>();
+    }
+    double q[3];
+    for (int r = 0; r < 3; ++r) q[r] = pose[4 * r] * p[0] + pose[4 * r + 1] * p[1] + pose[4 * r + 2] * p[2] + pose[4 * r + 3];
+    const double u = c["fx"].get<double>() * q[0] / q[2] + c["cx"].get<double>();
+    const double v = c["fy"].get<double>() * q[1] / q[2] + c["cy"].get<double>();
+    distances.push_back(std::hypot(u - mesh[3 * i].get<double>(), v - mesh[3 * i + 1].get<double>()));
+  }
+  std::nth_element(distances.begin(), distances.begin() + 234, distances.end());
+  return distances[234];
+}
+
+TEST_F(DrivePage, WritesThePageAndAFaceBasisThatLandsOnTheFaceMesh) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path drive = reference_ / "export" / "drive";
+  ASSERT_TRUE(fs::exists(drive / "index.html"));
+  nlohmann::json basis, tracking, landmarks;
+  ASSERT_TRUE(ReadJson(drive / "face_basis.json", &basis).ok());
+  ASSERT_TRUE(ReadJson(reference_ / "tracking.json", &tracking).ok());
+  ASSERT_TRUE(ReadJson(reference_ / "landmarks.json", &landmarks).ok());
+  ASSERT_EQ(basis["neutral"].size(), 468u);
+  ASSERT_EQ(basis["offsets"].size(), 53u);
+  EXPECT_EQ(basis["expression_names"], tracking["expression_names"]);
+  EXPECT_EQ(basis["oval"].size(), 36u);
+  // Where the tracked face model puts the mesh's points, against where the
+  // face mesh found them: the embedding and the tracking together.
+  for (int frame : {0, 60, 110}) {
+    const double px = BasisToMeshPixels(basis, tracking, landmarks, frame);
+    std::printf("frame %d: the face basis %.2f px (median) from the face mesh found in it\n", frame, px);
+    EXPECT_LT(px, 4.0);
+  }
+  const nlohmann::json data = PageData(drive / "index.html");
+  ASSERT_TRUE(data.is_object());
+  EXPECT_EQ(data["names"], tracking["expression_names"]);
+  EXPECT_EQ(data["frames"].size(), tracking["frames"].size());
+  EXPECT_EQ(data["offsets_type"], "float16");
+  EXPECT_EQ(data["camera"]["width"], 48);  // the avatar's training size, as render draws
+  EXPECT_TRUE(data["face"].is_object());   // the face mesh model is inlined: the webcam drives it
+
+  // Without the face mesh model the page plays takes only, and says why.
+  const fs::path bare = CopyOf(reference_, Scratch("drive_bare"));
+  const Result without = Headforge({"export", "--workspace", bare.string(), "--formats", "drive",
+                                    "--export-vision-models", (bare / "no_models").string()});
+  ASSERT_EQ(without.code, 0) << without.err;
+  EXPECT_NE(without.err.find("the blendshapes of the export before, kept"), std::string::npos) << without.err;
+  EXPECT_NE(without.err.find("scripts/install_deps.sh installs both"), std::string::npos) << without.err;
+  EXPECT_TRUE(PageData(bare / "export" / "drive" / "index.html")["face"].is_null());
+  EXPECT_TRUE(fs::exists(bare / "export" / "blendshapes" / "blendshapes.bin"));
+  // No blendshapes at all: refused, naming what to export.
+  fs::remove_all(bare / "export");
+  const Result none = Headforge({"export", "--workspace", bare.string(), "--formats", "drive"});
+  EXPECT_EQ(none.code, 1);
+  EXPECT_NE(none.err.find("export --formats blendshapes drive"), std::string::npos) << none.err;
+}
+
+#ifdef HEADFORGE_BROWSER_CHECKS
+// scripts/web/drive_page.cjs on the page with `extra` options; the state it wrote.
+nlohmann::json OpenDrivePage(const fs::path& ws, const std::string& name, const std::string& extra, int* code) {
+  const fs::path out = Scratch(name);
+  const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
+                              "/scripts/web/drive_page.cjs' --page '" + (ws / "export" / "drive" / "index.html").string() +
+                              "' --out '" + out.string() + "' --chromium '" + HEADFORGE_CHROMIUM + "' " + extra;
+  *code = std::system(command.c_str());
+  nlohmann::json state;
+  EXPECT_TRUE(ReadJson(out / "state.json", &state).ok()) << command;
+  return state;
+}
+
+// `headforge render` of frame k through the blendshapes (driven by `drive`
+// when given); the PNG's path.
+fs::path RenderBlendshapes(const fs::path& ws, int frame, const std::string& name, const fs::path& drive = "") {
+  const fs::path out = Scratch(name);
+  std::vector<std::string> args = {"render", "--workspace", ws.string(), "--model", (ws / "export" / "blendshapes").string(),
+                                   "--frames", std::to_string(frame), "--out", out.string()};
+  if (!drive.empty()) args.insert(args.end(), {"--drive", drive.string()});
+  const Result r = Headforge(args);
+  EXPECT_EQ(r.code, 0) << r.err;
+  char file[48];
+  std::snprintf(file, sizeof(file), "frame_%06d%s.png", frame, drive.empty() ? "" : "_driven");
+  return out / file;
+}
+
+std::string CompareOptions(const fs::path& ws, const fs::path& render, int frame, double min_psnr) {
+  char mask[32];
+  std::snprintf(mask, sizeof(mask), "%06d.png", frame);
+  return "--compare '" + render.string() + "' --mask '" + (ws / "masks" / "cam0" / mask).string() + "' --min-psnr " +
+         std::to_string(min_psnr);
+}
+
+TEST_F(DrivePage, DrawsAFrameAsRenderDoes) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path render = RenderBlendshapes(reference_, 110, "drive_render");
+  int code = 0;
+  const nlohmann::json state =
+      OpenDrivePage(reference_, "drive_frame", "--frame 110 " + CompareOptions(reference_, render, 110, 45), &code);
+  EXPECT_EQ(code, 0);
+  EXPECT_EQ(state["frame"], 110);
+  EXPECT_TRUE(state["errors"].empty()) << state["errors"];
+  const double psnr = state["compare"]["psnr"];
+  std::printf("the page's WebGL drawing of frame 110 against headforge render: %.1f dB (half-float target: %d)\n", psnr,
+              int(state["halfFloat"].get<bool>()));
+  EXPECT_GT(psnr, 45.0);  // 55.3 dB when written
+}
+
+// tracking.json and a Live Link Face CSV played back: frame k as render
+// --drive draws it (the take's expressions, the avatar's own first pose).
+TEST_F(DrivePage, PlaysRecordedTakes) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path render = RenderBlendshapes(reference_, 110, "drive_render_driven", reference_);
+  int code = 0;
+  nlohmann::json state = OpenDrivePage(reference_, "drive_take",
+                                       "--take '" + (reference_ / "tracking.json").string() + "' --frame 110 " +
+                                           CompareOptions(reference_, render, 110, 45), &code);
+  EXPECT_EQ(code, 0);
+  EXPECT_EQ(state["mode"], "recorded take");
+  std::printf("tracking.json played, frame 110 against render --drive: %.1f dB\n", state["compare"]["psnr"].get<double>());
+
+  // The CSV as Live Link Face writes it: ARKit's names (one browInnerUp and
+  // one cheekPuff where the face model has a left and a right), the head's
+  // and eyes' angles, a blendshape the avatar lacks; row 1 is frame 110,
+  // row 2 has weights outside [0, 1].
+  nlohmann::json tracking;
+  ASSERT_TRUE(ReadJson(reference_ / "tracking.json", &tracking).ok());
+  const auto& names = tracking["expression_names"];
+  const auto& w = tracking["frames"][110]["expression"];
+  std::vector<std::string> header = {"Timecode", "BlendShapeCount"};
+  std::vector<double> row;
+  std::map<std::string, double> expected;
+  for (const auto& n : names) {
+    std::string name = n.get<std::string>(), arkit = name;
+    arkit[0] = char(std::toupper(arkit[0]));
+    if (arkit.size() > 2 && arkit.compare(arkit.size() - 2, 2, "_L") == 0) arkit = arkit.substr(0, arkit.size() - 2) + "Left";
+    if (arkit.size() > 2 && arkit.compare(arkit.size() - 2, 2, "_R") == 0) arkit = arkit.substr(0, arkit.size() - 2) + "Right";
+    double value = w[name].get<double>();
+    for (const char* single : {"BrowInnerUp", "CheekPuff"})
+      if (arkit.rfind(single, 0) == 0) {
+        const std::string base = name.substr(0, name.size() - 2);
+        value = 0.5 * (w[base + "_L"].get<double>() + w[base + "_R"].get<double>());
+        arkit = single;
+      }
+    expected[name] = value;
+    if (std::find(header.begin(), header.end(), arkit) != header.end()) continue;
+    header.push_back(arkit);
+    row.push_back(value);
+  }
+  for (const char* extra : {"TongueOut", "HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw"}) {
+    header.push_back(extra);
+    row.push_back(0.3);
+  }
+  const fs::path csv = Scratch("drive_take.csv");
+  {
+    std::ofstream file(csv);
+    for (size_t i = 0; i < header.size(); ++i) file << (i ? "," : "") << header[i];
+    file << "\n00:00:00:00.000," << row.size() - 5;
+    for (size_t i = 0; i < row.size(); ++i) file << "," << 0.0;
+    file << "\n00:00:00:01.000," << row.size() - 5;
+    for (double v : row) file << "," << v;
+    file << "\n00:00:00:02.000," << row.size() - 5;
+    for (size_t i = 0; i < row.size(); ++i) file << "," << (header[i + 2] == "JawOpen" ? 1.7 : header[i + 2] == "EyeBlinkLeft" ? -0.3 : 0.0);
+    file << "\n";
+  }
+  state = OpenDrivePage(reference_, "drive_csv", "--take '" + csv.string() + "' --frame 1 " +
+                                                     CompareOptions(reference_, render, 110, 35), &code);
+  EXPECT_EQ(code, 0);
+  for (size_t k = 0; k < names.size(); ++k)
+    EXPECT_NEAR(state["weights"][k].get<double>(), expected[names[k].get<std::string>()], 1e-6) << names[k];
+  EXPECT_EQ(state["unknown"], nlohmann::json::array({"TongueOut"}));
+  std::printf("the CSV's row for frame 110 against render --drive: %.1f dB (its brows and cheeks one weight each)\n",
+              state["compare"]["psnr"].get<double>());
+  // Outside [0, 1]: clamped; every other blendshape at 0.
+  state = OpenDrivePage(reference_, "drive_csv_range", "--take '" + csv.string() + "' --frame 2", &code);
+  EXPECT_EQ(code, 0);
+  for (size_t k = 0; k < names.size(); ++k)
+    EXPECT_EQ(state["weights"][k].get<double>(), names[k] == "jawOpen" ? 1.0 : 0.0) << names[k];
+}
+
+// A fake webcam plays the capture's own frames (the first held for three
+// seconds: the page calibrates on it); the page's weights against the
+// simulator's truth, its head's turn against the truth's, its drawing of the
+// last frame against render's.
+TEST_F(DrivePage, TheWebcamDrivesIt) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path out = Scratch("drive_webcam");
+  const std::string command =
+      std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR + "/scripts/web/drive_webcam_check.cjs' --workspace '" +
+      reference_.string() + "' --out '" + out.string() + "' --seconds 25 --truth '" +
+      (SharedSimulation("talking_static", 125) / "ground_truth.json").string() + "' --headforge '" + HEADFORGE_BINARY +
+      "' --chromium '" + HEADFORGE_CHROMIUM + "' --max-weight-error 0.15 --max-rotation-deg 5 --min-psnr 20";
+  EXPECT_EQ(std::system(command.c_str()), 0) << command;
+  nlohmann::json check;
+  ASSERT_TRUE(ReadJson(out / "check.json", &check).ok());
+  const nlohmann::json& s = check["summary"];
+  EXPECT_GE(s["compared"].get<int>(), 20);
+  for (const char* name : {"jawOpen", "eyeBlink_L", "eyeBlink_R"})
+    EXPECT_LT(s["mae_truth"][name].get<double>(), 0.15) << name;  // 0.07-0.09 when written (track: 0.02-0.08)
+  EXPECT_LT(s["turn_error_deg_median"]["page"].get<double>(), 4.0);  // 2.3 (track 1.1)
+  EXPECT_GT(s["psnr_last"].get<double>(), 20.0);                     // 20.7-28.5
+}
+#endif
+
+}  // namespace
+}  // namespace headforge

@@ -69,6 +69,7 @@ int FaceModelCommand(const std::vector<std::string>& args);
 int BenchCommand(const std::vector<std::string>& args);
 int BenchTrain(const std::vector<std::string>& args);
 int BenchFrontEnd(const std::vector<std::string>& args);
+int BenchDrive(const std::vector<std::string>& args);
 int SplatFitCommand(const std::vector<std::string>& args);
 int RenderCommand(const std::vector<std::string>& args);
 int PackCommand(const std::vector<std::string>& args);

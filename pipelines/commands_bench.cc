@@ -670,14 +670,17 @@ int BenchCommand(const std::vector<std::string>& args) {
   if (!args.empty() && args[0] == "train") return BenchTrain(std::vector<std::string>(args.begin() + 1, args.end()));
   if (!args.empty() && args[0] == "front-end")
     return BenchFrontEnd(std::vector<std::string>(args.begin() + 1, args.end()));
+  if (!args.empty() && args[0] == "drive") return BenchDrive(std::vector<std::string>(args.begin() + 1, args.end()));
   if (!args.empty() && args[0] == "truth-workspace")
     return BenchTruthWorkspace(std::vector<std::string>(args.begin() + 1, args.end()));
   std::fprintf(stderr,
-               "Usage: headforge bench calibrate|track|train|front-end|truth-workspace [options]\n"
+               "Usage: headforge bench calibrate|track|train|front-end|drive|truth-workspace [options]\n"
                "  calibrate   camera accuracy against time on simulated scenes\n"
                "  front-end   ingest's masks (and their cost) against the simulator's truth\n"
                "  track       tracking accuracy over many simulated subjects\n"
                "  train       the avatar's ablation on a tracked workspace\n"
+               "  drive       cross-identity driving: the avatar driven by other workspaces, per\n"
+               "              remedy of the driver's weights (F-LMD, CSIM)\n"
                "  truth-workspace  a simulated capture's workspace with the true cameras and\n"
                "              tracking, to train on (what registration costs the avatar)\n"
                "(rendering and kernel speed: build/bench/headforge_bench)\n");

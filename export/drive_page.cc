@@ -170,6 +170,9 @@ Status WriteDrivePage(const fs::path& out_dir, const DrivePageOptions& options, 
   const bool webcam = !options.tfjs_js.empty() && ReadFileToString(options.tfjs_js, &tfjs).ok() &&
                       ReadFileToString(options.vision_models / "facemesh.json", &mesh_json).ok() &&
                       ReadFileToString(options.vision_models / "facemesh.bin", &mesh_bin).ok();
+  std::string mesh, engine;
+  const bool with_mesh = !options.mesh_glb.empty() && ReadFileToString(options.mesh_glb, &mesh).ok() &&
+                         !options.playcanvas_js.empty() && ReadFileToString(options.playcanvas_js, &engine).ok();
   const int64_t n = layout.value("gaussians", int64_t(0));
   const nlohmann::json data = {{"names", names},
                                {"gaussians", n},
@@ -185,7 +188,7 @@ Status WriteDrivePage(const fs::path& out_dir, const DrivePageOptions& options, 
 <style>
 html, body { margin: 0; height: 100%; background: #292b30; color: #ddd; font: 13px system-ui, sans-serif; }
 #stage { display: flex; gap: 16px; padding: 12px; align-items: flex-start; }
-#view { max-height: calc(100vh - 24px); max-width: calc(100vw - 300px); }
+#view, #mesh-view { max-height: calc(100vh - 24px); max-width: calc((100vw - 300px) / 2); }
 #side { width: 260px; }
 #side button, #side label { display: block; margin: 0 0 8px; }
 .bar { position: relative; margin: 2px 0; padding: 1px 4px; }
@@ -193,7 +196,7 @@ html, body { margin: 0; height: 100%; background: #292b30; color: #ddd; font: 13
 #weights { position: relative; z-index: 0; }
 </style>
 </head><body>
-<div id="stage"><canvas id="view"></canvas><div id="side">
+<div id="stage"><canvas id="view"></canvas><canvas id="mesh-view" hidden></canvas><div id="side">
 <button id="webcam">Drive from the webcam</button>
 <button id="replay">Play the capture's take</button>
 <label>Play a take (Live Link Face CSV or tracking.json): <input id="open" type="file" accept=".csv,.json"></label>
@@ -206,11 +209,16 @@ html, body { margin: 0; height: 100%; background: #292b30; color: #ddd; font: 13
     html += "<script id=\"facemesh-bin\" type=\"application/octet-stream\">" + Base64(mesh_bin) + "</script>\n";
     html += "<script>" + InlineScriptText(tfjs) + "</script>\n";
   }
+  if (with_mesh) {
+    html += "<script id=\"mesh-glb\" type=\"application/octet-stream\">" + Base64(mesh) + "</script>\n";
+    html += "<script>" + InlineScriptText(engine) + "</script>\n";
+  }
   html += std::string("<script>") + InlineScriptText(kSplatGlScript) + "</script>\n";
   html += std::string("<script>") + InlineScriptText(kFaceDriveScript) + "</script>\n";
   html += std::string("<script>") + InlineScriptText(kDrivePageScript) + "</script>\n</body></html>\n";
   HF_RETURN_IF_ERROR(WriteFileAtomic(out_dir / "index.html", html));
   summary->webcam = webcam;
+  summary->mesh = with_mesh;
   summary->gaussians = n;
   summary->page_bytes = int64_t(html.size());
   if (!webcam)

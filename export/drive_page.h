@@ -23,11 +23,17 @@ struct DrivePageOptions {
   // page drives from the webcam only when both are there.
   std::string tfjs_js;
   fs::path vision_models;
+  // The mesh avatar (export's avatar_mesh.glb) and PlayCanvas's UMD build:
+  // where both are there, the page draws the mesh beside the Gaussians, its
+  // morph targets posed by the same weights.
+  fs::path mesh_glb;
+  std::string playcanvas_js;
   bool half_offsets = true;    // the offsets as float16 (half the page; no visible change)
 };
 
 struct DrivePageSummary {
   bool webcam = false;  // the page holds the face mesh model
+  bool mesh = false;    // the page draws the mesh avatar too
   int64_t gaussians = 0;
   int64_t page_bytes = 0;
   std::string note;     // why the webcam is off, when it is

@@ -329,11 +329,14 @@ Status WriteDrive(ExportJob* job) {
   drive.blendshapes_dir = job->out_dir / "blendshapes";
   drive.tfjs_js = job->options.tfjs_js;
   drive.vision_models = job->options.vision_models.empty() ? DefaultVisionModelsDir() : job->options.vision_models;
+  if (fs::exists(job->out_dir / "avatar_mesh.glb", ec)) drive.mesh_glb = job->out_dir / "avatar_mesh.glb";
+  drive.playcanvas_js = job->options.playcanvas_js;
   DrivePageSummary summary;
   HF_RETURN_IF_ERROR(WriteDrivePage(job->out_dir / "drive", drive, &summary));
   if (!summary.note.empty()) HF_LOG(Warning) << "export: drive/index.html: " << summary.note;
   HF_LOG(Info) << "export: drive/index.html: " << summary.gaussians << " Gaussians, "
-               << summary.page_bytes / (1 << 20) << " MiB" << (summary.webcam ? ", the webcam drives it" : "");
+               << summary.page_bytes / (1 << 20) << " MiB" << (summary.webcam ? ", the webcam drives it" : "")
+               << (summary.mesh ? ", the mesh avatar beside them" : "");
   job->out.files.push_back("drive/index.html");
   job->out.files.push_back("drive/face_basis.json");
   return Status::Ok();

@@ -20,7 +20,8 @@ class DrivePage : public TrainStage {
  protected:
   static void SetUpTestSuite() {
     CopyReference("drive_reference");
-    exported_ = Headforge({"export", "--workspace", reference_.string(), "--formats", "blendshapes", "drive"});
+    exported_ = Headforge({"export", "--workspace", reference_.string(), "--formats", "mesh", "blendshapes", "drive",
+                           "--texture-size", "128", "--bake-views", "8"});
   }
   static Result exported_;
 };
@@ -110,8 +111,10 @@ TEST_F(DrivePage, WritesThePageAndAFaceBasisThatLandsOnTheFaceMesh) {
 
 #ifdef HEADFORGE_BROWSER_CHECKS
 // scripts/web/drive_page.cjs on the page with `extra` options; the state it wrote.
-nlohmann::json OpenDrivePage(const fs::path& ws, const std::string& name, const std::string& extra, int* code) {
+nlohmann::json OpenDrivePage(const fs::path& ws, const std::string& name, const std::string& extra, int* code,
+                             fs::path* written = nullptr) {
   const fs::path out = Scratch(name);
+  if (written) *written = out;
   const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
                               "/scripts/web/drive_page.cjs' --page '" + (ws / "export" / "drive" / "index.html").string() +
                               "' --out '" + out.string() + "' --chromium '" + HEADFORGE_CHROMIUM + "' " + extra;
@@ -155,6 +158,55 @@ TEST_F(DrivePage, DrawsAFrameAsRenderDoes) {
   std::printf("the page's WebGL drawing of frame 110 against headforge render: %.1f dB (half-float target: %d)\n", psnr,
               int(state["halfFloat"].get<bool>()));
   EXPECT_GT(psnr, 45.0);  // 55.3 dB when written
+}
+
+// Pixels of a drawing that are not the white background.
+cv::Mat Foreground(const fs::path& png) {
+  const cv::Mat image = cv::imread(png.string());
+  EXPECT_FALSE(image.empty()) << png;
+  cv::Mat grey;
+  cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  return grey < 245;
+}
+int Changed(const fs::path& a, const fs::path& b) {
+  cv::Mat difference;
+  cv::absdiff(cv::imread(a.string()), cv::imread(b.string()), difference);
+  cv::Mat grey;
+  cv::cvtColor(difference, grey, cv::COLOR_BGR2GRAY);
+  return cv::countNonZero(grey > 20);
+}
+
+// The mesh avatar beside the Gaussians: the same camera and pose (their
+// silhouettes overlap; the Gaussians hold the hair and shoulders the mesh
+// does not), and its morph targets follow the same weights as the
+// blendshapes (jawOpen at 0 and at 1 changes both drawings).
+TEST_F(DrivePage, TheMeshAvatarFollowsTheSameWeights) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  int code = 0;
+  nlohmann::json states[2];
+  fs::path dirs[2];
+  for (int open : {0, 1}) {
+    states[open] = OpenDrivePage(reference_, "drive_jaw" + std::to_string(open),
+                                 "--frame 110 --weights '{\"jawOpen\": " + std::to_string(open) + "}'", &code,
+                                 &dirs[open]);
+    EXPECT_EQ(code, 0);
+    EXPECT_EQ(states[open]["mesh"], "drawn");
+  }
+  const fs::path& shut = dirs[0];
+  const fs::path& opened = dirs[1];
+  const cv::Mat gaussians = Foreground(shut / "canvas.png"), mesh = Foreground(shut / "mesh.png");
+  const double iou = double(cv::countNonZero(gaussians & mesh)) / cv::countNonZero(gaussians | mesh);
+  const int mesh_changed = Changed(shut / "mesh.png", opened / "mesh.png");
+  const int splats_changed = Changed(shut / "canvas.png", opened / "canvas.png");
+  std::printf("mesh against Gaussians: silhouette IoU %.2f; jawOpen 0 -> 1 changes %d mesh and %d Gaussian pixels\n",
+              iou, mesh_changed, splats_changed);
+  EXPECT_GT(iou, 0.7);             // 0.83 when written
+  EXPECT_GT(mesh_changed, 30);     // 100
+  EXPECT_GT(splats_changed, 30);   // 97
+  const auto& names = states[1]["names"];
+  const size_t jaw = size_t(std::find(names.begin(), names.end(), "jawOpen") - names.begin());
+  ASSERT_LT(jaw, names.size());
+  EXPECT_EQ(states[1]["weights"][jaw], 1.0);
 }
 
 // tracking.json and a Live Link Face CSV played back: frame k as render

@@ -54,8 +54,69 @@
     names, weights: new Float32Array(k), camFromHead: Float64Array.from(firstPose),
     mode: 'take', frame: -1, fps: 0, drawn: 0, solves: [], lost_seconds: 0, error: null,
     halfFloat: renderer.halfFloat,
+    mesh: document.getElementById('mesh-glb') ? 'loading' : 'none',
   };
   window.headforge = state;
+
+  // The mesh avatar beside the Gaussians (where the page holds it): PlayCanvas
+  // draws its glTF, the morph targets set by the same weights, through the
+  // same camera (the head's node held still: the pose is the camera's).
+  const mesh = (() => {
+    const block = document.getElementById('mesh-glb');
+    if (!block || typeof pc === 'undefined') return null;
+    const canvas = document.getElementById('mesh-view');
+    canvas.hidden = false;
+    const app = new pc.Application(canvas, { graphicsDeviceOptions: { antialias: true, preserveDrawingBuffer: true } });
+    app.setCanvasResolution(pc.RESOLUTION_FIXED, data.camera.width, data.camera.height);
+    app.start();
+    const camera = new pc.Entity('camera');
+    camera.addComponent('camera', { clearColor: new pc.Color(data.background, data.background, data.background), nearClip: 0.01,
+                                    farClip: 50 });
+    // The pinhole's projection, principal point included (pixel centres at integers).
+    const c = data.camera, near = 0.01, far = 50;
+    camera.camera.calculateProjection = (m) => {
+      m.data.fill(0);
+      m.data[0] = 2 * c.fx / c.width;
+      m.data[5] = 2 * c.fy / c.height;
+      m.data[8] = 1 - 2 * (c.cx + 0.5) / c.width;
+      m.data[9] = 2 * (c.cy + 0.5) / c.height - 1;
+      m.data[10] = -(far + near) / (far - near);
+      m.data[11] = -1;
+      m.data[14] = -2 * far * near / (far - near);
+    };
+    app.root.addChild(camera);
+    const light = new pc.Entity('light');
+    light.addComponent('light', { type: 'directional', intensity: 0.6 });
+    camera.addChild(light);
+    const rig = { morph: null, index: null };
+    const asset = new pc.Asset('mesh', 'container', { url: URL.createObjectURL(new Blob([bytesOf('mesh-glb')])), filename: 'mesh.glb' });
+    asset.on('load', () => {
+      const entity = asset.resource.instantiateRenderEntity();
+      app.root.addChild(entity);
+      const instance = entity.findComponents('render').flatMap((r) => r.meshInstances).find((m) => m.morphInstance);
+      if (!instance) { window.headforge.error = 'mesh: the glTF has no morph targets'; return; }
+      rig.morph = instance.morphInstance;
+      const byName = new Map(instance.morphInstance.morph.targets.map((t, i) => [canonical(t.name), i]));
+      rig.index = names.map((name) => byName.get(canonical(name)));
+      place(window.headforge.weights, window.headforge.camFromHead);
+      // Drawn on PlayCanvas's next frame.
+      app.once('frameend', () => { window.headforge.mesh = 'drawn'; });
+    });
+    asset.on('error', (e) => { window.headforge.error = 'mesh: ' + e; });
+    app.assets.add(asset);
+    app.assets.load(asset);
+    // OpenCV's camera (x right, y down, looking along +z) as PlayCanvas's
+    // (looking along -z, y up): its axes in the head frame are R's rows.
+    const place = (weights, p) => {
+      const centre = [0, 1, 2].map((j) => -(p[j] * p[3] + p[4 + j] * p[7] + p[8 + j] * p[11]));
+      const m = new pc.Mat4();
+      m.data.set([p[0], p[1], p[2], 0, -p[4], -p[5], -p[6], 0, -p[8], -p[9], -p[10], 0, centre[0], centre[1], centre[2], 1]);
+      camera.setPosition(centre[0], centre[1], centre[2]);
+      camera.setRotation(new pc.Quat().setFromMat4(m));
+      if (rig.morph) rig.index.forEach((target, i) => { if (target !== undefined) rig.morph.setWeight(target, weights[i]); });
+    };
+    return { place };
+  })();
 
   // Frame rate over the last second of drawn frames.
   const stamps = [];
@@ -64,6 +125,7 @@
     const posed = pose(state.weights);
     const posedAt = performance.now();
     const times = renderer.draw(posed, opacities, state.camFromHead, data.camera);
+    if (mesh) mesh.place(state.weights, state.camFromHead);
     const now = performance.now();
     // Milliseconds of the last frame: the weighted sum, the Gaussians in the
     // camera's frame sorted by depth, and WebGL's drawing.

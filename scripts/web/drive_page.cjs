@@ -9,7 +9,8 @@
 //        [--weights JSON]                 pose by a script: {"jawOpen": 0.8, ...}
 //        [--compare REF.png --mask MASK.png [--min-psnr 28]]
 //        [--chromium /usr/bin/chromium]
-// Writes DIR/canvas.png (the canvas's pixels) and DIR/state.json (the mode,
+// Writes DIR/canvas.png (the canvas's pixels; DIR/mesh.png, the mesh
+// avatar's, where the page draws it) and DIR/state.json (the mode,
 // frame, frame rate, weights, the webcam's solves, console errors; with
 // --compare, the PSNR of the canvas against REF over MASK (resized to the
 // canvas, eroded by one pixel): `headforge render` of the same frame and
@@ -50,7 +51,8 @@ if (!args.page || !args.out) {
     const url = 'file://' + path.resolve(args.page) + (query.length ? '?' + query.join('&') : '');
     const started = Date.now();
     await page.goto(url, { waitUntil: 'load', timeout: 600000 });
-    await page.waitForFunction('window.done === true || window.headforge && window.headforge.error', { timeout: 600000 });
+    await page.waitForFunction('window.done === true && window.headforge.mesh !== "loading" || window.headforge && window.headforge.error',
+                               { timeout: 600000 });
     const loadSeconds = (Date.now() - started) / 1000;
     if (args.take) {
       const text = fs.readFileSync(args.take, 'utf8');
@@ -66,12 +68,18 @@ if (!args.page || !args.out) {
     }
     const state = await page.evaluate(() => {
       const h = window.headforge;
-      return { mode: h.mode, frame: h.frame, fps: h.fps, ms_pose: h.ms_pose, ms_sort: h.ms_sort, ms_gl: h.ms_gl, drawn: h.drawn, halfFloat: h.halfFloat, error: h.error,
+      return { mode: h.mode, mesh: h.mesh, frame: h.frame, fps: h.fps, ms_pose: h.ms_pose, ms_sort: h.ms_sort, ms_gl: h.ms_gl, drawn: h.drawn, halfFloat: h.halfFloat, error: h.error,
                unknown: h.unknown || [], lost_seconds: h.lost_seconds, weights: Array.from(h.weights), names: h.names,
                cam_from_head: Array.from(h.camFromHead), solves: h.solves };
     });
     const png = await page.evaluate(() => document.getElementById('view').toDataURL('image/png'));
     fs.writeFileSync(path.join(args.out, 'canvas.png'), Buffer.from(png.split(',')[1], 'base64'));
+    if (state.mesh === 'drawn') {
+      // PlayCanvas draws the mesh on its own frame: one more, after the last change.
+      await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+      const meshPng = await page.evaluate(() => document.getElementById('mesh-view').toDataURL('image/png'));
+      fs.writeFileSync(path.join(args.out, 'mesh.png'), Buffer.from(meshPng.split(',')[1], 'base64'));
+    }
     if (args.compare) {
       const dataUrl = (file) => 'data:image/png;base64,' + fs.readFileSync(file).toString('base64');
       state.compare = await page.evaluate(comparePixels, [png, dataUrl(args.compare), dataUrl(args.mask)]);

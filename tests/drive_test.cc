@@ -224,8 +224,8 @@ TEST_F(DrivePage, PlaysRecordedTakes) {
 
   // The CSV as Live Link Face writes it: ARKit's names (one browInnerUp and
   // one cheekPuff where the face model has a left and a right), the head's
-  // and eyes' angles, a blendshape the avatar lacks; row 1 is frame 110,
-  // row 2 has weights outside [0, 1].
+  // and eyes' angles, a blendshape the avatar lacks, one of the avatar's
+  // missing; row 1 is frame 110, row 2 has weights outside [0, 1].
   nlohmann::json tracking;
   ASSERT_TRUE(ReadJson(reference_ / "tracking.json", &tracking).ok());
   const auto& names = tracking["expression_names"];
@@ -245,8 +245,10 @@ TEST_F(DrivePage, PlaysRecordedTakes) {
         value = 0.5 * (w[base + "_L"].get<double>() + w[base + "_R"].get<double>());
         arkit = single;
       }
+    // A blendshape the take does not have stays 0.
+    if (name == "noseSneer_L") value = 0;
     expected[name] = value;
-    if (std::find(header.begin(), header.end(), arkit) != header.end()) continue;
+    if (name == "noseSneer_L" || std::find(header.begin(), header.end(), arkit) != header.end()) continue;
     header.push_back(arkit);
     row.push_back(value);
   }
@@ -281,27 +283,39 @@ TEST_F(DrivePage, PlaysRecordedTakes) {
     EXPECT_EQ(state["weights"][k].get<double>(), names[k] == "jawOpen" ? 1.0 : 0.0) << names[k];
 }
 
-// A fake webcam plays the capture's own frames (the first held for three
-// seconds: the page calibrates on it); the page's weights against the
-// simulator's truth, its head's turn against the truth's, its drawing of the
-// last frame against render's.
+// A fake webcam plays the capture's own frames (the first held for eight
+// seconds: the page calibrates on its first ten frames, which beside other
+// tests take it up to 5 s), then three seconds of black; the
+// page's weights against the simulator's truth, its head's turn against
+// the truth's, its drawing of the last frame against render's; in the
+// black the face is lost, and the avatar is back at its rest (the
+// capture's first expression and pose) when the face returns.
 TEST_F(DrivePage, TheWebcamDrivesIt) {
   ASSERT_EQ(exported_.code, 0) << exported_.err;
   const fs::path out = Scratch("drive_webcam");
   const std::string command =
       std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR + "/scripts/web/drive_webcam_check.cjs' --workspace '" +
-      reference_.string() + "' --out '" + out.string() + "' --seconds 25 --truth '" +
+      reference_.string() + "' --out '" + out.string() + "' --seconds 45 --hold 8 --truth '" +
       (SharedSimulation("talking_static", 125) / "ground_truth.json").string() + "' --headforge '" + HEADFORGE_BINARY +
-      "' --chromium '" + HEADFORGE_CHROMIUM + "' --max-weight-error 0.15 --max-rotation-deg 5 --min-psnr 20";
+      "' --chromium '" + HEADFORGE_CHROMIUM + "' --max-weight-error 0.15 --max-rotation-deg 5 --min-psnr 20 --blank 3";
   EXPECT_EQ(std::system(command.c_str()), 0) << command;
   nlohmann::json check;
   ASSERT_TRUE(ReadJson(out / "check.json", &check).ok());
   const nlohmann::json& s = check["summary"];
-  EXPECT_GE(s["compared"].get<int>(), 20);
+  // Beside other tests the page sees fewer frames (one in 3-15) and its pose
+  // is less steady: the bounds hold for that.
+  EXPECT_GE(s["compared"].get<int>(), 10);  // 18-95 when written
   for (const char* name : {"jawOpen", "eyeBlink_L", "eyeBlink_R"})
-    EXPECT_LT(s["mae_truth"][name].get<double>(), 0.15) << name;  // 0.07-0.09 when written (track: 0.02-0.08)
-  EXPECT_LT(s["turn_error_deg_median"]["page"].get<double>(), 4.0);  // 2.3 (track 1.1)
-  EXPECT_GT(s["psnr_last"].get<double>(), 20.0);                     // 20.7-28.5
+    EXPECT_LT(s["mae_truth"][name].get<double>(), 0.15) << name;  // 0.02-0.105 when written (track: 0.016-0.11)
+  EXPECT_LT(s["turn_error_deg_median"]["page"].get<double>(), 5.0);  // 1.3-3.5 (track 0.9-1.1)
+  EXPECT_GT(s["psnr_last"].get<double>(), 20.0);                     // 20.7-49.6
+  ASSERT_FALSE(s["lost_episodes"].empty());
+  const nlohmann::json& lost = s["lost_episodes"][0];
+  std::printf("face lost for %.1f s: the avatar %.4f from its rest when it returned\n", lost["seconds"].get<double>(),
+              lost["off_rest"].get<double>());
+  EXPECT_GT(lost["seconds"].get<double>(), 1.5);
+  EXPECT_LT(lost["off_rest"].get<double>(), 1e-6);
+  EXPECT_GT(s["solves"].get<int>(), lost["solves_before"].get<int>());  // found again after
 }
 #endif
 

@@ -52,7 +52,7 @@
   const firstPose = data.frames.length ? data.frames[0].cam_from_head : [1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1, 0.6];
   const state = {
     names, weights: new Float32Array(k), camFromHead: Float64Array.from(firstPose),
-    mode: 'take', frame: -1, fps: 0, drawn: 0, solves: [], lost_seconds: 0, error: null,
+    mode: 'take', frame: -1, fps: 0, drawn: 0, solves: [], lost_seconds: 0, lost_episodes: [], error: null,
     halfFloat: renderer.halfFloat,
     mesh: document.getElementById('mesh-glb') ? 'loading' : 'none',
   };
@@ -409,7 +409,7 @@
     await video.play();
     const grab = document.createElement('canvas');
     const context = grab.getContext('2d', { willReadFrequently: true });
-    let lostSince = null, calibrationDrawn = false;
+    let lostSince = null, calibrationDrawn = false, lostEpisode = null;
     while (!session.stop) {
       const w = video.videoWidth, h = video.videoHeight;
       if (!w || !h) { await new Promise((r) => setTimeout(r, 30)); continue; }
@@ -419,6 +419,7 @@
       const image = context.getImageData(0, 0, w, h);
       const start = performance.now();
       const found = await tracker.track(image);
+      if (session.stop) break;
       const now = performance.now();
       if (found.found) {
         const solved = solveFrame(session, found.points, scaledCamera(data.face.camera, w, h));
@@ -438,9 +439,18 @@
         session.previous = null;
         if (state.lost_seconds > 0.5) {
           const a = Math.min(1, (state.lost_seconds - 0.5) / 1.0);
-          for (let i = 0; i < k; ++i) state.weights[i] *= 1 - a;
-          for (let i = 0; i < 12; ++i) state.camFromHead[i] += (firstPose[i] - state.camFromHead[i]) * a;
+          for (let i = 0; i < k; ++i) state.weights[i] += (rest.weights[i] - state.weights[i]) * a;
+          for (let i = 0; i < 12; ++i) state.camFromHead[i] += (rest.pose[i] - state.camFromHead[i]) * a;
         }
+        // The episode as scripts see it: how long, and how far from rest the avatar still is.
+        let off = 0;
+        for (let i = 0; i < k; ++i) off = Math.max(off, Math.abs(state.weights[i] - rest.weights[i]));
+        for (let i = 0; i < 12; ++i) off = Math.max(off, Math.abs(state.camFromHead[i] - rest.pose[i]));
+        lostEpisode = { seconds: state.lost_seconds, off_rest: off, solves_before: state.solves.length };
+      }
+      if (found.found && lostEpisode) {
+        state.lost_episodes.push(lostEpisode);
+        lostEpisode = null;
       }
       // While calibrating the avatar holds its rest: drawn once.
       if (!(found.found && state.solves[state.solves.length - 1].calibrating && calibrationDrawn)) draw();

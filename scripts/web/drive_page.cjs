@@ -62,14 +62,22 @@ if (!args.page || !args.out) {
     if (args.webcam) {
       const seconds = Number(args.seconds || 20);
       await new Promise((r) => setTimeout(r, seconds * 1000));
-      await page.evaluate(() => window.headforge.stopWebcam());
+      // Stopped on a frame with the face found and solved (not in the middle
+      // of a loss, not calibrating), so the canvas shows that frame's solve.
+      await page.waitForFunction(() => {
+        const h = window.headforge, last = h.solves[h.solves.length - 1];
+        if (h.lost_seconds !== 0 || !last || last.calibrating) return false;
+        h.stopWebcam();
+        return true;
+      }, { timeout: 60000, polling: 'raf' }).catch(() => page.evaluate(() => window.headforge.stopWebcam()));
     } else if (!args.take && args.frame === undefined) {
       await new Promise((r) => setTimeout(r, 3000));  // a few frames of the looped take, for the frame rate
     }
     const state = await page.evaluate(() => {
       const h = window.headforge;
       return { mode: h.mode, mesh: h.mesh, frame: h.frame, fps: h.fps, ms_pose: h.ms_pose, ms_sort: h.ms_sort, ms_gl: h.ms_gl, drawn: h.drawn, halfFloat: h.halfFloat, error: h.error,
-               unknown: h.unknown || [], lost_seconds: h.lost_seconds, weights: Array.from(h.weights), names: h.names,
+               unknown: h.unknown || [], lost_seconds: h.lost_seconds, lost_episodes: h.lost_episodes,
+               weights: Array.from(h.weights), names: h.names,
                cam_from_head: Array.from(h.camFromHead), solves: h.solves };
     });
     const png = await page.evaluate(() => document.getElementById('view').toDataURL('image/png'));

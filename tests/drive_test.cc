@@ -209,6 +209,28 @@ TEST_F(DrivePage, TheMeshAvatarFollowsTheSameWeights) {
   EXPECT_EQ(states[1]["weights"][jaw], 1.0);
 }
 
+// blendshapes.glb (KHR_gaussian_splatting and 53 morph targets at weight 0)
+// drawn by PlayCanvas through frame 110's camera, against headforge render
+// of the blendshapes at the neutral expression (frame 110's weights set to 0
+// in a copy of the workspace): scripts/web/compare_splats.cjs.
+TEST_F(DrivePage, PlayCanvasDrawsTheBlendshapeGlbAtItsNeutralAsRenderDoes) {
+  ASSERT_EQ(exported_.code, 0) << exported_.err;
+  const fs::path ws = CopyOf(reference_, Scratch("drive_neutral"));
+  nlohmann::json tracking;
+  ASSERT_TRUE(ReadJson(ws / "tracking.json", &tracking).ok());
+  for (auto& f : tracking["frames"])
+    if (f["frame"] == 110)
+      for (auto& [name, weight] : f["expression"].items()) weight = 0.0;
+  ASSERT_TRUE(WriteJsonAtomic(ws / "tracking.json", tracking, 1).ok());
+  const fs::path shapes = ws / "export" / "blendshapes";
+  const std::string command = std::string("'") + HEADFORGE_NODE + "' '" + HEADFORGE_TEST_SOURCE_DIR +
+                              "/scripts/web/compare_splats.cjs' --workspace '" + ws.string() + "' --frame 110 --file '" +
+                              (shapes / "blendshapes.glb").string() + "' --model '" + shapes.string() +
+                              "' --size 128 --min-psnr 30 --headforge '" + HEADFORGE_BINARY + "' --chromium '" +
+                              HEADFORGE_CHROMIUM + "'";
+  EXPECT_EQ(std::system(command.c_str()), 0) << command;
+}
+
 // tracking.json and a Live Link Face CSV played back: frame k as render
 // --drive draws it (the take's expressions, the avatar's own first pose).
 TEST_F(DrivePage, PlaysRecordedTakes) {

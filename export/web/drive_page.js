@@ -68,6 +68,9 @@
     canvas.hidden = false;
     const app = new pc.Application(canvas, { graphicsDeviceOptions: { antialias: true, preserveDrawingBuffer: true } });
     app.setCanvasResolution(pc.RESOLUTION_FIXED, data.camera.width, data.camera.height);
+    // Drawn when the pose or the weights change, not every animation frame
+    // (in a software renderer that would take the time the face mesh needs).
+    app.autoRender = false;
     app.start();
     const camera = new pc.Entity('camera');
     camera.addComponent('camera', { clearColor: new pc.Color(data.background, data.background, data.background), nearClip: 0.01,
@@ -114,6 +117,7 @@
       camera.setPosition(centre[0], centre[1], centre[2]);
       camera.setRotation(new pc.Quat().setFromMat4(m));
       if (rig.morph) rig.index.forEach((target, i) => { if (target !== undefined) rig.morph.setWeight(target, weights[i]); });
+      app.renderNextFrame = true;
     };
     return { place };
   })();
@@ -354,7 +358,15 @@
   // from the pose held then and placed on the avatar's rest pose. So another
   // face, the face mesh's own placement of its points and another camera's
   // distance start the avatar where its capture started.
-  const solveFrame = (session, points, camera) => {
+  const solveFrame = (session, points, camera, at) => {
+    // The calibration's frames come from one still moment: frames grabbed
+    // (`at`) more than a second and a half apart start it again.
+    if (session.calibration.length && session.calibration.length < calibrationFrames &&
+        at - session.calibratedAt > 1500) {
+      session.calibration = [];
+      session.previous = null;
+    }
+    session.calibratedAt = at;
     if (session.calibration.length < calibrationFrames) {
       const guess = HeadforgeFaceDrive.solveFace(points, session.basis, camera, session.previous, { poseOnly: true });
       const fit = HeadforgeFaceDrive.solveFace(points, session.basis, camera,
@@ -399,6 +411,12 @@
     const model = await HeadforgeFaceDrive.loadFaceMesh(tf, JSON.parse(document.getElementById('facemesh-json').textContent),
                                                          bytesOf('facemesh-bin'));
     const tracker = new HeadforgeFaceDrive.FaceMeshTracker(tf, model);
+    // The network's first runs compile its programs (seconds in a software
+    // renderer): done before the camera starts, not on the calibration's frames.
+    const blank = { data: new Uint8ClampedArray(4 * 64 * 64), width: 64, height: 64 };
+    const squares = HeadforgeFaceDrive.searchRegions(64, 64);
+    await tracker.predict(blank, squares);
+    await tracker.predict(blank, squares.slice(0, 1));
     // The camera's own size: a size asked for may be cropped or scaled from
     // it, which the solve's camera (the capture's, at the frame's size) would not know.
     session.stream = await navigator.mediaDevices.getUserMedia({ video: true, audio: false });
@@ -407,6 +425,7 @@
     video.playsInline = true;
     video.srcObject = session.stream;
     await video.play();
+    state.stream_started = performance.now();
     const grab = document.createElement('canvas');
     const context = grab.getContext('2d', { willReadFrequently: true });
     let lostSince = null, calibrationDrawn = false, lostEpisode = null;
@@ -422,14 +441,14 @@
       if (session.stop) break;
       const now = performance.now();
       if (found.found) {
-        const solved = solveFrame(session, found.points, scaledCamera(data.face.camera, w, h));
+        const solved = solveFrame(session, found.points, scaledCamera(data.face.camera, w, h), start);
         lostSince = null;
         state.lost_seconds = 0;
         state.weights.set(solved.weights);
         state.camFromHead.set(solved.pose);
         state.solves.push({ thumb: thumbnail(image), weights: Array.from(solved.weights),
                             cam_from_head: Array.from(solved.pose), residual_px: solved.fit.residual_px,
-                            calibrating: solved.calibrating,
+                            calibrating: solved.calibrating, at: start,
                             ms_network: now - start, ms_solve: performance.now() - now });
         if (state.solves.length > 2000) state.solves.shift();
       } else {

@@ -6,7 +6,8 @@
 // (resized to --size, eroded by one pixel) and exits 1 below --min-psnr. The
 // check train_test runs on a simulated capture, for any workspace.
 //   node scripts/web/compare_splats.cjs --workspace WS --frame K --file WS/export/gaussians.glb
-//        [--size 128] [--min-psnr 30] [--headforge build/pipelines/headforge] [--chromium /usr/bin/chromium]
+//        [--size 128] [--min-psnr 30] [--model DIR (render's --model)] [--headforge build/pipelines/headforge]
+//        [--chromium /usr/bin/chromium]
 const fs = require('fs');
 const os = require('os');
 const path = require('path');
@@ -43,7 +44,8 @@ const query = `fx=${lens.fx * scale}&fy=${lens.fy * scale}&cx=${(lens.cx + 0.5) 
 
 const tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'hf_compare_'));
 execFileSync(headforge, ['render', '--workspace', ws, '--frames', String(frame), '--background', '0', '--resolution',
-                         String(size), '--out', path.join(tmp, 'render')], { stdio: ['ignore', 'ignore', 'inherit'] });
+                         String(size), '--out', path.join(tmp, 'render'), ...(args.model ? ['--model', args.model] : [])],
+             { stdio: ['ignore', 'ignore', 'inherit'] });
 const shot = path.join(tmp, 'playcanvas.png');
 execFileSync(process.execPath, [path.join(__dirname, 'screenshot.cjs'), '--page', 'splat_view.html', '--file', args.file,
                                 '--query', query, '--width', String(size), '--height', String(size), '--out', shot,

@@ -78,7 +78,7 @@ if (!args.page || !args.out) {
       return { mode: h.mode, mesh: h.mesh, frame: h.frame, fps: h.fps, ms_pose: h.ms_pose, ms_sort: h.ms_sort, ms_gl: h.ms_gl, drawn: h.drawn, halfFloat: h.halfFloat, error: h.error,
                unknown: h.unknown || [], lost_seconds: h.lost_seconds, lost_episodes: h.lost_episodes,
                weights: Array.from(h.weights), names: h.names,
-               cam_from_head: Array.from(h.camFromHead), solves: h.solves };
+               cam_from_head: Array.from(h.camFromHead), solves: h.solves, stream_started: h.stream_started };
     });
     const png = await page.evaluate(() => document.getElementById('view').toDataURL('image/png'));
     fs.writeFileSync(path.join(args.out, 'canvas.png'), Buffer.from(png.split(',')[1], 'base64'));

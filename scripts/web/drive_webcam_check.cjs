@@ -144,14 +144,26 @@ const watched = ['jawOpen', 'eyeBlink_L', 'eyeBlink_R'];
 // The page's poses are placed on the capture's frame 0 pose (its rest).
 const firstPoseOf = (b) => b.frames.find((f) => f.frame === 0).cam_from_head;
 const index = Object.fromEntries(state.names.map((n, i) => [n, i]));
+// The avatar's rest (its capture's first frame) and the driver's first frame.
+const rest = JSON.parse(fs.readFileSync(path.join(ws, 'tracking.json'))).frames[0].expression;
+const first = tracking.frames[0].expression;
 const rows = [];
 for (const solve of state.solves) {
   const m = match(solve.thumb);
   const f = tracked.get(m.frame);
-  // Frame 0 is the one the calibration saw (held at the start): not compared.
-  if (!f || solve.calibrating || m.frame === frameNumbers[0]) continue;
+  // The held first frame is what the calibration saw, and its thumbnail
+  // cannot tell it from the clip's next frames: solves made while the fake
+  // camera (looping the file in real time, 25 frames a second) was in the
+  // hold, or within 3 frames of it, are not compared.
+  const position = Math.floor((solve.at - state.stream_started) / 40) % (held + frameFiles.length + blankFrames);
+  if (!f || solve.calibrating || position < held + 3) continue;
   const errors = Object.fromEntries(watched.map((n) => [n, Math.abs(solve.weights[index[n]] - f.expression[n])]));
   const all = state.names.reduce((s, n, i) => s + Math.abs(solve.weights[i] - f.expression[n]), 0) / state.names.length;
+  // Changes since the first frame: the page's weights from the avatar's rest
+  // (where its calibration puts the driver's first frame) against track's
+  // from the driver's first frame; for another person, what carries over.
+  const relative = Object.fromEntries(watched.map((n) => [n, Math.abs((solve.weights[index[n]] - rest[n]) -
+                                                                      (f.expression[n] - first[n]))]));
   const t = truth ? truth[m.frame].expression : null;
   const truthErrors = t ? Object.fromEntries(watched.map((n) => [n, Math.abs(solve.weights[index[n]] - t[n])])) : null;
   const trackTruthErrors = t ? Object.fromEntries(watched.map((n) => [n, Math.abs(f.expression[n] - t[n])])) : null;
@@ -160,7 +172,7 @@ for (const solve of state.solves) {
   const pageTurn = turn(solve.cam_from_head, firstPoseOf(basis));
   const pageTurnError = t ? angleDeg(pageTurn, truthTurn) : null;
   const trackTurnError = t ? angleDeg(turn(poses.get(m.frame), poses.get(0)), truthTurn) : null;
-  rows.push({ frame: m.frame, match_distance: m.distance, errors, truth_errors: truthErrors,
+  rows.push({ frame: m.frame, match_distance: m.distance, errors, relative_errors: relative, truth_errors: truthErrors,
               track_truth_errors: trackTruthErrors, page_turn_error_deg: pageTurnError,
               track_turn_error_deg: trackTurnError, all,
               turn_vs_track_deg: angleDeg(pageTurn, turn(poses.get(m.frame), poses.get(0))),
@@ -174,6 +186,7 @@ const summary = {
   solves: state.solves.length, compared: rows.length, calibration: state.solves.filter((s) => s.calibrating).length,
   mae: Object.fromEntries(watched.map((n) => [n, mean(rows.map((r) => r.errors[n]))])),
   mae_all53: mean(rows.map((r) => r.all)),
+  mae_relative: Object.fromEntries(watched.map((n) => [n, mean(rows.map((r) => r.relative_errors[n]))])),
   mae_truth: truth ? Object.fromEntries(watched.map((n) => [n, mean(rows.map((r) => r.truth_errors[n]))])) : null,
   turn_error_deg_median: truth ? { page: median(rows.map((r) => r.page_turn_error_deg)),
                                     track: median(rows.map((r) => r.track_turn_error_deg)) } : null,
@@ -217,6 +230,8 @@ const summary = {
   console.log(`webcam solves: ${summary.solves} (${summary.calibration} calibrating), ${rows.length} matched to tracked frames`);
   console.log('mean absolute error against track: ' + watched.map((n) => `${n} ${summary.mae[n].toFixed(3)}`).join(', ') +
               `, all 53 ${summary.mae_all53.toFixed(3)}`);
+  console.log('the same as changes since the first frame: ' +
+              watched.map((n) => `${n} ${summary.mae_relative[n].toFixed(3)}`).join(', '));
   if (truth) {
     console.log('against the simulator\'s truth: the page ' + watched.map((n) => `${n} ${summary.mae_truth[n].toFixed(3)}`).join(', ') +
                 '; track ' + watched.map((n) => `${n} ${summary.mae_track_truth[n].toFixed(3)}`).join(', '));

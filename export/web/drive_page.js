@@ -186,14 +186,17 @@
       showTakeFrame(index);
       return;
     }
-    // Each drawn frame shows the take's frame whose time has come (frames
-    // are skipped when drawing is slower than the take).
+    // Each animation frame shows the take's frame whose time has come, posed
+    // and drawn only when that frame changes (frames are skipped when
+    // drawing is slower than the take).
     const session = {};
     playing = session;
     const started = performance.now();
+    let shown = -1;
     const next = () => {
       if (playing !== session) return;
-      showTakeFrame(Math.floor((performance.now() - started) / 1000 * data.fps) % take.length);
+      const index = Math.floor((performance.now() - started) / 1000 * data.fps) % take.length;
+      if (index !== shown) showTakeFrame((shown = index));
       requestAnimationFrame(next);
     };
     next();

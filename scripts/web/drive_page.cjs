@@ -24,6 +24,7 @@ for (let i = 2; i < process.argv.length; i += 2) args[process.argv[i].replace(/^
 const modules = path.join(__dirname, '..', '..', '.tools', 'node', 'node_modules');
 const puppeteer = require(path.join(modules, 'puppeteer-core'));
 const { comparePixels } = require('./compare_pixels.cjs');
+const { kChromiumFlags } = require('./chromium.cjs');
 if (!args.page || !args.out) {
   console.error('usage: drive_page.cjs --page drive/index.html --out DIR [--frame K] [--take FILE] [--webcam Y4M --seconds S]');
   process.exit(2);
@@ -31,9 +32,7 @@ if (!args.page || !args.out) {
 
 (async () => {
   fs.mkdirSync(args.out, { recursive: true });
-  const flags = ['--no-sandbox', '--disable-gpu-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
-                 '--disable-background-networking', '--disable-component-update', '--disable-sync', '--no-first-run',
-                 '--allow-file-access-from-files'];
+  const flags = [...kChromiumFlags, '--allow-file-access-from-files'];
   if (args.webcam)
     flags.push('--use-fake-ui-for-media-stream', '--use-fake-device-for-media-stream',
                '--use-file-for-fake-video-capture=' + path.resolve(args.webcam));

@@ -16,6 +16,7 @@ for (let i = 2; i < process.argv.length; i += 2) args[process.argv[i].replace(/^
 const root = path.join(__dirname, '..', '..');
 const modules = path.join(root, '.tools', 'node', 'node_modules');
 const puppeteer = require(path.join(modules, 'puppeteer-core'));
+const { kChromiumFlags } = require('./chromium.cjs');
 const types = { '.html': 'text/html', '.js': 'text/javascript', '.mjs': 'text/javascript', '.glb': 'model/gltf-binary',
                 '.json': 'application/json', '.wasm': 'application/wasm', '.ply': 'application/octet-stream' };
 
@@ -40,9 +41,7 @@ server.listen(0, '127.0.0.1', async () => {
   const browser = await puppeteer.launch({
     executablePath: args.chromium || '/usr/bin/chromium',
     headless: true,
-    args: ['--no-sandbox', '--disable-gpu-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
-           '--disable-background-networking', '--disable-component-update', '--disable-sync', '--no-first-run',
-           '--disable-quic'],
+    args: [...kChromiumFlags, '--disable-quic'],
   });
   const errors = [];
   let code = 0;

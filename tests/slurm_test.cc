@@ -266,6 +266,11 @@ TEST(Slurm, BatchOfCapturesRunsInOrderFailsAloneRequeuesAndSkipsWhatIsDone) {
     const std::string job = Output({"scontrol", "show", "job", train + "_2"});
     return job.find("JobState=PENDING") != std::string::npos && job.find("Restarts=1") != std::string::npos;
   }, std::chrono::seconds(60))) << Output({"scontrol", "show", "job", train + "_2"});
+  // The requeue revoked the job's credential as of its second; a launch with
+  // a credential made in that same second is refused ("Job credential
+  // revoked") and the job ends failed. Slurm's own hold keeps them apart by
+  // minutes; the release waits for the clock to pass that second.
+  std::this_thread::sleep_for(std::chrono::milliseconds(2100));
   Output({"scontrol", "update", "JobId=" + train + "_2", "StartTime=now"});
 
   const nlohmann::json status = Settled(root, std::chrono::seconds(300));
@@ -273,7 +278,8 @@ TEST(Slurm, BatchOfCapturesRunsInOrderFailsAloneRequeuesAndSkipsWhatIsDone) {
   std::printf("the batch (4 captures, 5 stages, one requeue) settled in %.1f s\n", batch_s);
   EXPECT_TRUE(status.value("failed", false));
   for (const std::string name : {"alpha", kOdd.c_str(), "slow"}) {
-    for (const auto& stage : kStages) EXPECT_EQ(States(status, name)[stage], "done") << name << " " << stage;
+    for (const auto& stage : kStages)
+      EXPECT_EQ(States(status, name)[stage], "done") << name << " " << stage;
     // Each stage started after the one before it finished.
     nlohmann::json ws;
     ASSERT_TRUE(ReadJson(root / name / "workspace.json", &ws).ok()) << name;
@@ -285,6 +291,9 @@ TEST(Slurm, BatchOfCapturesRunsInOrderFailsAloneRequeuesAndSkipsWhatIsDone) {
             << name << ": " << kStages[i] << " started before " << kStages[i - 1] << " finished";
       }
   }
+  if (::testing::Test::HasFailure())
+    std::printf("batch status: %s\nslurmctld.log:\n%s\n", status.dump(1).c_str(),
+                Slurp(dir / "cluster" / "slurmctld.log").c_str());
   const auto broken = States(status, "broken");
   EXPECT_EQ(broken.at("ingest"), "failed");
   for (size_t i = 1; i < kStages.size(); ++i) EXPECT_EQ(broken.at(kStages[i]), "cancelled") << kStages[i];

@@ -199,7 +199,7 @@ html, body { margin: 0; height: 100%; background: #292b30; color: #ddd; font: 13
 <div id="stage"><canvas id="view"></canvas><canvas id="mesh-view" hidden></canvas><div id="side">
 <button id="webcam">Drive from the webcam</button>
 <button id="replay">Play the capture's take</button>
-<label>Play a take (Live Link Face CSV or tracking.json): <input id="open" type="file" accept=".csv,.json"></label>
+<label>Play a take (Live Link Face CSV or tracking.json) or drive from a video of a face: <input id="open" type="file" accept=".csv,.json,video/*"></label>
 <div id="weights"></div></div></div>
 )";
   html += "<script id=\"drive-data\" type=\"application/json\">" + InlineScriptText(data.dump()) + "</script>\n";

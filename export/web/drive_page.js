@@ -7,6 +7,8 @@
 //   - the webcam (?drive=webcam or the button): MediaPipe's face mesh in the
 //     page (TensorFlow.js), the weights and pose solved against the face
 //     model's 468 points (face_drive.js);
+//   - a recorded video of a face (given to the page as a file): the same,
+//     every frame in turn, paced by the video's time;
 //   - a script: window.headforge.setWeights(...).
 // window.headforge exposes what is shown (weights, pose, frame rate) to
 // scripts; window.done is set once the first frame is drawn.
@@ -151,7 +153,7 @@
     panel.textContent = '';
     const head = document.createElement('div');
     head.textContent = state.mode + (state.frame >= 0 ? ' frame ' + state.frame : '') +
-                       (state.mode === 'webcam' && state.status ? ' (' + state.status + ')' : '') + ' · ' +
+                       ((state.mode === 'webcam' || state.mode === 'video') && state.status ? ' (' + state.status + ')' : '') + ' · ' +
                        state.fps.toFixed(1) + ' frames/s';
     panel.appendChild(head);
     for (const [w, i] of top) {
@@ -394,32 +396,105 @@
     }
     // The pull toward the previous frame weakens with the time since it
     // (a slow page sees frames far apart), and a stale start gets more steps.
-    const now = performance.now();
-    const scale = session.previous ? Math.min(1, 1000 / 30 / Math.max(1, now - session.previousAt)) : 1;
+    const scale = session.previous ? Math.min(1, 1000 / 30 / Math.max(1, at - session.previousAt)) : 1;
     const fit = solveLive(session, points, camera, session.previous, scale);
     session.previous = fit;
-    session.previousAt = now;
+    session.previousAt = at;
     return { weights: fit.weights, pose: session.toAvatar ? compose(poseOf(fit), session.toAvatar) : poseOf(fit), fit,
              calibrating: false };
   };
-  const startWebcam = async () => {
-    if (!data.face || typeof tf === 'undefined') throw new Error('this page has no face mesh model: export it with the vision models installed (scripts/install_deps.sh)');
-    stopWebcam();
-    playing = null;
-    state.mode = 'webcam';
-    state.frame = -1;
-    const session = { stop: false, basis: data.face, calibration: [], previous: null };
-    webcam = session;
-    state.recalibrate = () => { session.basis = data.face; session.calibration = []; session.previous = null; session.toAvatar = null; };
+  // The face mesh network, loaded once. Its first runs compile its programs
+  // (seconds in a software renderer): done before the first frame, not on
+  // the calibration's.
+  let trackerLoaded = null;
+  const loadTracker = () => trackerLoaded || (trackerLoaded = (async () => {
     const model = await HeadforgeFaceDrive.loadFaceMesh(tf, JSON.parse(document.getElementById('facemesh-json').textContent),
                                                          bytesOf('facemesh-bin'));
     const tracker = new HeadforgeFaceDrive.FaceMeshTracker(tf, model);
-    // The network's first runs compile its programs (seconds in a software
-    // renderer): done before the camera starts, not on the calibration's frames.
     const blank = { data: new Uint8ClampedArray(4 * 64 * 64), width: 64, height: 64 };
     const squares = HeadforgeFaceDrive.searchRegions(64, 64);
     await tracker.predict(blank, squares);
     await tracker.predict(blank, squares.slice(0, 1));
+    return tracker;
+  })());
+  // A driving session (the webcam's or a video's), reset by ?recalibrate.
+  const startSession = async (mode) => {
+    if (!data.face || typeof tf === 'undefined') throw new Error('this page has no face mesh model: export it with the vision models installed (scripts/install_deps.sh)');
+    stopWebcam();
+    playing = null;
+    state.mode = mode;
+    state.frame = -1;
+    state.solves = [];
+    state.lost_episodes = [];
+    state.error = null;
+    const session = { stop: false, basis: data.face, calibration: [], previous: null, lostSince: null,
+                      searchedAt: -Infinity, calibrationDrawn: false, lostEpisode: null };
+    webcam = session;
+    state.recalibrate = () => { session.basis = data.face; session.calibration = []; session.previous = null; session.toAvatar = null; };
+    session.tracker = await loadTracker();
+    session.tracker.reset();
+    return session;
+  };
+  // One frame of a session: the face found (while it is lost, searched for
+  // at most five times a second of the frames' time `at`, in ms), the
+  // weights and pose solved, the avatar drawn. `extra` goes into the solve's
+  // record (a video's frame number).
+  const driveImage = async (session, image, at, extra) => {
+    let found = { found: false };
+    const start = performance.now();
+    if (session.lostSince === null || at - session.searchedAt >= 200) {
+      if (session.lostSince !== null) session.searchedAt = at;
+      found = await session.tracker.track(image);
+    }
+    const now = performance.now();
+    if (found.found) {
+      const solved = solveFrame(session, found.points, scaledCamera(data.face.camera, image.width, image.height), at);
+      session.lostSince = null;
+      state.lost_seconds = 0;
+      state.weights.set(solved.weights);
+      state.camFromHead.set(solved.pose);
+      state.solves.push(Object.assign({ thumb: thumbnail(image), weights: Array.from(solved.weights),
+                                        cam_from_head: Array.from(solved.pose), residual_px: solved.fit.residual_px,
+                                        calibrating: solved.calibrating, at,
+                                        ms_network: now - start, ms_solve: performance.now() - now }, extra));
+      if (state.solves.length > 2000) state.solves.shift();
+    } else {
+      // Hold, then ease back to rest.
+      if (session.lostSince === null) session.lostSince = session.searchedAt = at;
+      state.lost_seconds = (at - session.lostSince) / 1000;
+      session.previous = null;
+      if (state.lost_seconds > 0.5) {
+        const a = Math.min(1, (state.lost_seconds - 0.5) / 1.0);
+        for (let i = 0; i < k; ++i) state.weights[i] += (rest.weights[i] - state.weights[i]) * a;
+        for (let i = 0; i < 12; ++i) state.camFromHead[i] += (rest.pose[i] - state.camFromHead[i]) * a;
+      }
+      // The episode as scripts see it: how long, and how far from rest the avatar still is.
+      let off = 0;
+      for (let i = 0; i < k; ++i) off = Math.max(off, Math.abs(state.weights[i] - rest.weights[i]));
+      for (let i = 0; i < 12; ++i) off = Math.max(off, Math.abs(state.camFromHead[i] - rest.pose[i]));
+      session.lostEpisode = { seconds: state.lost_seconds, off_rest: off, solves_before: state.solves.length };
+    }
+    if (found.found && session.lostEpisode) {
+      state.lost_episodes.push(session.lostEpisode);
+      session.lostEpisode = null;
+    }
+    // While calibrating the avatar holds its rest: drawn once.
+    const calibrating = found.found && state.solves[state.solves.length - 1].calibrating;
+    if (!(calibrating && session.calibrationDrawn)) draw();
+    session.calibrationDrawn = calibrating;
+  };
+  const grabber = () => {
+    const grab = document.createElement('canvas');
+    const context = grab.getContext('2d', { willReadFrequently: true });
+    return (video) => {
+      grab.width = video.videoWidth;
+      grab.height = video.videoHeight;
+      context.drawImage(video, 0, 0, grab.width, grab.height);
+      return context.getImageData(0, 0, grab.width, grab.height);
+    };
+  };
+  const startWebcam = async () => {
+    const session = await startSession('webcam');
     // The camera's own size: a size asked for may be cropped or scaled from
     // it, which the solve's camera (the capture's, at the frame's size) would not know.
     session.stream = await navigator.mediaDevices.getUserMedia({ video: true, audio: false });
@@ -429,56 +504,48 @@
     video.srcObject = session.stream;
     await video.play();
     state.stream_started = performance.now();
-    const grab = document.createElement('canvas');
-    const context = grab.getContext('2d', { willReadFrequently: true });
-    let lostSince = null, calibrationDrawn = false, lostEpisode = null;
+    const grab = grabber();
     while (!session.stop) {
-      const w = video.videoWidth, h = video.videoHeight;
-      if (!w || !h) { await new Promise((r) => setTimeout(r, 30)); continue; }
-      grab.width = w;
-      grab.height = h;
-      context.drawImage(video, 0, 0, w, h);
-      const image = context.getImageData(0, 0, w, h);
-      const start = performance.now();
-      const found = await tracker.track(image);
-      if (session.stop) break;
-      const now = performance.now();
-      if (found.found) {
-        const solved = solveFrame(session, found.points, scaledCamera(data.face.camera, w, h), start);
-        lostSince = null;
-        state.lost_seconds = 0;
-        state.weights.set(solved.weights);
-        state.camFromHead.set(solved.pose);
-        state.solves.push({ thumb: thumbnail(image), weights: Array.from(solved.weights),
-                            cam_from_head: Array.from(solved.pose), residual_px: solved.fit.residual_px,
-                            calibrating: solved.calibrating, at: start,
-                            ms_network: now - start, ms_solve: performance.now() - now });
-        if (state.solves.length > 2000) state.solves.shift();
-      } else {
-        // Hold, then ease back to rest.
-        if (lostSince === null) lostSince = now;
-        state.lost_seconds = (now - lostSince) / 1000;
-        session.previous = null;
-        if (state.lost_seconds > 0.5) {
-          const a = Math.min(1, (state.lost_seconds - 0.5) / 1.0);
-          for (let i = 0; i < k; ++i) state.weights[i] += (rest.weights[i] - state.weights[i]) * a;
-          for (let i = 0; i < 12; ++i) state.camFromHead[i] += (rest.pose[i] - state.camFromHead[i]) * a;
-        }
-        // The episode as scripts see it: how long, and how far from rest the avatar still is.
-        let off = 0;
-        for (let i = 0; i < k; ++i) off = Math.max(off, Math.abs(state.weights[i] - rest.weights[i]));
-        for (let i = 0; i < 12; ++i) off = Math.max(off, Math.abs(state.camFromHead[i] - rest.pose[i]));
-        lostEpisode = { seconds: state.lost_seconds, off_rest: off, solves_before: state.solves.length };
-      }
-      if (found.found && lostEpisode) {
-        state.lost_episodes.push(lostEpisode);
-        lostEpisode = null;
-      }
-      // While calibrating the avatar holds its rest: drawn once.
-      if (!(found.found && state.solves[state.solves.length - 1].calibrating && calibrationDrawn)) draw();
-      calibrationDrawn = found.found && state.solves[state.solves.length - 1].calibrating;
+      if (!video.videoWidth || !video.videoHeight) { await new Promise((r) => setTimeout(r, 30)); continue; }
+      const image = grab(video);
+      await driveImage(session, image, performance.now());
       await new Promise((r) => requestAnimationFrame(r));
     }
+  };
+  // A recorded video (a file the page is given) drives the avatar as the
+  // webcam does, every frame of it (sampled ?fps=N times a second of the
+  // video, 25) in turn, however long each takes: the video's time, not the
+  // clock's, paces the solve. state.video_frame and state.video_frames say
+  // how far it is; state.video_done when it has ended.
+  const startVideo = async (file) => {
+    const session = await startSession('video');
+    state.video_done = false;
+    const video = document.createElement('video');
+    video.muted = true;
+    video.preload = 'auto';
+    const url = URL.createObjectURL(file);
+    session.stream = { getTracks: () => [{ stop: () => URL.revokeObjectURL(url) }] };
+    await new Promise((resolve, reject) => {
+      video.onloadeddata = resolve;
+      video.onerror = () => reject(new Error('cannot decode ' + (file.name || 'the video') + ': ' +
+                                            (video.error ? video.error.message || 'code ' + video.error.code : 'unknown')));
+      video.src = url;
+    });
+    const fps = Number(params.get('fps') || 25);
+    const count = Math.max(1, Math.floor(video.duration * fps + 1e-6));
+    state.video_frames = count;
+    const grab = grabber();
+    for (let i = 0; i < count && !session.stop; ++i) {
+      await new Promise((resolve) => {
+        video.onseeked = resolve;
+        video.currentTime = i / fps + 0.002;  // the frame shown from that time on
+      });
+      state.video_frame = i;
+      state.status = 'frame ' + (i + 1) + ' of ' + count;
+      await driveImage(session, grab(video), 1000 * i / fps, { video_frame: i });
+    }
+    if (!session.stop) state.status = 'the video has ended';
+    state.video_done = true;
   };
   // The capture's camera at another image size (the webcam's): the same
   // field of view along the longer side, centred.
@@ -489,13 +556,20 @@
              cy: same ? (c.cy + 0.5) * s - 0.5 : (h - 1) / 2, width: w, height: h };
   };
   state.startWebcam = () => startWebcam().catch((e) => { state.error = String(e); console.error('drive: ' + e); });
+  state.startVideo = (file) => startVideo(file).catch((e) => {
+    state.error = String(e);
+    state.video_done = true;
+    console.error('drive: ' + e);
+  });
   state.stopWebcam = stopWebcam;
 
   document.getElementById('webcam').onclick = state.startWebcam;
   document.getElementById('replay').onclick = () => play(data.frames, 'the capture\'s take');
   document.getElementById('open').onchange = async (event) => {
     const file = event.target.files[0];
-    if (file) state.playTake(await file.text());
+    if (!file) return;
+    if (file.type.startsWith('video/') || /\.(webm|mp4|m4v|mov|mkv|ogv)$/i.test(file.name)) state.startVideo(file);
+    else state.playTake(await file.text());
   };
   if (!data.face || typeof tf === 'undefined') document.getElementById('webcam').disabled = true;
 

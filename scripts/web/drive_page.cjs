@@ -6,6 +6,7 @@
 //        [--frame K]                      hold frame K of the capture's take
 //        [--take FILE [--frame K]]        play a Live Link Face CSV or tracking.json (frame K held)
 //        [--webcam FILE.y4m --seconds S]  drive from a fake webcam fed from the file, for S seconds
+//        [--video FILE.webm [--fps N]]    drive from a recorded video (every frame, N a second), to its end
 //        [--weights JSON]                 pose by a script: {"jawOpen": 0.8, ...}
 //        [--compare REF.png --mask MASK.png [--min-psnr 28]]
 //        [--chromium /usr/bin/chromium]
@@ -26,7 +27,7 @@ const puppeteer = require(path.join(modules, 'puppeteer-core'));
 const { comparePixels } = require('./compare_pixels.cjs');
 const { kChromiumFlags } = require('./chromium.cjs');
 if (!args.page || !args.out) {
-  console.error('usage: drive_page.cjs --page drive/index.html --out DIR [--frame K] [--take FILE] [--webcam Y4M --seconds S]');
+  console.error('usage: drive_page.cjs --page drive/index.html --out DIR [--frame K] [--take FILE] [--webcam Y4M --seconds S] [--video WEBM --fps N]');
   process.exit(2);
 }
 
@@ -47,6 +48,7 @@ if (!args.page || !args.out) {
     const query = [];
     if (args.frame !== undefined && !args.take) query.push('frame=' + args.frame);
     if (args.webcam) query.push('drive=webcam');
+    if (args.video && args.fps) query.push('fps=' + args.fps);
     const url = 'file://' + path.resolve(args.page) + (query.length ? '?' + query.join('&') : '');
     const started = Date.now();
     await page.goto(url, { waitUntil: 'load', timeout: 600000 });
@@ -69,6 +71,11 @@ if (!args.page || !args.out) {
         h.stopWebcam();
         return true;
       }, { timeout: 60000, polling: 'raf' }).catch(() => page.evaluate(() => window.headforge.stopWebcam()));
+    } else if (args.video) {
+      // As a user gives it: the file chosen in the page's file input.
+      const input = await page.$('#open');
+      await input.uploadFile(path.resolve(args.video));
+      await page.waitForFunction(() => window.headforge.video_done === true, { timeout: 900000, polling: 500 });
     } else if (!args.take && args.frame === undefined) {
       await new Promise((r) => setTimeout(r, 3000));  // a few frames of the looped take, for the frame rate
     }
@@ -77,7 +84,8 @@ if (!args.page || !args.out) {
       return { mode: h.mode, mesh: h.mesh, frame: h.frame, fps: h.fps, ms_pose: h.ms_pose, ms_sort: h.ms_sort, ms_gl: h.ms_gl, drawn: h.drawn, halfFloat: h.halfFloat, error: h.error,
                unknown: h.unknown || [], lost_seconds: h.lost_seconds, lost_episodes: h.lost_episodes,
                weights: Array.from(h.weights), names: h.names,
-               cam_from_head: Array.from(h.camFromHead), solves: h.solves, stream_started: h.stream_started };
+               cam_from_head: Array.from(h.camFromHead), solves: h.solves, stream_started: h.stream_started,
+               video_frames: h.video_frames, status: h.status };
     });
     const png = await page.evaluate(() => document.getElementById('view').toDataURL('image/png'));
     fs.writeFileSync(path.join(args.out, 'canvas.png'), Buffer.from(png.split(',')[1], 'base64'));
@@ -98,7 +106,7 @@ if (!args.page || !args.out) {
     fs.writeFileSync(path.join(args.out, 'state.json'), JSON.stringify(state));
     console.log(`drive page: ${state.mode}, frame ${state.frame}, ${state.drawn} frames drawn, ` +
                 `${state.fps.toFixed(1)} frames/s (last frame: pose ${state.ms_pose.toFixed(1)} ms, sort ` +
-                `${state.ms_sort.toFixed(1)} ms, WebGL ${state.ms_gl.toFixed(1)} ms), ${state.solves.length} webcam solves, loaded in ${loadSeconds.toFixed(1)} s`);
+                `${state.ms_sort.toFixed(1)} ms, WebGL ${state.ms_gl.toFixed(1)} ms), ${state.solves.length} solves from a face, loaded in ${loadSeconds.toFixed(1)} s`);
     if (state.compare) {
       console.log(`drive page against ${path.basename(args.compare)}: ${state.compare.psnr.toFixed(2)} dB over ` +
                   `${state.compare.count} px of head`);

@@ -10,7 +10,12 @@
 //   node scripts/web/drive_webcam_check.cjs --workspace WS --out DIR [--seconds 30] [--hold 3] [--blank 0]
 //        [--max-weight-error 0.1] [--max-rotation-deg 3] [--min-psnr 28]
 //        [--driver WS2] [--truth ground_truth.json] [--headforge build/pipelines/headforge]
-//        [--chromium /usr/bin/chromium]
+//        [--chromium /usr/bin/chromium] [--video [--fps 12.5]]
+// --video: the frames go to the page as a recorded video (a WebM file given
+// to its file input) instead of a fake webcam: every frame is solved in
+// turn (sampled --fps a second), paced by the video's time, so the results
+// do not depend on how fast the machine is; --seconds does not apply, and
+// after --blank the first frame comes back for a second.
 // --driver: another tracked workspace's frames drive WS's page (another
 // person: the page's calibration makes the face its own); its weights and
 // its head's turn since the first frame are compared with that workspace's
@@ -25,7 +30,10 @@ const { execFileSync } = require('child_process');
 const { comparePixels } = require('./compare_pixels.cjs');
 
 const args = {};
-for (let i = 2; i < process.argv.length; i += 2) args[process.argv[i].replace(/^--/, '')] = process.argv[i + 1];
+for (let i = 2; i < process.argv.length; i += 2) {
+  if (process.argv[i] === '--video') { args.video = true; --i; continue; }
+  args[process.argv[i].replace(/^--/, '')] = process.argv[i + 1];
+}
 if (!args.workspace || !args.out) {
   console.error('usage: drive_webcam_check.cjs --workspace WS --out DIR [--seconds 30]');
   process.exit(2);
@@ -57,11 +65,19 @@ if (blankFrames > 0) {
                                         path.join(frameDir, frameFiles[0])]).toString().trim().replace(',', 'x');
   execFileSync('ffmpeg', ['-loglevel', 'error', '-y', '-f', 'lavfi', '-i', `color=black:s=${size}`, '-frames:v', '1', black]);
 }
+// A video's face comes back after the blank: its first frame, for a second.
+const returnFrames = args.video && blankFrames > 0 ? 25 : 0;
 [...Array(held).fill(path.resolve(frameDir, frameFiles[0])), ...frameFiles.map((f) => path.resolve(frameDir, f)),
- ...Array(blankFrames).fill(black)].forEach((f, i) =>
+ ...Array(blankFrames).fill(black), ...Array(returnFrames).fill(path.resolve(frameDir, frameFiles[0]))].forEach((f, i) =>
   fs.symlinkSync(f, path.join(sequence, String(i).padStart(6, '0') + '.png')));
 execFileSync('ffmpeg', ['-loglevel', 'error', '-y', '-framerate', '25', '-i', path.join(sequence, '%06d.png'),
                         '-pix_fmt', 'yuv420p', y4m]);
+// The same frames as a WebM (VP9, near lossless, a key frame every 5 frames
+// for the page's frame-by-frame seeks).
+const webm = path.join(out, 'face.webm');
+if (args.video)
+  execFileSync('ffmpeg', ['-loglevel', 'error', '-y', '-i', y4m, '-c:v', 'libvpx-vp9', '-crf', '4', '-b:v', '0',
+                          '-g', '5', '-deadline', 'good', '-cpu-used', '4', webm]);
 const probe = execFileSync('ffprobe', ['-v', 'error', '-select_streams', 'v:0', '-show_entries', 'stream=width,height',
                                        '-of', 'csv=p=0', y4m]).toString().trim().split(',').map(Number);
 const [width, height] = probe;
@@ -89,8 +105,10 @@ const frameNumbers = frameFiles.map((f) => Number(path.basename(f, '.png')));
 
 // The page, driven for --seconds.
 const page = path.join(ws, 'export', 'drive', 'index.html');
-execFileSync(process.execPath, [path.join(__dirname, 'drive_page.cjs'), '--page', page, '--out', out, '--webcam', y4m,
-                                '--seconds', String(args.seconds || 30),
+const fps = Number(args.fps || 12.5);
+execFileSync(process.execPath, [path.join(__dirname, 'drive_page.cjs'), '--page', page, '--out', out,
+                                ...(args.video ? ['--video', webm, '--fps', String(fps)]
+                                               : ['--webcam', y4m, '--seconds', String(args.seconds || 30)]),
                                 '--chromium', args.chromium || '/usr/bin/chromium'], { stdio: 'inherit' });
 const state = JSON.parse(fs.readFileSync(path.join(out, 'state.json')));
 const tracking = JSON.parse(fs.readFileSync(path.join(driver, 'tracking.json')));
@@ -125,6 +143,13 @@ const poses = new Map(tracking.frames.map((f) => {
   return [f.frame, pose];
 }));
 
+// A video's solve: its frame is known (the driver's clip frame at that
+// position of the sequence, the first frame again after the blank).
+const videoMatch = (solve) => {
+  const position = Math.round(solve.video_frame * 25 / fps);
+  const i = position < held ? 0 : position < held + frameFiles.length ? position - held : 0;
+  return { frame: frameNumbers[i], distance: 0, second: Infinity, position };
+};
 const match = (thumb) => {
   let best = -1, bestD = Infinity, second = Infinity;
   thumbs.forEach((t, i) => {
@@ -149,14 +174,15 @@ const rest = JSON.parse(fs.readFileSync(path.join(ws, 'tracking.json'))).frames[
 const first = tracking.frames[0].expression;
 const rows = [];
 for (const solve of state.solves) {
-  const m = match(solve.thumb);
+  const m = args.video ? videoMatch(solve) : match(solve.thumb);
   const f = tracked.get(m.frame);
   // The held first frame is what the calibration saw, and its thumbnail
   // cannot tell it from the clip's next frames: solves made while the fake
   // camera (looping the file in real time, 25 frames a second) was in the
-  // hold, or within 3 frames of it, are not compared.
-  const position = Math.floor((solve.at - state.stream_started) / 40) % (held + frameFiles.length + blankFrames);
-  if (!f || solve.calibrating || position < held + 3) continue;
+  // hold, or within 3 frames of it, are not compared (a video's, in the hold).
+  const position = args.video ? m.position
+                              : Math.floor((solve.at - state.stream_started) / 40) % (held + frameFiles.length + blankFrames);
+  if (!f || solve.calibrating || position < held + (args.video ? 0 : 3)) continue;
   const errors = Object.fromEntries(watched.map((n) => [n, Math.abs(solve.weights[index[n]] - f.expression[n])]));
   const all = state.names.reduce((s, n, i) => s + Math.abs(solve.weights[i] - f.expression[n]), 0) / state.names.length;
   // Changes since the first frame: the page's weights from the avatar's rest
@@ -196,13 +222,14 @@ const summary = {
   shift_mm_median: self ? median(rows.map((r) => r.shift_mm)) : null,
   ms_network_median: median(rows.map((r) => r.ms_network)), ms_solve_median: median(rows.map((r) => r.ms_solve)),
   match_distance_max: Math.max(...rows.map((r) => r.match_distance)),
-  fps: state.fps, user_agent: state.user_agent, lost_episodes: state.lost_episodes,
+  fps: state.fps, source: args.video ? 'video' : 'webcam', video_frames: state.video_frames, user_agent: state.user_agent, lost_episodes: state.lost_episodes,
 };
 
 // The last drawing (the page's canvas when it stopped) against headforge
 // render of the frame it showed.
 (async () => {
-  const last = state.solves.length ? match(state.solves[state.solves.length - 1].thumb).frame : -1;
+  const lastSolve = state.solves[state.solves.length - 1];
+  const last = !lastSolve ? -1 : args.video ? videoMatch(lastSolve).frame : match(lastSolve.thumb).frame;
   if (last >= 0 && self) {
     const renderDir = path.join(out, 'render');
     execFileSync(headforge, ['render', '--workspace', ws, '--model', path.join(ws, 'export', 'blendshapes'), '--frames',
@@ -227,7 +254,7 @@ const summary = {
   summary.bounds = bounds;
   summary.pass = pass;
   fs.writeFileSync(path.join(out, 'check.json'), JSON.stringify({ summary, rows }, null, 1));
-  console.log(`webcam solves: ${summary.solves} (${summary.calibration} calibrating), ${rows.length} matched to tracked frames`);
+  console.log(`${summary.source} solves: ${summary.solves} (${summary.calibration} calibrating), ${rows.length} matched to tracked frames`);
   console.log('mean absolute error against track: ' + watched.map((n) => `${n} ${summary.mae[n].toFixed(3)}`).join(', ') +
               `, all 53 ${summary.mae_all53.toFixed(3)}`);
   console.log('the same as changes since the first frame: ' +

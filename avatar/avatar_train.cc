@@ -6,8 +6,9 @@
 #include "avatar/gan_avatar/trainer.h"
 #include "avatar/gaussian_style/trainer.h"
 #include "avatar/model_table.h"
-#include "avatar/train/dataset_pack.h"
 #include "avatar/torch_runtime.h"
+#include "avatar/train/dataset_pack.h"
+#include "avatar/train/distributed.h"
 #include "avatar/train/loop.h"
 #include "capture/capture_io.h"
 #include "core/camera_set.h"
@@ -246,6 +247,12 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
                 const fs::path& out_dir, Progress* progress, TrainSummary* summary) {
   UseTensorThreads();
   HF_RETURN_IF_ERROR(options.Check());
+  // Ranks of torchrun's would each train the workspace alone, and meet at its lock.
+  if (DistributedSetup setup; ReadDistributedSetup("auto", &setup).ok() && setup.source == "torchrun" && setup.world > 1)
+    return Status::InvalidArgument(
+        "train: RANK and WORLD_SIZE=" + std::to_string(setup.world) + " ask for data-parallel training, which "
+        "headforge-train does on a training pack: headforge pack --workspace WS --out PACK, then every rank runs "
+        "headforge-train PACK --out DIR (docs/cluster.md); unset RANK and WORLD_SIZE to train here in one process");
   FaceModel model;
   HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
   TrainOptions resolved = options;

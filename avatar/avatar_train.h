@@ -23,6 +23,8 @@
 
 namespace headforge {
 
+class Collective;  // avatar/train/loop.h: the ranks of a data-parallel training
+
 // The training loop's length and cadence (avatar/train/loop.h's
 // LoopOptions, made by TrainLoopOptions in train_loop_options.h), every
 // model's and stage's alike.
@@ -76,6 +78,9 @@ struct TrainOptions {
   GaussianStyleTrainOptions gaussian_style;
   GanAvatarTrainOptions gan_avatar;
   int seed = 0;
+  // The ranks of a data-parallel training (avatar/train/distributed.h), not
+  // an option: set by the program that connected them. Null: one process.
+  Collective* collective = nullptr;
 
   // The mask `model` trains with under these options: ingest or mesh.
   std::string MaskFor(const AvatarModel& model_entry) const {
@@ -160,7 +165,10 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
 // on the workspace's machine.
 Status WriteTrainPack(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
                       const fs::path& pack);
+// With `collective` (several ranks, each running TrainFromPack on the same
+// pack and out_dir): the gaussian-style model's stages 1-2 are trained
+// data-parallel, and rank 0 alone writes out_dir and trains stage 3.
 Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& settings, const fs::path& out_dir,
-                     Progress* progress, TrainSummary* summary);
+                     Progress* progress, TrainSummary* summary, Collective* collective = nullptr);
 
 }  // namespace headforge

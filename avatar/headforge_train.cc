@@ -7,11 +7,13 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "avatar/avatar_train.h"
 #include "avatar/torch_runtime.h"
+#include "avatar/train/distributed.h"
 #include "core/interrupt.h"
 #include "core/parallel.h"
 #include "core/log.h"
@@ -42,6 +44,15 @@ void PrintHelp() {
       "                    train options with _ for -: decoder_steps=0, steps=20000)\n"
       "  --threads N       CPU threads for tensor work (default 0: $HEADFORGE_THREADS\n"
       "                    when set, else all)\n"
+      "  --distributed M   auto (default): under torchrun (RANK, WORLD_SIZE, MASTER_ADDR,\n"
+      "                    MASTER_PORT) or srun -n N (SLURM_PROCID, SLURM_NTASKS), train\n"
+      "                    the gaussian-style model's stages 1-2 data-parallel: each\n"
+      "                    rank its share of every step's views (views_per_step, one\n"
+      "                    per rank by default), the gradients summed over the ranks\n"
+      "                    (c10d, gloo); rank 0 writes DIR and trains stage 3. Every\n"
+      "                    rank is given the same PACK and DIR. off: one process.\n"
+      "  --distributed-timeout S  seconds to wait for the other ranks, at the start and\n"
+      "                    at each step, before failing (default 300)\n"
       "  --log-level L     debug, info (default), warning, error, silent\n");
 }
 
@@ -53,6 +64,8 @@ int main(int argc, char** argv) {
   std::string pack, out, level = "info";
   std::vector<std::string> settings;
   int threads = 0;
+  std::string distributed = "auto";
+  double timeout_s = 300;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     const auto value = [&](std::string* v) {
@@ -77,6 +90,18 @@ int main(int argc, char** argv) {
       char* end = nullptr;
       if (!value(&count) || (threads = int(std::strtol(count.c_str(), &end, 10)), *end != '\0') || threads < 0) {
         std::fprintf(stderr, "headforge-train: --threads takes a count >= 0 (0: all)\n");
+        return kExitUsage;
+      }
+    } else if (arg == "--distributed") {
+      if (!value(&distributed)) {
+        std::fprintf(stderr, "headforge-train: --distributed takes auto or off\n");
+        return kExitUsage;
+      }
+    } else if (arg == "--distributed-timeout") {
+      std::string text;
+      char* end = nullptr;
+      if (!value(&text) || text.empty() || (timeout_s = std::strtod(text.c_str(), &end)) <= 0 || *end != '\0') {
+        std::fprintf(stderr, "headforge-train: --distributed-timeout takes a number of seconds > 0\n");
         return kExitUsage;
       }
     } else if (arg == "--max-minutes") {
@@ -109,14 +134,31 @@ int main(int argc, char** argv) {
   }
   ConfigureTorchThreads(threads > 0 ? threads : DefaultThreads());
   KeepFreedTensorMemory();
+  DistributedSetup setup;
+  if (Status s = ReadDistributedSetup(distributed, &setup); !s.ok()) {
+    std::fprintf(stderr, "headforge-train: %s\n", s.message().c_str());
+    return kExitUsage;
+  }
+  std::unique_ptr<ProcessGroup> group;
+  if (setup.world > 1) {
+    HF_LOG(Info) << "headforge-train: rank " << setup.rank << " of " << setup.world << " (" << setup.source
+                 << "), meeting at " << setup.address << ":" << setup.port;
+    if (Status s = ProcessGroup::Connect(setup, timeout_s, &group); !s.ok()) {
+      std::fprintf(stderr, "headforge-train: %s\n", s.message().c_str());
+      return kExitFailure;
+    }
+  }
   InterruptScope interrupts;
   StderrProgress progress;
+  NullProgress quiet;  // ranks but 0 draw no progress bar
   TrainSummary summary;
-  const Status status = TrainFromPack(pack, settings, out, &progress, &summary);
+  const Status status =
+      TrainFromPack(pack, settings, out, setup.rank == 0 ? static_cast<Progress*>(&progress) : &quiet, &summary, group.get());
   if (!status.ok()) {
-    std::fprintf(stderr, "headforge-train: %s\n", status.message().c_str());
+    std::fprintf(stderr, "headforge-train: %s%s\n", setup.world > 1 ? ("rank " + std::to_string(setup.rank) + ": ").c_str() : "",
+                 status.message().c_str());
     return status.code() == Status::Code::kInvalidArgument ? kExitUsage : kExitFailure;
   }
-  HF_LOG(Info) << "headforge-train: " << summary.OneLine() << " -> " << out;
+  if (setup.rank == 0) HF_LOG(Info) << "headforge-train: " << summary.OneLine() << " -> " << out;
   return kExitOk;
 }

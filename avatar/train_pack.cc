@@ -53,7 +53,7 @@ Status ApplySettings(const std::vector<std::string>& settings, nlohmann::json* o
 }  // namespace
 
 Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& settings, const fs::path& out_dir,
-                     Progress* progress, TrainSummary* summary) {
+                     Progress* progress, TrainSummary* summary, Collective* collective) {
   UseTensorThreads();
   AvatarDataset data;
   nlohmann::json recorded;
@@ -61,6 +61,9 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
   TrainOptions options;
   try {
     nlohmann::json resolved = ToJson(TrainOptionsFromJson(recorded));
+    // Fields a record leaves out at their defaults can be set too.
+    nlohmann::json& style = resolved[std::string(kGaussianStyle.folder)];
+    if (style.is_object() && !style.contains("views_per_step")) style["views_per_step"] = 0;
     HF_RETURN_IF_ERROR(ApplySettings(settings, &resolved));
     options = TrainOptionsFromJson(resolved);
   } catch (const nlohmann::json::exception& e) {
@@ -86,7 +89,11 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
   if (!ImageFilesWritten())
     HF_LOG(Info) << "train: this build writes no images (previews, held_out/): headforge render --held-out "
                     "--side-by-side draws them once the model is in its workspace";
+  options.collective = collective;
   if (kGaussianStyle.Is(options.model)) return TrainGaussianStyleRun(options, data, out_dir, progress, summary);
+  if (collective != nullptr)
+    return Status::InvalidArgument("data-parallel training: the gan-avatar model trains in one process (it has no "
+                                   "ranks' share of views yet); run headforge-train once, or --distributed off");
   if (!options.gan_avatar.generator_from.empty())
     return Status::InvalidArgument("--set generator_from: a pack trains the GAN itself; --generator-from is headforge "
                                    "train's, on the workspace");

@@ -10,6 +10,8 @@ PACKAGES=(
   libopencv-dev libopencv-contrib-dev opencv-data
   libopenmesh-dev
   libtorch-dev
+  # gloo's headers: LibTorch's c10d ProcessGroupGloo (data-parallel training).
+  libgloo-dev
   libboost-program-options-dev libboost-filesystem-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libdlib-dev libdlib-data

@@ -12,7 +12,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(DecoderTrainOptions, decoder_ste
                                                 decoder_init)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(GaussianStyleTrainOptions, canonical_fraction, deform, mesh_riding,
                                                 region_weight, latent_dropout, ssim_weight, validation, patience,
-                                                pose_lr, init_gaussians, max_gaussians, densify_from, densify_until,
+                                                pose_lr, views_per_step, init_gaussians, max_gaussians, densify_from, densify_until,
                                                 densify_every, grad_threshold, lr_means, lr_quats, lr_scales,
                                                 lr_opacity, lr_features, decoder)
 
@@ -29,6 +29,8 @@ Status GaussianStyleTrainOptions::Check() const {
   if (!(region_weight >= 0) || !(ssim_weight >= 0 && ssim_weight <= 1))
     return Status::InvalidArgument("train: --region-weight must be >= 0 and --ssim-weight in [0, 1]");
   if (!(pose_lr >= 0)) return Status::InvalidArgument("train: --pose-lr must be zero or positive");
+  if (views_per_step < 0 || views_per_step > 64)
+    return Status::InvalidArgument("train: --views-per-step must be in [0, 64] (0: one per rank)");
   if (init_gaussians < 1 || max_gaussians < init_gaussians)
     return Status::InvalidArgument("train: --init-gaussians must be positive and at most --max-gaussians");
   if (densify_every < 1) return Status::InvalidArgument("train: --densify-every must be at least 1");
@@ -37,7 +39,13 @@ Status GaussianStyleTrainOptions::Check() const {
   return Status::Ok();
 }
 
-nlohmann::json ToJson(const GaussianStyleTrainOptions& options) { return options; }
+nlohmann::json ToJson(const GaussianStyleTrainOptions& options) {
+  nlohmann::json j = options;
+  // Left out at its default, so that the records (and the train stage's
+  // fingerprint) of runs that never set it stay as they were.
+  if (options.views_per_step == 0) j.erase("views_per_step");
+  return j;
+}
 
 void FromJson(const nlohmann::json& j, GaussianStyleTrainOptions* options) {
   *options = j.get<GaussianStyleTrainOptions>();

@@ -65,6 +65,9 @@ struct GaussianStyleTrainOptions {
   // pose (radians and metres), learnt with the avatar; 0 keeps the tracked
   // poses. Held-out views keep theirs.
   double pose_lr = 0;
+  // Training views per step, their losses averaged (0: one, or one per rank
+  // of a data-parallel training).
+  int views_per_step = 0;
   int init_gaussians = 20000;   // sampled on the tracked mesh
   int64_t max_gaussians = 40000;
   int densify_from = 300, densify_until = 3000, densify_every = 100;

@@ -35,6 +35,10 @@ void AddGaussianStyleOptions(OptionSet* o, GaussianStyleTrainOptions* g) {
          "metres), learnt with the avatar where the tracked poses are a little off; 0 keeps them. Held-out views "
          "keep their tracked poses.",
          "pose-lr");
+  o->Add("train.views_per_step", &g->views_per_step,
+         "gaussian-style: training views in each step of stages 1-2, their losses averaged (0: one, or one per rank "
+         "when headforge-train runs data-parallel under torchrun or srun: docs/cluster.md).",
+         "views-per-step");
   o->Add("train.init_gaussians", &g->init_gaussians, "Gaussians sampled on the tracked mesh to start with.",
          "init-gaussians");
   o->Add("train.max_gaussians", &g->max_gaussians, "Densification adds no more beyond this count.", "max-gaussians");

@@ -17,6 +17,7 @@
 #include "avatar/splat/splat_ops.h"
 #include "avatar/train/adam.h"
 #include "avatar/train/device.h"
+#include "avatar/train/distributed.h"
 #include "avatar/train/image_file.h"
 #include "avatar/train/loop.h"
 #include "avatar/train_loop_options.h"
@@ -56,6 +57,12 @@ class Trainer : public LoopTrainer {
  public:
   Trainer(const TrainOptions& options, const AvatarDataset& data, torch::Device device)
       : options_(options), data_(data), device_(device), gen_(at::detail::createCPUGenerator(options.seed)) {
+    group_ = dynamic_cast<ProcessGroup*>(options.collective);
+    if (group_) {
+      rank_ = group_->rank();
+      world_ = group_->world();
+    }
+    views_per_step_ = style_.views_per_step > 0 ? style_.views_per_step : world_;
     const int steps = options.loop.steps;
     const int canonical = style_.deform ? int(std::lround(style_.canonical_fraction * steps)) : steps;
     stage1_steps_ = std::clamp(canonical, 0, steps);
@@ -107,6 +114,10 @@ class Trainer : public LoopTrainer {
   double best_validation_ = -1;
   int best_validation_step_ = 0, since_best_ = 0;
   int stopped_at_ = 0;  // > 0: stopped there by --patience
+  // A data-parallel run's ranks (null: one process), this one's rank, and
+  // the training views of each step over all ranks.
+  ProcessGroup* group_ = nullptr;
+  int rank_ = 0, world_ = 1, views_per_step_ = 1;
 };
 
 Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
@@ -174,47 +185,83 @@ Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
 }
 
 void Trainer::Step(int step, RunningStats* stats) {
-  if (step == stage1_steps_ + 1 && style_.deform)
+  if (step == stage1_steps_ + 1 && style_.deform && rank_ == 0)
     HF_LOG(Info) << "train: stage 2 (deformation" << (style_.region_weight > 0 ? ", region loss" : "")
                  << ") from step " << step;
   const int64_t views = int64_t(usable_.size());
-  const int64_t slot = (step - 1) % views;
-  if (slot == 0) order_ = torch::randperm(views, gen_);
-  const int64_t index = usable_[size_t(order_[slot].item<int64_t>())];
-  const AvatarView& view = data_.train[size_t(index)];
   adam_.SetLr(0, lr_means_ * std::pow(0.01, double(step) / options_.loop.steps));
   const bool stage2 = deform_now(step);
-  // A random background each step: only the head may be opaque.
-  const torch::Tensor background = torch::rand({3}, gen_).to(device_);
-  // Frame 0's latent in place of the view's own, for --latent-dropout of them.
-  int64_t latent = view.frame;
-  if (stage2 && style_.latent_dropout > 0 && torch::rand({1}, gen_).item<double>() < style_.latent_dropout)
-    latent = 0;
-  PosedGaussians posed = avatar_.Pose(data_, view.condition, latent, stage2);
-  if (pose_corrections_.defined()) posed = CorrectPose(posed, pose_corrections_[index]);
-  const SplatRenderResult out = RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities,
-                                                posed.features.slice(1, 0, 3), background, view.view);
-  out.means2d.retain_grad();
-  const torch::Tensor& mask = masks_[size_t(index)];
-  const torch::Tensor target = images_[size_t(index)] * mask + background.view({3, 1, 1}) * (1 - mask);
-  const torch::Tensor l1 = (out.image - target).abs().mean();
-  torch::Tensor loss = (1 - style_.ssim_weight) * l1 + style_.ssim_weight * (1 - Ssim(out.image, target));
-  double region = 0;
-  if (stage2 && style_.region_weight > 0 && view.has_landmarks) {
-    const torch::Tensor r = (RegionCrops(out.image, view) - RegionCrops(target, view)).abs().mean();
-    loss = loss + style_.region_weight * r;
-    region = r.item<double>();
+  // The step's views continue the pass's seeded order; of several, rank r of
+  // a data-parallel run takes the r-th, (r + W)-th, ... Every rank draws
+  // every view's random numbers, so that their generators stay alike.
+  const int per_step = views_per_step_;
+  const double share = 1.0 / per_step;
+  double loss_sum = 0, l1_sum = 0, region_sum = 0;
+  for (int j = 0; j < per_step; ++j) {
+    const int64_t slot = ((int64_t(step) - 1) * per_step + j) % views;
+    if (slot == 0) order_ = torch::randperm(views, gen_);
+    const int64_t index = usable_[size_t(order_[slot].item<int64_t>())];
+    const AvatarView& view = data_.train[size_t(index)];
+    // A random background each step: only the head may be opaque.
+    const torch::Tensor background = torch::rand({3}, gen_).to(device_);
+    // Frame 0's latent in place of the view's own, for --latent-dropout of them.
+    int64_t latent = view.frame;
+    if (stage2 && style_.latent_dropout > 0 && torch::rand({1}, gen_).item<double>() < style_.latent_dropout)
+      latent = 0;
+    if (j % world_ != rank_) continue;
+    PosedGaussians posed = avatar_.Pose(data_, view.condition, latent, stage2);
+    if (pose_corrections_.defined()) posed = CorrectPose(posed, pose_corrections_[index]);
+    const SplatRenderResult out = RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities,
+                                                  posed.features.slice(1, 0, 3), background, view.view);
+    out.means2d.retain_grad();
+    const torch::Tensor& mask = masks_[size_t(index)];
+    const torch::Tensor target = images_[size_t(index)] * mask + background.view({3, 1, 1}) * (1 - mask);
+    const torch::Tensor l1 = (out.image - target).abs().mean();
+    torch::Tensor loss = (1 - style_.ssim_weight) * l1 + style_.ssim_weight * (1 - Ssim(out.image, target));
+    double region = 0;
+    if (stage2 && style_.region_weight > 0 && view.has_landmarks) {
+      const torch::Tensor r = (RegionCrops(out.image, view) - RegionCrops(target, view)).abs().mean();
+      loss = loss + style_.region_weight * r;
+      region = r.item<double>();
+    }
+    const double value = loss.item<double>();
+    loss_sum += value;
+    l1_sum += l1.item<double>();
+    region_sum += region;
+    if (!std::isfinite(value)) continue;
+    (per_step == 1 ? loss : loss * share).backward();
+    densify_->AfterBackward(out.means2d.grad(), out.radii, view.view.width, view.view.height);
   }
-  const double value = loss.item<double>();
-  stats->Add("loss", value);
-  if (!std::isfinite(value)) return;
-  loss.backward();
-  densify_->AfterBackward(out.means2d.grad(), out.radii, view.view.width, view.view.height);
+  if (group_) {
+    // Every rank's gradients and figures summed: a parameter no view of this
+    // rank reached takes part as zeros (its gradient is made where another
+    // rank's view reached it, as one process with all the views would).
+    std::vector<torch::Tensor*> params = adam_.Parameters();
+    torch::Tensor reached = torch::zeros({int64_t(params.size()) + 3}, torch::kFloat64);
+    for (size_t i = 0; i < params.size(); ++i) reached[int64_t(i)] = params[i]->grad().defined() ? 1.0 : 0.0;
+    reached[int64_t(params.size())] = loss_sum;
+    reached[int64_t(params.size()) + 1] = l1_sum;
+    reached[int64_t(params.size()) + 2] = region_sum;
+    group_->AllReduceSum({reached});
+    std::vector<torch::Tensor> grads;
+    for (size_t i = 0; i < params.size(); ++i) {
+      if (reached[int64_t(i)].item<double>() == 0) continue;
+      if (!params[i]->grad().defined()) params[i]->mutable_grad() = torch::zeros_like(*params[i]);
+      grads.push_back(params[i]->grad());
+    }
+    for (const torch::Tensor& t : densify_->StepStatistics(avatar_.gaussians.params.size(), device_)) grads.push_back(t);
+    group_->AllReduceSum(grads);
+    loss_sum = reached[int64_t(params.size())].item<double>();
+    l1_sum = reached[int64_t(params.size()) + 1].item<double>();
+    region_sum = reached[int64_t(params.size()) + 2].item<double>();
+  }
+  stats->Add("loss", loss_sum * share);
+  if (!std::isfinite(loss_sum)) return;
   adam_.Step();
   adam_.ZeroGrad();
   Densify(step);
-  stats->Add("l1", l1.item<double>());
-  stats->Add("region_l1", region);
+  stats->Add("l1", l1_sum * share);
+  stats->Add("region_l1", region_sum * share);
 }
 
 void Trainer::Describe(int step, nlohmann::json* line) {
@@ -364,6 +411,12 @@ Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, Stats
   // Without stage 3 after it, a run the time limit stopped keeps its
   // checkpoint with the model, for train --extend.
   loop.save_at_time_limit = style_.decoder.decoder_steps <= 0;
+  loop.collective = group_;
+  if (group_ && rank_ == 0)
+    HF_LOG(Info) << "train: data-parallel over " << world_ << " ranks, " << views_per_step_
+                 << " training views a step (rank r takes the r-th, (r + " << world_ << ")-th, ...)";
+  else if (!group_ && views_per_step_ > 1)
+    HF_LOG(Info) << "train: " << views_per_step_ << " training views a step";
   HF_RETURN_IF_ERROR(RunLoop(loop, this, &state_, stats, progress));
   progress->Finish(std::to_string(state_.step) + " steps, " + std::to_string(avatar_.gaussians.params.size()) +
                    " Gaussians");
@@ -553,8 +606,12 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& load
   const fs::path checkpoint = out_dir / "checkpoint.pt", decoder_checkpoint = out_dir / "decoder_checkpoint.pt";
   std::error_code ec;
   GaussianStyleAvatar avatar;
+  // A data-parallel run's ranks but rank 0 train stages 1-2 with it and
+  // write nothing: rank 0 writes the model and trains stage 3 alone.
+  const bool follower = options.collective != nullptr && options.collective->rank() != 0;
   // Stage 3 under way: stages 1-2 are in model.pt and eval_stage2.json.
   if (style.decoder.decoder_steps > 0 && fs::exists(decoder_checkpoint, ec) && !fs::exists(checkpoint, ec)) {
+    if (follower) return Status::Ok();
     HF_RETURN_IF_ERROR(LoadAvatar(out_dir, device, &avatar, nullptr));
     avatar.decoder = nullptr;
     if (style.mesh_riding) avatar.neutral = ComputeTriangleFrames(data.identity_vertices, data.triangles).To(device);
@@ -568,6 +625,11 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& load
     HF_RETURN_IF_ERROR(trainer.Start(checkpoint, stats));
     const int resumed_from = trainer.step();
     HF_RETURN_IF_ERROR(trainer.Train(out_dir, checkpoint, stats, progress));
+    if (follower) {
+      summary->steps = trainer.step();
+      summary->resumed_from = resumed_from;
+      return Status::Ok();
+    }
     HF_RETURN_IF_ERROR(trainer.Finish(out_dir, summary));
     summary->resumed_from = resumed_from;
     if (style.decoder.decoder_steps <= 0) {
@@ -603,10 +665,12 @@ Status TrainGaussianStyle(const TrainOptions& options, const AvatarDataset& load
 
 Status TrainGaussianStyleRun(const TrainOptions& options, const AvatarDataset& data, const fs::path& out_dir,
                              Progress* progress, TrainSummary* summary) {
-  StatsLog stats;
-  HF_RETURN_IF_ERROR(OpenTrainStats(out_dir, &stats));
+  StatsLog stats;  // a rank but 0's stays in memory
+  if (options.collective == nullptr || options.collective->rank() == 0)
+    HF_RETURN_IF_ERROR(OpenTrainStats(out_dir, &stats));
   *summary = TrainSummary();
   HF_RETURN_IF_ERROR(TrainGaussianStyle(options, data, out_dir, &stats, progress, summary));
+  if (options.collective != nullptr && options.collective->rank() != 0) return Status::Ok();
   summary->outputs = {"model.pt", "config.json", "stats.jsonl", "eval.json"};
   if (summary->extendable) summary->outputs.push_back("checkpoint.pt");
   std::error_code ec;

@@ -24,6 +24,12 @@ class Adam {
   size_t size() const { return slots_.size(); }
   void SetLr(size_t index, double lr) { slots_[index].lr = lr; }
   double lr(size_t index) const { return slots_[index].lr; }
+  // The parameters, in the order they were added.
+  std::vector<torch::Tensor*> Parameters() const {
+    std::vector<torch::Tensor*> out;
+    for (const Slot& s : slots_) out.push_back(s.param);
+    return out;
+  }
 
   void Step();
   void ZeroGrad();

@@ -18,23 +18,39 @@ class DefaultDensify : public DensifyStrategy {
     torch::NoGradGuard no_grad;
     const int64_t n = radii.size(0);
     const auto opts = means2d_grad.options().dtype(torch::kFloat64);  // on the Gaussians' device
-    if (!grad_sum_.defined() || grad_sum_.size(0) != n) {
-      grad_sum_ = torch::zeros({n}, opts);
-      seen_ = torch::zeros({n}, opts);
-    } else if (grad_sum_.device() != means2d_grad.device()) {  // restored from a checkpoint
-      grad_sum_ = grad_sum_.to(means2d_grad.device());
-      seen_ = seen_.to(means2d_grad.device());
-    }
+    StepStatistics(n, means2d_grad.device());
     // In units of half the image, as normalised device coordinates would be.
     const torch::Tensor g = means2d_grad.detach().to(torch::kFloat64) *
                             torch::tensor({0.5 * width, 0.5 * height}, opts);
     const torch::Tensor visible = radii > 0;
-    grad_sum_ += torch::where(visible, g.norm(2, 1), torch::zeros({1}, opts));
-    seen_ += visible.to(torch::kFloat64);
+    step_grad_ += torch::where(visible, g.norm(2, 1), torch::zeros({1}, opts));
+    step_seen_ += visible.to(torch::kFloat64);
+  }
+
+  std::vector<torch::Tensor> StepStatistics(int64_t n, torch::Device device) override {
+    if (!step_grad_.defined() || step_grad_.size(0) != n) {
+      const auto opts = torch::TensorOptions().dtype(torch::kFloat64).device(device);
+      step_grad_ = torch::zeros({n}, opts);
+      step_seen_ = torch::zeros({n}, opts);
+    }
+    return {step_grad_, step_seen_};
   }
 
   DensifyPlan AfterStep(int step, const GaussianParams& params) override {
     torch::NoGradGuard no_grad;
+    // The step's statistics into the running sums.
+    if (step_grad_.defined()) {
+      if (!grad_sum_.defined() || grad_sum_.size(0) != step_grad_.size(0)) {
+        grad_sum_ = torch::zeros_like(step_grad_);
+        seen_ = torch::zeros_like(step_grad_);
+      } else if (grad_sum_.device() != step_grad_.device()) {  // restored from a checkpoint
+        grad_sum_ = grad_sum_.to(step_grad_.device());
+        seen_ = seen_.to(step_grad_.device());
+      }
+      grad_sum_ += step_grad_;
+      seen_ += step_seen_;
+      step_grad_ = step_seen_ = torch::Tensor();
+    }
     DensifyPlan plan;
     const bool densify_now = step >= options_.start && step <= options_.stop &&
                              step % options_.interval == 0 && grad_sum_.defined() &&
@@ -129,6 +145,7 @@ class DefaultDensify : public DensifyStrategy {
   DefaultDensifyOptions options_;
   at::Generator generator_;
   torch::Tensor grad_sum_, seen_;  // [N] since the last densification
+  torch::Tensor step_grad_, step_seen_;  // [N] this step's, until AfterStep adds them
 };
 
 }  // namespace

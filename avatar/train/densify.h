@@ -9,6 +9,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "avatar/train/checkpoint.h"
 #include "avatar/train/splat_fit_options.h"
@@ -50,6 +51,11 @@ class DensifyStrategy {
   // (pixels) and `radii` [N] of the view just rendered, its size in pixels.
   virtual void AfterBackward(const torch::Tensor& means2d_grad, const torch::Tensor& radii,
                              int width, int height) = 0;
+  // The statistics AfterBackward gathered since the last AfterStep, `n`
+  // rows on `device` (zeros where it gathered none): a data-parallel step
+  // sums them over its ranks, in place, before AfterStep, so that every rank
+  // densifies alike.
+  virtual std::vector<torch::Tensor> StepStatistics(int64_t n, torch::Device device) = 0;
   // After the optimiser step `step` (counting from 1).
   virtual DensifyPlan AfterStep(int step, const GaussianParams& params) = 0;
   // Its running statistics and random state, under names starting `prefix`,

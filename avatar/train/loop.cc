@@ -82,6 +82,8 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
                Progress* progress) {
   const auto start = std::chrono::steady_clock::now();
   const double before = state->seconds;
+  Collective* const group = options.collective;
+  const bool writes = group == nullptr || group->rank() == 0;
   auto elapsed = [&] { return before + SecondsSince(start); };
   auto line_for = [&](int step) {
     nlohmann::json line = options.tags;
@@ -94,10 +96,11 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
     state->stats.TakeMeans(&line);
     trainer->Describe(step, &line);
     line["seconds"] = options.clock_offset + elapsed();
-    stats->Append(line.dump());
+    if (writes) stats->Append(line.dump());
   };
   // A checkpoint of where the loop stands now.
   auto save = [&] {
+    if (!writes) return Status::Ok();
     LoopState now = *state;
     now.seconds = elapsed();
     now.stats_lines = stats->size();
@@ -112,7 +115,13 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
   if (options.max_minutes > 0) progress->LimitTime(60.0 * options.max_minutes - before);
   for (int step = state->step + 1; step <= options.steps; ++step) {
     state->stats.ClearStep();
-    trainer->Step(step, &state->stats);
+    try {
+      trainer->Step(step, &state->stats);
+    } catch (const DistributedFailure& e) {
+      progress->Finish("failed");
+      state->seconds = elapsed();
+      return Status::IoError(options.label + ": step " + std::to_string(step) + ": " + e.what());
+    }
     if (!state->stats.non_finite().empty()) {
       progress->Finish("diverged");
       state->seconds = elapsed();
@@ -124,26 +133,52 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
       HF_LOG(Warning) << options.label << ": step " << step << ": " << warning;
       nlohmann::json line = line_for(step);
       line["warning"] = warning;
-      stats->Append(line.dump());
+      if (writes) stats->Append(line.dump());
     }
     state->step = step;
     progress->Advance();
-    const bool out_of_time = options.max_minutes > 0 && elapsed() > 60.0 * options.max_minutes;
+    bool out_of_time = options.max_minutes > 0 && elapsed() > 60.0 * options.max_minutes;
+    bool stop = InterruptRequested();
+    if (group) {
+      // One rank's time limit or stop is every rank's (rank 0's clock may
+      // cross the limit a step before another's).
+      std::vector<uint8_t> flags = {uint8_t(out_of_time), uint8_t(stop)};
+      if (Status s = group->AnyOf(&flags); !s.ok()) {
+        progress->Finish("failed");
+        state->seconds = elapsed();
+        return Status::IoError(options.label + ": step " + std::to_string(step) + ": " + s.message());
+      }
+      out_of_time = flags[0] != 0;
+      stop = flags[1] != 0;
+    }
     const bool last = step == options.steps || out_of_time;
     const bool boundary = trainer->Boundary(step);
     if (step % std::max(options.log_every, 1) == 0 || last || boundary) log_line(step);
-    if (!last && options.eval_every > 0 && step % options.eval_every == 0) {
+    if (writes && !last && options.eval_every > 0 && step % options.eval_every == 0) {
       nlohmann::json line = line_for(step);
       if (trainer->Evaluate(step, &line)) {
         line["seconds"] = options.clock_offset + elapsed();
         stats->Append(line.dump());
       }
     }
-    if (boundary || (options.preview_every > 0 && step % options.preview_every == 0))
+    if (writes && (boundary || (options.preview_every > 0 && step % options.preview_every == 0)))
       HF_RETURN_IF_ERROR(trainer->Preview(step));
-    if (std::string why; !last && trainer->Done(step, &why)) {
+    std::string why;
+    bool done = !last && writes && trainer->Done(step, &why);
+    if (group && !last) {
+      // Done() follows rank 0's evaluations: its answer goes to every rank.
+      std::vector<uint8_t> flags = {uint8_t(done)};
+      if (Status s = group->AnyOf(&flags); !s.ok()) {
+        progress->Finish("failed");
+        state->seconds = elapsed();
+        return Status::IoError(options.label + ": step " + std::to_string(step) + ": " + s.message());
+      }
+      done = flags[0] != 0;
+    }
+    if (done) {
       if (!state->stats.empty()) log_line(step);
-      HF_LOG(Info) << options.label << ": stopped at step " << step << " of " << options.steps << ": " << why;
+      if (writes)
+        HF_LOG(Info) << options.label << ": stopped at step " << step << " of " << options.steps << ": " << why;
       break;
     }
     if (out_of_time) {
@@ -153,7 +188,6 @@ Status RunLoop(const LoopOptions& options, LoopTrainer* trainer, LoopState* stat
       if (options.save_at_time_limit && step < options.steps) HF_RETURN_IF_ERROR(save());
       break;
     }
-    const bool stop = InterruptRequested();
     if (options.checkpoint_every > 0 && !last && (stop || step % options.checkpoint_every == 0))
       HF_RETURN_IF_ERROR(save());
     if (stop) {

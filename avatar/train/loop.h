@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -58,6 +59,24 @@ class RunningStats {
   double non_finite_value_ = 0;
 };
 
+// The processes of one data-parallel training (avatar/train/distributed.h),
+// as the loop sees them: rank 0 logs, evaluates, previews and saves; every
+// rank stops where any one of them stops.
+class Collective {
+ public:
+  virtual ~Collective() = default;
+  virtual int rank() const = 0;
+  virtual int world() const = 0;
+  // Each flag OR-ed over every rank, in place.
+  virtual Status AnyOf(std::vector<uint8_t>* flags) = 0;
+};
+
+// Thrown by a trainer's step whose collective operation failed (a rank that
+// has gone): the loop ends the run with its message.
+struct DistributedFailure : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 // Where a loop stands: saved in its trainer's checkpoint and read back on resume.
 struct LoopState {
   int step = 0;         // steps done
@@ -87,6 +106,10 @@ struct LoopOptions {
   int eval_every = 0;         // 0: none inside the loop
   int preview_every = 0;      // 0: none
   int checkpoint_every = 0;   // 0: no checkpoint (an interrupt loses the loop's progress)
+  // Several processes training one model: rank 0 alone writes (log lines,
+  // evaluations, previews, checkpoints); a stop, a time limit or the
+  // trainer's Done() on any rank ends the step on every rank. Null: one process.
+  Collective* collective = nullptr;
   // What an interrupt's message tells the user to do.
   std::string resume_hint = "the checkpoint is saved: run the same command again to resume";
 };

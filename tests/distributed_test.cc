@@ -1,0 +1,167 @@
+// Data-parallel training: headforge-train run as two ranks on this machine,
+// each spawned as its own process with torchrun's variables (RANK,
+// WORLD_SIZE, MASTER_ADDR, MASTER_PORT), on a training pack of the tracked
+// capture. Two ranks with one view each per step train the model one
+// process trains with both views per step, to the byte; a stop on one rank
+// stops both at one step and the pair resumes to that same model; a rank
+// that dies fails the other within its timeout.
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "tests/train_fixture.h"
+
+namespace headforge {
+namespace {
+
+int FreePort() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t size = sizeof(address);
+  int port = 0;
+  if (::bind(fd, reinterpret_cast<sockaddr*>(&address), size) == 0 &&
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size) == 0)
+    port = ntohs(address.sin_port);
+  ::close(fd);
+  return port;
+}
+
+// The run's exit code (128 + the signal that ended it).
+int Wait(pid_t pid) {
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+class DataParallel : public ::testing::Test {
+ protected:
+  // A pack of the tracked capture at 48 px: 40 steps of stages 1-2 (half
+  // each), densification at steps 10, 20 and 30, a checkpoint every 5 steps;
+  // then the two runs every test compares with.
+  static void SetUpTestSuite() {
+    dir_ = Scratch("data_parallel");
+    pack_ = dir_ / "talking.pack";
+    packed_ = Headforge({"pack", "--workspace", TrackedTalkingStatic().string(), "--out", pack_.string(),
+                         "--train-size", "48", "--steps", "40", "--canonical-fraction", "0.5", "--init-gaussians",
+                         "1500", "--max-gaussians", "2500", "--densify-from", "10", "--densify-every", "10",
+                         "--densify-until", "30", "--eval-every", "0", "--preview-every", "0", "--log-every", "5",
+                         "--checkpoint-every", "5", "--max-minutes", "0", "--decoder-steps", "0"});
+    if (packed_.code != 0) return;
+    one_ = Headforge({pack_.string(), "--out", (dir_ / "one").string(), "--threads", "1", "--set", "views_per_step=2"},
+                     HEADFORGE_TRAIN_BINARY);
+    two_ = RunRanks(dir_ / "two");
+  }
+
+  // Rank `rank` of two (`out` beside its log), started now.
+  static pid_t StartRank(int rank, int port, const fs::path& out, const std::vector<std::string>& extra = {}) {
+    std::vector<std::string> args = {"RANK=" + std::to_string(rank), "WORLD_SIZE=2", "MASTER_ADDR=127.0.0.1",
+                                     "MASTER_PORT=" + std::to_string(port), HEADFORGE_TRAIN_BINARY, pack_.string(),
+                                     "--out", out.string(), "--threads", "1", "--distributed-timeout", "60"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const fs::path log = out.string() + ".rank" + std::to_string(rank) + ".log";
+    return Spawn(args, log, log, "/usr/bin/env");
+  }
+  static std::string Log(const fs::path& out, int rank) {
+    return Slurp(out.string() + ".rank" + std::to_string(rank) + ".log");
+  }
+  // Both ranks to the end; their exit codes.
+  static std::pair<int, int> RunRanks(const fs::path& out) {
+    const int port = FreePort();
+    const pid_t zero = StartRank(0, port, out), one = StartRank(1, port, out);
+    const int code_one = Wait(one);
+    return {Wait(zero), code_one};
+  }
+
+  inline static fs::path dir_, pack_;
+  inline static Result packed_, one_;
+  inline static std::pair<int, int> two_;
+};
+
+TEST_F(DataParallel, TwoRanksTrainTheModelOneProcessTrainsWithBothViewsAStep) {
+  ASSERT_EQ(packed_.code, 0) << packed_.err;
+  ASSERT_EQ(one_.code, 0) << one_.err;
+  const fs::path two = dir_ / "two";
+  ASSERT_EQ(two_.first, 0) << Log(two, 0);
+  ASSERT_EQ(two_.second, 0) << Log(two, 1);
+  EXPECT_NE(Log(two, 0).find("data-parallel over 2 ranks, 2 training views a step"), std::string::npos) << Log(two, 0);
+  // Rank 0 wrote the model; both ranks' gradients went into every step: the
+  // same bytes as one process taking both views (the sum of two numbers is
+  // the same whichever rank holds which), densification included.
+  EXPECT_EQ(FileHash(two / "model.pt"), FileHash(dir_ / "one" / "model.pt"));
+  const std::vector<nlohmann::json> stats = StatsLines(two / "stats.jsonl");
+  const std::vector<nlohmann::json> expected = StatsLines(dir_ / "one" / "stats.jsonl");
+  ASSERT_EQ(stats.size(), expected.size());
+  ASSERT_GE(stats.size(), 8u);
+  for (size_t i = 0; i < stats.size(); ++i) {
+    EXPECT_EQ(stats[i]["loss"], expected[i]["loss"]) << i;
+    EXPECT_EQ(stats[i]["gaussians"], expected[i]["gaussians"]) << i;
+  }
+  EXPECT_NE(stats.front()["gaussians"], stats.back()["gaussians"]);  // densification ran
+  nlohmann::json eval, expected_eval;
+  ASSERT_TRUE(ReadJson(two / "eval.json", &eval).ok());
+  ASSERT_TRUE(ReadJson(dir_ / "one" / "eval.json", &expected_eval).ok());
+  EXPECT_EQ(eval["mean"]["psnr_masked"], expected_eval["mean"]["psnr_masked"]);
+  // One view a step trains another model: the comparison can tell.
+  const Result single = Headforge({pack_.string(), "--out", (dir_ / "single").string(), "--threads", "1"},
+                                  HEADFORGE_TRAIN_BINARY);
+  ASSERT_EQ(single.code, 0) << single.err;
+  EXPECT_NE(FileHash(dir_ / "single" / "model.pt"), FileHash(two / "model.pt"));
+}
+
+TEST_F(DataParallel, AStopOnOneRankStopsBothAtOneStepAndThePairResumes) {
+  ASSERT_EQ(packed_.code, 0) << packed_.err;
+  ASSERT_EQ(two_.first, 0) << Log(dir_ / "two", 0);
+  const fs::path out = dir_ / "stopped";
+  const int port = FreePort();
+  const pid_t zero = StartRank(0, port, out), one = StartRank(1, port, out);
+  // SIGTERM to rank 1 once rank 0 has saved its first checkpoint.
+  int status = 0;
+  const bool signalled = SignalWhen(one, SIGTERM, [&] { return fs::exists(out / "checkpoint.pt"); },
+                                    std::chrono::seconds(120), &status, std::chrono::milliseconds(20));
+  const int code_zero = Wait(zero);
+  ASSERT_TRUE(signalled) << "rank 1 ended before the first checkpoint:\n" << Log(out, 1);
+  EXPECT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 1) << Log(out, 1);
+  EXPECT_EQ(code_zero, 1) << Log(out, 0);
+  const std::string said = "training stopped at step ";
+  const size_t at0 = Log(out, 0).find(said), at1 = Log(out, 1).find(said);
+  ASSERT_NE(at0, std::string::npos) << Log(out, 0);
+  ASSERT_NE(at1, std::string::npos) << Log(out, 1);
+  const int step0 = std::atoi(Log(out, 0).c_str() + at0 + said.size());
+  EXPECT_EQ(step0, std::atoi(Log(out, 1).c_str() + at1 + said.size()));  // both at one step
+  EXPECT_LT(step0, 40);
+  std::printf("rank 1 stopped by SIGTERM: both ranks stopped at step %d\n", step0);
+  // Run again, both resume from rank 0's checkpoint and end where the
+  // uninterrupted pair did.
+  const auto [again0, again1] = RunRanks(out);
+  ASSERT_EQ(again0, 0) << Log(out, 0);
+  ASSERT_EQ(again1, 0) << Log(out, 1);
+  EXPECT_NE(Log(out, 1).find("resuming from the checkpoint at step " + std::to_string(step0)), std::string::npos)
+      << Log(out, 1);
+  EXPECT_EQ(FileHash(out / "model.pt"), FileHash(dir_ / "two" / "model.pt"));
+}
+
+TEST_F(DataParallel, ARankThatDiesFailsTheOtherWithinItsTimeout) {
+  ASSERT_EQ(packed_.code, 0) << packed_.err;
+  const fs::path out = dir_ / "killed";
+  const int port = FreePort();
+  const pid_t zero = StartRank(0, port, out), one = StartRank(1, port, out);
+  int status = 0;
+  ASSERT_TRUE(SignalWhen(one, SIGKILL, [&] { return fs::exists(out / "checkpoint.pt"); }, std::chrono::seconds(120),
+                         &status, std::chrono::milliseconds(20)))
+      << Log(out, 1);
+  const auto killed = std::chrono::steady_clock::now();
+  const int code = Wait(zero);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - killed).count();
+  std::printf("rank 1 killed: rank 0 failed %.1f s later\n", seconds);
+  EXPECT_EQ(code, 1) << Log(out, 0);
+  EXPECT_LT(seconds, 60 + 15);  // --distributed-timeout 60
+  EXPECT_NE(Log(out, 0).find("another rank has gone"), std::string::npos) << Log(out, 0);
+}
+
+}  // namespace
+}  // namespace headforge

@@ -5,30 +5,14 @@
 // process trains with both views per step, to the byte; a stop on one rank
 // stops both at one step and the pair resumes to that same model; a rank
 // that dies fails the other within its timeout.
-#include <netinet/in.h>
 #include <signal.h>
-#include <sys/socket.h>
 #include <sys/wait.h>
-#include <unistd.h>
 
+#include "tests/free_port.h"
 #include "tests/train_fixture.h"
 
 namespace headforge {
 namespace {
-
-int FreePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t size = sizeof(address);
-  int port = 0;
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&address), size) == 0 &&
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size) == 0)
-    port = ntohs(address.sin_port);
-  ::close(fd);
-  return port;
-}
 
 // The run's exit code (128 + the signal that ended it).
 int Wait(pid_t pid) {

@@ -25,6 +25,7 @@
 
 #include "core/json_io.h"
 #include "core/process.h"
+#include "tests/free_port.h"
 #include "tests/run_headforge.h"
 #include "tests/shared_workspace.h"
 
@@ -50,21 +51,6 @@ std::string Output(const std::vector<std::string>& args, int* code = nullptr) {
   std::string text = Slurp(log);
   fs::remove(log);
   return s.ok() ? text : s.message();
-}
-
-int FreePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t size = sizeof(address);
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&address), size) != 0 ||
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size) != 0) {
-    ::close(fd);
-    return 0;
-  }
-  ::close(fd);
-  return ntohs(address.sin_port);
 }
 
 // Polls `done` every `every` until it holds or `limit` passes.

@@ -4,13 +4,13 @@
 #include "avatar/train/distributed.h"
 
 #include <gtest/gtest.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
 #include <torch/torch.h>
-#include <unistd.h>
 
 #include <cstdlib>
+#include <optional>
 #include <thread>
+
+#include "tests/free_port.h"
 
 namespace headforge {
 namespace {
@@ -101,20 +101,6 @@ TEST(DistributedSetup, TorchrunsAndSlurmsVariablesNameTheRanks) {
     EXPECT_NE(status.message().find(named), std::string::npos) << status.message();
   }
   EXPECT_NE(ReadDistributedSetup("on", &s).message().find("auto or off"), std::string::npos);
-}
-
-int FreePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t size = sizeof(address);
-  int port = 0;
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&address), size) == 0 &&
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size) == 0)
-    port = ntohs(address.sin_port);
-  ::close(fd);
-  return port;
 }
 
 #ifdef HEADFORGE_WITH_GLOO

@@ -52,7 +52,9 @@ void PrintHelp() {
       "                    (c10d, gloo); rank 0 writes DIR and trains stage 3. Every\n"
       "                    rank is given the same PACK and DIR. off: one process.\n"
       "  --distributed-timeout S  seconds to wait for the other ranks, at the start and\n"
-      "                    at each step, before failing (default 300)\n"
+      "                    at each step, before failing (default 1800: the others wait\n"
+      "                    within it while rank 0 evaluates and saves; a rank that dies\n"
+      "                    fails the others at once)\n"
       "  --log-level L     debug, info (default), warning, error, silent\n");
 }
 
@@ -65,7 +67,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> settings;
   int threads = 0;
   std::string distributed = "auto";
-  double timeout_s = 300;
+  double timeout_s = 1800;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     const auto value = [&](std::string* v) {

@@ -62,8 +62,9 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
   try {
     nlohmann::json resolved = ToJson(TrainOptionsFromJson(recorded));
     // Fields a record leaves out at their defaults can be set too.
-    nlohmann::json& style = resolved[std::string(kGaussianStyle.folder)];
-    if (style.is_object() && !style.contains("views_per_step")) style["views_per_step"] = 0;
+    if (const auto style = resolved.find(std::string(kGaussianStyle.folder));
+        style != resolved.end() && style->is_object() && !style->contains("views_per_step"))
+      (*style)["views_per_step"] = 0;
     HF_RETURN_IF_ERROR(ApplySettings(settings, &resolved));
     options = TrainOptionsFromJson(resolved);
   } catch (const nlohmann::json::exception& e) {

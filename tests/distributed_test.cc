@@ -119,6 +119,12 @@ TEST_F(DataParallel, AStopOnOneRankStopsBothAtOneStepAndThePairResumes) {
   EXPECT_EQ(step0, std::atoi(Log(out, 1).c_str() + at1 + said.size()));  // both at one step
   EXPECT_LT(step0, 40);
   std::printf("rank 1 stopped by SIGTERM: both ranks stopped at step %d\n", step0);
+  // One process would walk the checkpoint's pass another way: refused.
+  const std::string checkpoint = FileHash(out / "checkpoint.pt");
+  const Result alone = Headforge({pack_.string(), "--out", out.string(), "--threads", "1"}, HEADFORGE_TRAIN_BINARY);
+  EXPECT_EQ(alone.code, 2) << alone.err;
+  EXPECT_NE(alone.err.find("saved by a training of 2 views a step"), std::string::npos) << alone.err;
+  EXPECT_EQ(FileHash(out / "checkpoint.pt"), checkpoint);
   // Run again, both resume from rank 0's checkpoint and end where the
   // uninterrupted pair did.
   const auto [again0, again1] = RunRanks(out);
@@ -127,6 +133,20 @@ TEST_F(DataParallel, AStopOnOneRankStopsBothAtOneStepAndThePairResumes) {
   EXPECT_NE(Log(out, 1).find("resuming from the checkpoint at step " + std::to_string(step0)), std::string::npos)
       << Log(out, 1);
   EXPECT_EQ(FileHash(out / "model.pt"), FileHash(dir_ / "two" / "model.pt"));
+}
+
+// Ranks given different options are told so before the first step.
+TEST_F(DataParallel, RanksThatDoNotStartAlikeAreToldSo) {
+  ASSERT_EQ(packed_.code, 0) << packed_.err;
+  const fs::path out = dir_ / "unalike";
+  const int port = FreePort();
+  const pid_t zero = StartRank(0, port, out), one = StartRank(1, port, out, {"--set", "steps=41"});
+  const int code_one = Wait(one), code_zero = Wait(zero);
+  for (const auto& [rank, code] : {std::pair{0, code_zero}, std::pair{1, code_one}}) {
+    EXPECT_EQ(code, 2) << Log(out, rank);
+    EXPECT_NE(Log(out, rank).find("the ranks do not start alike"), std::string::npos) << Log(out, rank);
+  }
+  EXPECT_FALSE(fs::exists(out / "model.pt"));
 }
 
 TEST_F(DataParallel, ARankThatDiesFailsTheOtherWithinItsTimeout) {

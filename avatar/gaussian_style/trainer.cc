@@ -57,7 +57,7 @@ class Trainer : public LoopTrainer {
  public:
   Trainer(const TrainOptions& options, const AvatarDataset& data, torch::Device device)
       : options_(options), data_(data), device_(device), gen_(at::detail::createCPUGenerator(options.seed)) {
-    group_ = dynamic_cast<ProcessGroup*>(options.collective);
+    group_ = dynamic_cast<ProcessGroup*>(options.collective);  // the only Collective there is
     if (group_) {
       rank_ = group_->rank();
       world_ = group_->world();
@@ -230,7 +230,10 @@ void Trainer::Step(int step, RunningStats* stats) {
     region_sum += region;
     if (!std::isfinite(value)) continue;
     (per_step == 1 ? loss : loss * share).backward();
-    densify_->AfterBackward(out.means2d.grad(), out.radii, view.view.width, view.view.height);
+    // Densification judges each view's own screen-space gradient, not its
+    // share of the step's loss.
+    densify_->AfterBackward(per_step == 1 ? out.means2d.grad() : out.means2d.grad() * per_step, out.radii,
+                            view.view.width, view.view.height);
   }
   if (group_) {
     // Every rank's gradients and figures summed: a parameter no view of this
@@ -363,6 +366,7 @@ Status Trainer::SaveCheckpoint(const fs::path& path, const LoopState& state) con
   densify_->SaveState("densify.", &c);
   c.Put("generator", gen_.get_state());
   c.Put("order", order_);
+  if (views_per_step_ != 1) c.Put("views_per_step", int64_t(views_per_step_));  // one: left out, as before
   c.Put("validation.best", best_validation_);
   c.Put("validation.best_step", int64_t(best_validation_step_));
   c.Put("validation.since", int64_t(since_best_));
@@ -380,6 +384,15 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
     return damaged;
   best_validation_step_ = int(best_step);
   since_best_ = int(since);
+  // The pass's order is walked views_per_step at a time: another count
+  // would resume elsewhere in it, with other batches.
+  int64_t views_per_step = 1;
+  c.Get("views_per_step", &views_per_step);
+  if (views_per_step != views_per_step_)
+    return Status::InvalidArgument(path.string() + " was saved by a training of " + std::to_string(views_per_step) +
+                                   " views a step, this one takes " + std::to_string(views_per_step_) +
+                                   (world_ > 1 ? " (one per rank)" : "") + ": resume it with --views-per-step " +
+                                   std::to_string(views_per_step) + " (or as many ranks), or delete it to start over");
   GaussianParams& p = avatar_.gaussians.params;
   const auto rows = p.All();
   for (size_t i = 0; i < rows.size(); ++i) {
@@ -412,6 +425,25 @@ Status Trainer::Train(const fs::path& out_dir, const fs::path& checkpoint, Stats
   // checkpoint with the model, for train --extend.
   loop.save_at_time_limit = style_.decoder.decoder_steps <= 0;
   loop.collective = group_;
+  if (group_) {
+    // Every rank must start where rank 0 starts: the same step (its
+    // checkpoint read through the same --out), Gaussians and options.
+    const double mine[] = {double(state_.step), double(avatar_.gaussians.params.size()), double(views_per_step_),
+                           double(options_.loop.steps)};
+    torch::Tensor all = torch::tensor(std::vector<double>(std::begin(mine), std::end(mine)), torch::kFloat64);
+    try {
+      group_->AllReduceSum({all});
+    } catch (const DistributedFailure& e) {
+      return Status::IoError(std::string("train: ") + e.what());
+    }
+    for (int i = 0; i < 4; ++i)
+      if (all[i].item<double>() != world_ * mine[i])
+        return Status::InvalidArgument(
+            "train: the ranks do not start alike (rank " + std::to_string(rank_) + ": step " +
+            std::to_string(state_.step) + ", " + std::to_string(avatar_.gaussians.params.size()) + " Gaussians, " +
+            std::to_string(views_per_step_) + " views a step, " + std::to_string(options_.loop.steps) +
+            " steps); give every rank the same PACK, the same --out on a file system they share, and the same --set");
+  }
   if (group_ && rank_ == 0)
     HF_LOG(Info) << "train: data-parallel over " << world_ << " ranks, " << views_per_step_
                  << " training views a step (rank r takes the r-th, (r + " << world_ << ")-th, ...)";

@@ -67,9 +67,10 @@ Status ReadDistributedSetup(const std::string& mode, DistributedSetup* setup) {
     setup->source = "torchrun";
     return Status::Ok();
   }
-  const std::string tasks = Env("SLURM_NTASKS");
+  // srun's step (a batch script's own shell has SLURM_NTASKS but is one process).
+  const std::string tasks = Env("SLURM_STEP_NUM_TASKS");
   if (!tasks.empty() && tasks != "1") {
-    HF_RETURN_IF_ERROR(ParseInt("SLURM_NTASKS", tasks, 1, 65536, &setup->world));
+    HF_RETURN_IF_ERROR(ParseInt("SLURM_STEP_NUM_TASKS", tasks, 1, 65536, &setup->world));
     HF_RETURN_IF_ERROR(ParseInt("SLURM_PROCID", Env("SLURM_PROCID"), 0, setup->world - 1, &setup->rank));
     const std::string nodes = !Env("SLURM_STEP_NODELIST").empty() ? Env("SLURM_STEP_NODELIST") : Env("SLURM_JOB_NODELIST");
     if (!Env("MASTER_ADDR").empty()) {
@@ -113,9 +114,18 @@ Status ProcessGroup::Connect(const DistributedSetup& setup, double timeout_s, st
     options.timeout = timeout;
     group->impl_->store = c10::make_intrusive<c10d::TCPStore>(setup.address, options);
     auto gloo = c10d::ProcessGroupGloo::Options::create(timeout);
-    // The interface that reaches rank 0's address (this host's own name
-    // where rank 0 is here).
-    gloo->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname(setup.address));
+    // GLOO_SOCKET_IFNAME's interface where it is set; else the address of
+    // rank 0 where it is this host's (one machine); else this host's name's.
+    const char* interface = std::getenv("GLOO_SOCKET_IFNAME");
+    if (interface != nullptr && *interface != '\0') {
+      gloo->devices.push_back(c10d::ProcessGroupGloo::createDeviceForInterface(interface));
+    } else {
+      try {
+        gloo->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname(setup.address));
+      } catch (const std::exception&) {  // rank 0 is on another host
+        gloo->devices.push_back(c10d::ProcessGroupGloo::createDefaultDevice());
+      }
+    }
     group->impl_->group = c10::make_intrusive<c10d::ProcessGroupGloo>(group->impl_->store, setup.rank, setup.world, gloo);
   } catch (const std::exception& e) {
     std::string what = e.what();

@@ -3,7 +3,7 @@
 // summed over all ranks before the optimiser's step, so that every rank
 // holds the same model after it. The ranks find one another as torchrun and
 // Slurm tell them (RANK, WORLD_SIZE, MASTER_ADDR, MASTER_PORT; or
-// SLURM_PROCID, SLURM_NTASKS and the first host of the job's node list) and
+// SLURM_PROCID, srun's SLURM_STEP_NUM_TASKS and the first host of the step's node list) and
 // talk through LibTorch's c10d: a TCPStore for the rendezvous and
 // ProcessGroupGloo for the sums (on CPU tensors, and CUDA ones by copy).
 #pragma once
@@ -28,7 +28,7 @@ struct DistributedSetup {
 
 // The setup `mode` asks for: "off" (one process, whatever the environment
 // says), or "auto": torchrun's variables where RANK and WORLD_SIZE are set,
-// else Slurm's where SLURM_NTASKS is above 1 (SLURM_PROCID the rank, the
+// else Slurm's where srun's SLURM_STEP_NUM_TASKS is above 1 (SLURM_PROCID the rank, the
 // first host of SLURM_STEP_NODELIST or SLURM_JOB_NODELIST the address,
 // MASTER_PORT or 29500 plus the job's id modulo 1000 the port), else one
 // process. A value that does not parse is an error naming the variable.

@@ -20,7 +20,7 @@ namespace {
 class Environment {
  public:
   explicit Environment(const std::vector<std::pair<const char*, const char*>>& values) {
-    for (const char* name : {"RANK", "WORLD_SIZE", "MASTER_ADDR", "MASTER_PORT", "SLURM_PROCID", "SLURM_NTASKS",
+    for (const char* name : {"RANK", "WORLD_SIZE", "MASTER_ADDR", "MASTER_PORT", "SLURM_PROCID", "SLURM_NTASKS", "SLURM_STEP_NUM_TASKS",
                              "SLURM_STEP_NODELIST", "SLURM_JOB_NODELIST", "SLURM_JOB_ID"}) {
       const char* old = std::getenv(name);
       saved_.push_back({name, old ? std::optional<std::string>(old) : std::nullopt});
@@ -72,8 +72,8 @@ TEST(DistributedSetup, TorchrunsAndSlurmsVariablesNameTheRanks) {
     EXPECT_EQ(s.world, 1);
   }
   {
-    Environment env({{"SLURM_PROCID", "1"}, {"SLURM_NTASKS", "2"}, {"SLURM_JOB_NODELIST", "gpu[05-06]"},
-                     {"SLURM_JOB_ID", "123456"}});
+    Environment env({{"SLURM_PROCID", "1"}, {"SLURM_NTASKS", "2"}, {"SLURM_STEP_NUM_TASKS", "2"},
+                     {"SLURM_JOB_NODELIST", "gpu[05-06]"}, {"SLURM_JOB_ID", "123456"}});
     ASSERT_TRUE(ReadDistributedSetup("auto", &s).ok());
     EXPECT_EQ(s.rank, 1);
     EXPECT_EQ(s.world, 2);
@@ -82,8 +82,9 @@ TEST(DistributedSetup, TorchrunsAndSlurmsVariablesNameTheRanks) {
     EXPECT_EQ(s.source, "slurm");
   }
   {
-    // One task of a Slurm job: one process.
-    Environment env({{"SLURM_PROCID", "0"}, {"SLURM_NTASKS", "1"}});
+    // One task of a Slurm job, or a batch script of several tasks run
+    // without srun (its own shell is one process): one process.
+    Environment env({{"SLURM_PROCID", "0"}, {"SLURM_NTASKS", "4"}});
     ASSERT_TRUE(ReadDistributedSetup("auto", &s).ok());
     EXPECT_EQ(s.world, 1);
   }
@@ -94,7 +95,7 @@ TEST(DistributedSetup, TorchrunsAndSlurmsVariablesNameTheRanks) {
            {{{"RANK", "0"}, {"WORLD_SIZE", "two"}}, "WORLD_SIZE='two'"},
            {{{"RANK", "0"}}, "RANK and WORLD_SIZE go together"},
            {{{"RANK", "0"}, {"WORLD_SIZE", "2"}, {"MASTER_PORT", "99999"}}, "MASTER_PORT='99999'"},
-           {{{"SLURM_NTASKS", "2"}}, "SLURM_PROCID=''"}}) {
+           {{{"SLURM_STEP_NUM_TASKS", "2"}}, "SLURM_PROCID=''"}}) {
     Environment env(values);
     const Status status = ReadDistributedSetup("auto", &s);
     EXPECT_FALSE(status.ok()) << named;

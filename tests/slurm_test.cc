@@ -313,6 +313,39 @@ TEST(Slurm, BatchOfCapturesRunsInOrderFailsAloneRequeuesAndSkipsWhatIsDone) {
     }
   EXPECT_EQ(States(second, "broken").at("ingest"), "failed");
   EXPECT_EQ(States(second, "broken").at("train"), "cancelled");
+
+  // One training over two ranks that srun starts in a job of two tasks:
+  // Slurm's own variables (SLURM_PROCID, SLURM_STEP_NUM_TASKS) make them
+  // ranks 0 and 1, and they train the model one process trains with both
+  // views a step. A pack of alpha's capture, 20 steps at 48 px.
+  const fs::path pack = dir / "alpha.pack";
+  const Result packed = Hf({"pack", "--workspace", (root / "alpha").string(), "--out", pack.string(), "--train-size",
+                            "48", "--steps", "20", "--init-gaussians", "600", "--max-gaussians", "800", "--densify-from",
+                            "5", "--densify-every", "5", "--densify-until", "15", "--eval-every", "0", "--preview-every",
+                            "0", "--log-every", "5", "--checkpoint-every", "10", "--max-minutes", "0", "--decoder-steps",
+                            "0"});
+  ASSERT_EQ(packed.code, 0) << packed.err;
+  const fs::path trainer = dir / "headforge-train";
+  fs::copy_file(HEADFORGE_TRAIN_BINARY, trainer);
+  const fs::path ranks = dir / "ranks", script = dir / "ranks.sh", log = dir / "ranks.log";
+  ASSERT_TRUE(WriteFileAtomic(script, "#!/bin/sh\nexec srun " + trainer.string() + " " + pack.string() + " --out " +
+                                          ranks.string() + " --threads 1\n")
+                  .ok());
+  // The node's name need not resolve on a test machine: rank 0 is reached at 127.0.0.1.
+  int code = -1;
+  const std::string submitted =
+      Output({"sbatch", "--wait", "--ntasks", "2", "--cpus-per-task", "1", "--output", log.string(), "--export",
+              "ALL,MASTER_ADDR=127.0.0.1,MASTER_PORT=" + std::to_string(FreePort()), script.string()},
+             &code);
+  const std::string said = Slurp(log);
+  ASSERT_EQ(code, 0) << submitted << said;
+  for (const char* line : {"rank 0 of 2 (slurm)", "rank 1 of 2 (slurm)", "data-parallel over 2 ranks, 2 training views"})
+    EXPECT_NE(said.find(line), std::string::npos) << line << "\n" << said;
+  const Result alone = Headforge({pack.string(), "--out", (dir / "alone").string(), "--threads", "1", "--set",
+                                  "views_per_step=2"},
+                                 trainer.c_str());
+  ASSERT_EQ(alone.code, 0) << alone.err;
+  EXPECT_EQ(FileHash(ranks / "model.pt"), FileHash(dir / "alone" / "model.pt"));
 }
 
 }  // namespace

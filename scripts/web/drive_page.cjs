@@ -6,7 +6,8 @@
 //        [--frame K]                      hold frame K of the capture's take
 //        [--take FILE [--frame K]]        play a Live Link Face CSV or tracking.json (frame K held)
 //        [--webcam FILE.y4m --seconds S]  drive from a fake webcam fed from the file, for S seconds
-//        [--video FILE.webm [--fps N]]    drive from a recorded video (every frame, N a second), to its end
+//        [--video FILE.webm [--fps N] [--video-timeout S]]  drive from a recorded video (every frame, N a
+//                                         second), to its end (at most S seconds, 7200)
 //        [--weights JSON]                 pose by a script: {"jawOpen": 0.8, ...}
 //        [--compare REF.png --mask MASK.png [--min-psnr 28]]
 //        [--chromium /usr/bin/chromium]
@@ -75,7 +76,21 @@ if (!args.page || !args.out) {
       // As a user gives it: the file chosen in the page's file input.
       const input = await page.$('#open');
       await input.uploadFile(path.resolve(args.video));
-      await page.waitForFunction(() => window.headforge.video_done === true, { timeout: 900000, polling: 500 });
+      // Polled from here (a long video in a software renderer takes longer
+      // than one protocol call may wait), its progress said every 30 s.
+      const limit = Date.now() + 1000 * Number(args['video-timeout'] || 7200);
+      let said = Date.now();
+      for (;;) {
+        const at = await page.evaluate(() => ({ done: window.headforge.video_done === true, frame: window.headforge.video_frame,
+                                                frames: window.headforge.video_frames }));
+        if (at.done) break;
+        if (Date.now() > limit) throw new Error('the video was not done within --video-timeout');
+        if (Date.now() - said > 30000) {
+          console.log(`drive page: video frame ${at.frame + 1} of ${at.frames}`);
+          said = Date.now();
+        }
+        await new Promise((r) => setTimeout(r, 1000));
+      }
     } else if (!args.take && args.frame === undefined) {
       await new Promise((r) => setTimeout(r, 3000));  // a few frames of the looped take, for the frame rate
     }

@@ -239,24 +239,24 @@ void Trainer::Step(int step, RunningStats* stats) {
     // Every rank's gradients and figures summed: a parameter no view of this
     // rank reached takes part as zeros (its gradient is made where another
     // rank's view reached it, as one process with all the views would).
-    std::vector<torch::Tensor*> params = adam_.Parameters();
-    torch::Tensor reached = torch::zeros({int64_t(params.size()) + 3}, torch::kFloat64);
-    for (size_t i = 0; i < params.size(); ++i) reached[int64_t(i)] = params[i]->grad().defined() ? 1.0 : 0.0;
-    reached[int64_t(params.size())] = loss_sum;
-    reached[int64_t(params.size()) + 1] = l1_sum;
-    reached[int64_t(params.size()) + 2] = region_sum;
-    group_->AllReduceSum({reached});
+    const std::vector<torch::Tensor*> params = adam_.Parameters();
+    std::vector<double> figures;
+    for (const torch::Tensor* p : params) figures.push_back(p->grad().defined() ? 1.0 : 0.0);
+    figures.insert(figures.end(), {loss_sum, l1_sum, region_sum});
+    const torch::Tensor summed = torch::tensor(figures, torch::kFloat64);
+    group_->AllReduceSum({summed});
+    const double* reached = summed.data_ptr<double>();
     std::vector<torch::Tensor> grads;
     for (size_t i = 0; i < params.size(); ++i) {
-      if (reached[int64_t(i)].item<double>() == 0) continue;
+      if (reached[i] == 0) continue;
       if (!params[i]->grad().defined()) params[i]->mutable_grad() = torch::zeros_like(*params[i]);
       grads.push_back(params[i]->grad());
     }
     for (const torch::Tensor& t : densify_->StepStatistics(avatar_.gaussians.params.size(), device_)) grads.push_back(t);
     group_->AllReduceSum(grads);
-    loss_sum = reached[int64_t(params.size())].item<double>();
-    l1_sum = reached[int64_t(params.size()) + 1].item<double>();
-    region_sum = reached[int64_t(params.size()) + 2].item<double>();
+    loss_sum = reached[params.size()];
+    l1_sum = reached[params.size() + 1];
+    region_sum = reached[params.size() + 2];
   }
   stats->Add("loss", loss_sum * share);
   if (!std::isfinite(loss_sum)) return;

@@ -117,17 +117,17 @@ TEST_F(GanAvatarTrain, TrainsAndWritesItsModel) {
   EXPECT_NE(first_.err.find("train: gan-avatar"), std::string::npos) << first_.err;
 }
 
-TEST_F(GanAvatarTrain, TheSameSeedGivesTheSameModel) {
+// The same seed's model again is the pack test's (the GAN trained by
+// headforge-train and the mapping added on the workspace give the
+// reference's model.pt) and the kill test's; another seed gives another.
+TEST_F(GanAvatarTrain, AnotherSeedGivesAnotherModel) {
   ASSERT_EQ(first_.code, 0) << first_.err;
-  const fs::path again = CopyOf(TrackedTalkingStatic(), Scratch("again"));
-  const Result second = Headforge(TrainArgs(again));
-  ASSERT_EQ(second.code, 0) << second.err;
-  EXPECT_EQ(FileHash(again / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
-  std::vector<std::string> args = TrainArgs(again);
+  const fs::path other = CopyOf(TrackedTalkingStatic(), Scratch("other_seed"));
+  std::vector<std::string> args = TrainArgs(other);
   args.insert(args.end(), {"--train-seed", "3"});
-  const Result other = Headforge(args);
-  ASSERT_EQ(other.code, 0) << other.err;
-  EXPECT_NE(FileHash(again / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
+  const Result r = Headforge(args);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(FileHash(other / kModelDir / "model.pt"), FileHash(reference_ / kModelDir / "model.pt"));
 }
 
 TEST_F(GanAvatarTrain, KilledMidTrainingResumesToTheSameModel) {

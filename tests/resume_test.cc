@@ -21,8 +21,8 @@ const fs::path kScene = fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / "orbit_
 
 std::vector<std::string> FitArgs(const fs::path& out) {
   return {"splat-fit", "--scene", kScene.string(), "--out", out.string(), "--resolution", "48", "--frames", "24",
-          "--iterations", "500", "--init-points", "3000", "--eval-every", "0", "--densify-until", "300",
-          "--checkpoint-every", "50", "--log-every", "50", "--max-minutes", "0", "--threads", "2"};
+          "--iterations", "100", "--init-points", "3000", "--eval-every", "0", "--densify-until", "60",
+          "--checkpoint-every", "10", "--log-every", "10", "--max-minutes", "0", "--threads", "2"};
 }
 
 // Starts a fit and sends `signal` once its checkpoint has reached at least
@@ -33,9 +33,9 @@ int InterruptAt(const std::vector<std::string>& args, const fs::path& out, int s
   const fs::path checkpoint = out / ".staging" / "splat_fit" / "checkpoint.pt";
   const fs::path stats = out / ".staging" / "splat_fit" / "stats.jsonl";
   int status = 0;
-  // stats.jsonl gets a line every 50 steps (log_every): count them.
+  // stats.jsonl gets a line every 10 steps (log_every): count them.
   const bool signalled = SignalWhen(pid, signal, [&] {
-    return fs::exists(checkpoint) && int(CountLines(stats)) * 50 >= step;
+    return fs::exists(checkpoint) && int(CountLines(stats)) * 10 >= step;
   }, std::chrono::seconds(300), &status, std::chrono::milliseconds(20));
   if (!signalled) ADD_FAILURE() << "the fit ended before it was interrupted:\n" << Slurp(log);
   return status;
@@ -50,7 +50,7 @@ TEST(Resume, InterruptedSplatFitContinuesFromItsCheckpoint) {
   ASSERT_EQ(whole.code, 0) << whole.err;
 
   // SIGTERM: the fit saves a checkpoint, says how to resume, and exits 1.
-  const int stopped = InterruptAt(FitArgs(cut), cut, 150, SIGTERM);
+  const int stopped = InterruptAt(FitArgs(cut), cut, 30, SIGTERM);
   ASSERT_TRUE(WIFEXITED(stopped)) << "SIGTERM should be caught";
   EXPECT_EQ(WEXITSTATUS(stopped), 1);
   const std::string said = Slurp(cut.string() + ".log");
@@ -62,21 +62,21 @@ TEST(Resume, InterruptedSplatFitContinuesFromItsCheckpoint) {
   EXPECT_NE(status.out.find("interrupted"), std::string::npos) << status.out;
 
   // Resumed, then killed outright past a later checkpoint.
-  const int killed = InterruptAt(FitArgs(cut), cut, 350, SIGKILL);
+  const int killed = InterruptAt(FitArgs(cut), cut, 70, SIGKILL);
   ASSERT_TRUE(WIFSIGNALED(killed));
   const std::string resumed_log = Slurp(cut.string() + ".log");
   EXPECT_NE(resumed_log.find("resuming from the checkpoint at step"), std::string::npos) << resumed_log;
 
   // The last run finishes from the last checkpoint before the kill (one every
-  // 50 steps; the kill came at step 350 or a little later), not from step 0
-  // or from where SIGTERM stopped the first run (about step 150).
+  // 10 steps; the kill came at step 70 or a little later), not from step 0
+  // or from where SIGTERM stopped the first run (about step 30).
   const Result last = Headforge(FitArgs(cut));
   ASSERT_EQ(last.code, 0) << last.err;
   nlohmann::json report;
   ASSERT_TRUE(ReadJson(cut / "report.json", &report).ok());
-  EXPECT_EQ(report["steps"], 500);
-  EXPECT_GE(report["resumed_from"].get<int>(), 300);
-  EXPECT_LT(report["resumed_from"].get<int>(), 500);
+  EXPECT_EQ(report["steps"], 100);
+  EXPECT_GE(report["resumed_from"].get<int>(), 60);
+  EXPECT_LT(report["resumed_from"].get<int>(), 100);
   std::printf("splat-fit resumed from step %d after SIGTERM and SIGKILL\n", report["resumed_from"].get<int>());
   // The same Gaussians, bit for bit, as the fit that never stopped.
   EXPECT_EQ(FileHash(cut / "gaussians.ply"), FileHash(reference / "gaussians.ply"));

@@ -243,22 +243,80 @@ Status AdoptRecordedOptions(const TrainOptions& options, TrainOptions* resolved)
 
 }  // namespace
 
+struct TrainRanks::Impl {
+  std::unique_ptr<ProcessGroup> group;
+};
+
+TrainRanks::~TrainRanks() = default;
+
+Status TrainRanks::Join(const std::string& mode, double timeout_s, std::unique_ptr<TrainRanks>* ranks) {
+  ranks->reset();
+  DistributedSetup setup;
+  HF_RETURN_IF_ERROR(ReadDistributedSetup(mode, &setup));
+  if (setup.world <= 1) return Status::Ok();
+  HF_LOG(Info) << "train: rank " << setup.rank << " of " << setup.world << " (" << setup.source << "), meeting at "
+               << setup.address << ":" << setup.port;
+  std::unique_ptr<TrainRanks> joined(new TrainRanks());
+  joined->impl_ = std::make_unique<Impl>();
+  HF_RETURN_IF_ERROR(ProcessGroup::Connect(setup, timeout_s, &joined->impl_->group));
+  *ranks = std::move(joined);
+  return Status::Ok();
+}
+
+int TrainRanks::rank() const { return impl_->group->rank(); }
+int TrainRanks::world() const { return impl_->group->world(); }
+Collective* TrainRanks::collective() { return impl_->group.get(); }
+
+Status TrainRanks::Tell(bool training) {
+  if (told_ || rank() != 0) return Status::Internal("train: only rank 0 tells, once, whether it trains");
+  told_ = true;
+  std::vector<uint8_t> word = {uint8_t(training)};
+  return impl_->group->AnyOf(&word);
+}
+
+Status TrainRanks::Hear(bool* training) {
+  if (rank() == 0) return Status::Internal("train: rank 0 tells, it does not hear");
+  std::vector<uint8_t> word = {0};
+  HF_RETURN_IF_ERROR(impl_->group->AnyOf(&word));
+  *training = word[0] != 0;
+  return Status::Ok();
+}
+
+namespace {
+
+// The ranks of a data-parallel run train the gaussian-style model alone.
+Status CheckRanksModel(const TrainOptions& options) {
+  if (kGaussianStyle.Is(options.model)) return Status::Ok();
+  return Status::InvalidArgument("data-parallel training: the " + options.model +
+                                 " model trains in one process (it has no ranks' share of views yet); run headforge "
+                                 "train once, or --distributed off");
+}
+
+}  // namespace
+
 Status RunTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
-                const fs::path& out_dir, Progress* progress, TrainSummary* summary) {
+                const fs::path& out_dir, Progress* progress, TrainSummary* summary, TrainRanks* ranks) {
   UseTensorThreads();
   HF_RETURN_IF_ERROR(options.Check());
-  // Ranks of torchrun's would each train the workspace alone, and meet at its lock.
-  if (DistributedSetup setup; ReadDistributedSetup("auto", &setup).ok() && setup.source == "torchrun" && setup.world > 1)
+  // Ranks of torchrun's that were not joined (headforge run) would each train
+  // the workspace alone, and meet at its lock.
+  if (DistributedSetup setup;
+      ranks == nullptr && ReadDistributedSetup("auto", &setup).ok() && setup.source == "torchrun" && setup.world > 1)
     return Status::InvalidArgument(
         "train: RANK and WORLD_SIZE=" + std::to_string(setup.world) + " ask for data-parallel training, which "
-        "headforge-train does on a training pack: headforge pack --workspace WS --out PACK, then every rank runs "
-        "headforge-train PACK --out DIR (docs/cluster.md); unset RANK and WORLD_SIZE to train here in one process");
+        "headforge train does when every rank runs it (headforge train --workspace WS), or headforge-train on a "
+        "training pack (docs/cluster.md); unset RANK and WORLD_SIZE to train here in one process");
+  if (ranks != nullptr) HF_RETURN_IF_ERROR(CheckRanksModel(options));
   FaceModel model;
   HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
   TrainOptions resolved = options;
   if (!options.gan_avatar.generator_from.empty()) HF_RETURN_IF_ERROR(AdoptRecordedOptions(options, &resolved));
   AvatarDataset data;
   HF_RETURN_IF_ERROR(LoadTrainingData(resolved, workspace, model, &data));
+  if (ranks != nullptr) {
+    resolved.collective = ranks->collective();
+    HF_RETURN_IF_ERROR(ranks->Tell(true));
+  }
   if (!kGanAvatar.Is(resolved.model)) return TrainGaussianStyleRun(resolved, data, out_dir, progress, summary);
   if (resolved.gan_avatar.landmark_model.empty()) resolved.gan_avatar.landmark_model = DefaultLandmarkModel();
   TrackingFile tracking;
@@ -271,6 +329,28 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
     return EstimateImageExpressions(images, cameras, model, tracking, reading, p, out);
   };
   return TrainGanAvatar(resolved, data, track_images, out_dir, progress, summary);
+}
+
+Status FollowTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
+                   const fs::path& out_dir, TrainRanks* ranks, bool* trained) {
+  UseTensorThreads();
+  *trained = false;
+  HF_RETURN_IF_ERROR(options.Check());
+  HF_RETURN_IF_ERROR(CheckRanksModel(options));
+  bool training = false;
+  HF_RETURN_IF_ERROR(ranks->Hear(&training));
+  if (!training) return Status::Ok();
+  FaceModel model;
+  HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
+  AvatarDataset data;
+  HF_RETURN_IF_ERROR(LoadTrainingData(options, workspace, model, &data));
+  TrainOptions resolved = options;
+  resolved.collective = ranks->collective();
+  NullProgress quiet;
+  TrainSummary summary;
+  HF_RETURN_IF_ERROR(TrainGaussianStyleRun(resolved, data, out_dir, &quiet, &summary));
+  *trained = true;
+  return Status::Ok();
 }
 
 Status WriteTrainPack(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,

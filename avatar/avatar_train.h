@@ -9,6 +9,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -145,12 +146,49 @@ struct TrainSummary {
   std::string OneLine() const;
 };
 
+// The processes of one data-parallel `headforge train` (every rank runs the
+// command on the workspace, started by torchrun or srun), connected through
+// LibTorch's c10d (avatar/train/distributed.h). Rank 0 runs the train stage
+// as one process does, holding the workspace; it tells the others whether
+// it trains (Tell), and they (Hear) train the gaussian-style model's stages
+// 1-2 beside it, writing nothing (FollowTrain).
+class TrainRanks {
+ public:
+  ~TrainRanks();
+  // `mode` "auto" (torchrun's or srun's variables; docs/cluster.md) or
+  // "off"; `*ranks` stays null for one process.
+  static Status Join(const std::string& mode, double timeout_s, std::unique_ptr<TrainRanks>* ranks);
+  int rank() const;
+  int world() const;
+  // Rank 0, once: whether it trains (before its first step) or not (the
+  // stage up to date, refused or failed before training).
+  Status Tell(bool training);
+  bool told() const { return told_; }
+  // A rank above 0: rank 0's word.
+  Status Hear(bool* training);
+  Collective* collective();
+
+ private:
+  struct Impl;
+  TrainRanks() = default;
+  std::unique_ptr<Impl> impl_;
+  bool told_ = false;
+};
+
 // Trains on `workspace` (ingest, calibrate, align and track done) into
 // `out_dir`, which holds its checkpoint between attempts: a run that finds
 // one continues from it. Writes model.pt, config.json, stats.jsonl,
-// eval.json, previews/ and held_out/.
+// eval.json, previews/ and held_out/. With `ranks` (rank 0 of a
+// data-parallel run) the gaussian-style model's stages 1-2 are trained with
+// the other ranks.
 Status RunTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
-                const fs::path& out_dir, Progress* progress, TrainSummary* summary);
+                const fs::path& out_dir, Progress* progress, TrainSummary* summary, TrainRanks* ranks = nullptr);
+// A rank above 0 of a data-parallel `headforge train`: waits for rank 0's
+// word and, when it trains, trains stages 1-2 beside it on the same views,
+// reading rank 0's `out_dir` (its checkpoint, on a resume) and writing
+// nothing. `*trained`: whether rank 0 trained.
+Status FollowTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
+                   const fs::path& out_dir, TrainRanks* ranks, bool* trained);
 
 // The same run in two halves, for a GPU machine without the rest of the
 // stack: WriteTrainPack reads the workspace's views as RunTrain would and

@@ -54,6 +54,19 @@ class StageJob {
   // Writes the stage's outputs into `context.staging` and names them in
   // `result` with a one-line summary.
   virtual Status Run(const StageEnv& env, const StageContext& context, StageResult* result) = 0;
+
+  // One stage run by several processes (train under torchrun or srun): the
+  // stage's own command calls Join before it opens the workspace. A process
+  // that follows another (`*follows`) calls Follow in place of the stage:
+  // it works beside the leading one without the workspace's lock and writes
+  // nothing. The leading process runs the stage, then Finish (whether the
+  // stage ran, was up to date or failed).
+  virtual Status Join(bool* follows) {
+    *follows = false;
+    return Status::Ok();
+  }
+  virtual Status Follow(const StageSettings& settings, const fs::path& workspace) { return Status::Ok(); }
+  virtual void Finish() {}
 };
 
 struct StageEntry {

@@ -242,11 +242,13 @@ bool Workspace::WasInterrupted(const std::string& stage) const {
   return free;
 }
 
+fs::path Workspace::StagingPath(const fs::path& root, const std::string& stage) { return root / kStagingDir / stage; }
+
 Status Workspace::BeginStage(const std::string& stage, const std::string& fingerprint,
                              const std::vector<std::string>& upstream, bool resumable, fs::path* staging,
                              bool* resumed) {
   HF_CHECK(mode_ == Mode::kReadWrite);
-  *staging = root_ / kStagingDir / stage;
+  *staging = StagingPath(root_, stage);
   // We hold the lock, so a record that says running belongs to a run that died.
   const StageRecord* last = Find(stage);
   const std::vector<std::pair<std::string, long>> made_from = UpstreamCommits(upstream);

@@ -62,6 +62,8 @@ class Workspace {
   static Status Open(const fs::path& root, Mode mode, std::unique_ptr<Workspace>* workspace);
   // Whether `root` holds a workspace (its workspace.json).
   static bool Exists(const fs::path& root);
+  // Where `stage` writes while it runs (BeginStage's staging folder).
+  static fs::path StagingPath(const fs::path& root, const std::string& stage);
   ~Workspace();
 
   const fs::path& root() const { return root_; }

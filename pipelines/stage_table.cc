@@ -204,13 +204,23 @@ int StageCommand(const StageEntry& entry, const std::vector<std::string>& args) 
     return ReportFailure(Status::NotFound("no workspace at " + common.workspace +
                                           " (no workspace.json); headforge run --video FILE --workspace " +
                                           common.workspace + " makes one"));
+  bool follows = false;
+  if (Status s = job->Join(&follows); !s.ok()) return ReportFailure(s);
+  if (follows) {
+    if (Status s = job->Follow(settings, common.workspace); !s.ok()) return ReportFailure(s);
+    return kExitOk;
+  }
   std::unique_ptr<Workspace> workspace;
-  if (int code = OpenForWriting(common, &workspace); code >= 0) return code;
+  Status status;
+  if (int code = OpenForWriting(common, &workspace); code >= 0) {
+    job->Finish();
+    return code;
+  }
   StderrProgress progress;
   bool skipped = false;
-  if (Status s = RunStageJob(entry, job.get(), options, workspace.get(), settings, &progress, force, &skipped);
-      !s.ok())
-    return ReportFailure(s);
+  status = RunStageJob(entry, job.get(), options, workspace.get(), settings, &progress, force, &skipped);
+  job->Finish();
+  if (!status.ok()) return ReportFailure(status);
   return kExitOk;
 }
 

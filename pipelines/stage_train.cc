@@ -61,6 +61,16 @@ class TrainJob : public StageJob {
                  "Go on with a gaussian-style training its time limit stopped, from the checkpoint kept with its "
                  "model, under a longer --max-minutes (0: none); every other option as it trained.",
                  "extend", OptionSet::Effect::kRuntime);
+    options->Add("train.distributed", &distributed_,
+                 "auto: when torchrun (RANK, WORLD_SIZE, MASTER_ADDR, MASTER_PORT) or srun (several tasks) starts "
+                 "this command once per rank, the gaussian-style model's stages 1-2 train data-parallel: rank 0 "
+                 "runs the stage on the workspace, the others train beside it and write nothing (docs/cluster.md); "
+                 "off: one process, whatever the environment says.",
+                 "distributed", OptionSet::Effect::kRuntime);
+    options->Add("train.distributed_timeout", &distributed_timeout_,
+                 "Seconds the ranks wait for one another (at the start, and for each step's sums) before a rank "
+                 "that does not answer fails the run.",
+                 "distributed-timeout", OptionSet::Effect::kRuntime);
   }
   void Resolve(const StageSettings&, const OptionSet& parsed) override {
     // Each model's preset differs: resolve both now, while `parsed` says
@@ -93,15 +103,40 @@ class TrainJob : public StageJob {
   Status Ahead(const fs::path& workspace) const override {
     return CheckEnoughFramesToTrain(workspace, options_.data.holdout);
   }
-  Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
-    std::string model = options_.model, why = "as asked";
-    if (model == "auto") HF_RETURN_IF_ERROR(ChooseModel(env.workspace->root(), &model, &why));
+  Status Join(bool* follows) override {
+    *follows = false;
+    if (distributed_ != "auto" && distributed_ != "off")
+      return Status::InvalidArgument("--distributed takes auto or off, not '" + distributed_ + "'");
+    if (!(distributed_timeout_ > 0)) return Status::InvalidArgument("--distributed-timeout takes seconds above 0");
+    HF_RETURN_IF_ERROR(TrainRanks::Join(distributed_, distributed_timeout_, &ranks_));
+    *follows = ranks_ != nullptr && ranks_->rank() > 0;
+    return Status::Ok();
+  }
+  Status Follow(const StageSettings& settings, const fs::path& workspace) override {
+    std::string model, why;
     const TrainOptions* options = nullptr;
-    for (const TrainOptions& t : resolved_)
-      if (t.model == model) options = &t;
-    if (!options) return Status::Internal("train: no options resolved for " + model);
-    if (Status s = options->Check(); !s.ok())
-      return s.WithContext("--model auto chose " + model + " (" + why + "); give --model to choose");
+    HF_RETURN_IF_ERROR(Choose(workspace, &model, &why, &options));
+    const fs::path out = Workspace::StagingPath(workspace, "train") / "models" / std::string(FindAvatarModel(model)->folder);
+    bool trained = false;
+    HF_RETURN_IF_ERROR(FollowTrain(*options, workspace, settings.face_model, out, ranks_.get(), &trained)
+                           .WithContext("rank " + std::to_string(ranks_->rank())));
+    if (trained)
+      HF_LOG(Info) << "train: rank " << ranks_->rank() << " of " << ranks_->world()
+                   << ": trained stages 1-2 beside rank 0, which wrote the model";
+    else
+      HF_LOG(Info) << "train: rank " << ranks_->rank() << ": rank 0 did not train (the stage was up to date, or "
+                   << "it stopped before training: its log says why)";
+    return Status::Ok();
+  }
+  void Finish() override {
+    // Ranks waiting for rank 0's word go home when it did not train.
+    if (ranks_ != nullptr && !ranks_->told())
+      if (Status s = ranks_->Tell(false); !s.ok()) HF_LOG(Warning) << "train: " << s.message();
+  }
+  Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
+    std::string model, why;
+    const TrainOptions* options = nullptr;
+    HF_RETURN_IF_ERROR(Choose(env.workspace->root(), &model, &why, &options));
     HF_LOG(Info) << "train: " << model << " (" << (options_.model == "auto" ? "--model auto: " : "") << why
                  << (options_.model == "auto" ? "; --model " + AvatarModelNames() + " chooses" : "") << ")";
     const std::string folder(FindAvatarModel(model)->folder);
@@ -113,7 +148,7 @@ class TrainJob : public StageJob {
     }
     TrainSummary summary;
     HF_RETURN_IF_ERROR(RunTrain(*options, env.workspace->root(), env.settings->face_model,
-                                context.staging / "models" / folder, env.progress, &summary));
+                                context.staging / "models" / folder, env.progress, &summary, ranks_.get()));
     result->outputs = {"models/" + folder};
     const std::string& generator_from = options->gan_avatar.generator_from;
     const std::string how = generator_from.empty() ? options->preset : "the GAN of " + generator_from;
@@ -123,8 +158,26 @@ class TrainJob : public StageJob {
   }
 
  private:
+  // The model to train (--model, or auto's choice from the workspace's
+  // cameras), why, and its resolved options.
+  Status Choose(const fs::path& workspace, std::string* model, std::string* why, const TrainOptions** options) const {
+    *model = options_.model;
+    *why = "as asked";
+    if (*model == "auto") HF_RETURN_IF_ERROR(ChooseModel(workspace, model, why));
+    *options = nullptr;
+    for (const TrainOptions& t : resolved_)
+      if (t.model == *model) *options = &t;
+    if (!*options) return Status::Internal("train: no options resolved for " + *model);
+    if (Status s = (*options)->Check(); !s.ok())
+      return s.WithContext("--model auto chose " + *model + " (" + *why + "); give --model to choose");
+    return Status::Ok();
+  }
+
   TrainOptions options_;
   bool extend_ = false;
+  std::string distributed_ = "auto";
+  double distributed_timeout_ = 1800;
+  std::unique_ptr<TrainRanks> ranks_;  // a data-parallel run's, joined
   std::vector<TrainOptions> resolved_;  // per model that may run
   Status preset_;
 };

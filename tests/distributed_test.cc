@@ -1,4 +1,5 @@
-// Data-parallel training: headforge-train run as two ranks on this machine,
+// Data-parallel training: headforge-train (and headforge train on a
+// workspace) run as two ranks on this machine,
 // each spawned as its own process with torchrun's variables (RANK,
 // WORLD_SIZE, MASTER_ADDR, MASTER_PORT), on a training pack of the tracked
 // capture. Two ranks with one view each per step train the model one
@@ -165,6 +166,53 @@ TEST_F(DataParallel, ARankThatDiesFailsTheOtherWithinItsTimeout) {
   EXPECT_EQ(code, 1) << Log(out, 0);
   EXPECT_LT(seconds, 60 + 15);  // --distributed-timeout 60
   EXPECT_NE(Log(out, 0).find("another rank has gone"), std::string::npos) << Log(out, 0);
+}
+
+// `headforge train` on a workspace, every rank running the command: rank 0
+// runs the stage (its lock, its staging folder, the model it commits), rank
+// 1 trains beside it and writes nothing; the model is the one a pack of the
+// same options trains in one process with both views a step. Run again, the
+// stage is up to date on rank 0, and rank 1 is told so and ends.
+TEST_F(DataParallel, HeadforgeTrainOnAWorkspaceTrainsAsRanks) {
+  ASSERT_EQ(packed_.code, 0) << packed_.err;
+  ASSERT_EQ(one_.code, 0) << one_.err;
+  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("data_parallel_ws"));
+  const auto run = [&](const std::string& name) {
+    const int port = FreePort();
+    pid_t pids[2];
+    for (int rank = 0; rank < 2; ++rank) {
+      std::vector<std::string> args = {"RANK=" + std::to_string(rank), "WORLD_SIZE=2", "MASTER_ADDR=127.0.0.1",
+                                       "MASTER_PORT=" + std::to_string(port), HEADFORGE_BINARY, "train",
+                                       "--workspace", ws.string(), "--train-size", "48", "--steps", "40",
+                                       "--canonical-fraction", "0.5", "--init-gaussians", "1500", "--max-gaussians",
+                                       "2500", "--densify-from", "10", "--densify-every", "10", "--densify-until",
+                                       "30", "--eval-every", "0", "--preview-every", "0", "--log-every", "5",
+                                       "--checkpoint-every", "5", "--max-minutes", "0", "--decoder-steps", "0",
+                                       "--threads", "1", "--distributed-timeout", "60"};
+      const fs::path log = ws.string() + "." + name + std::to_string(rank) + ".log";
+      pids[rank] = Spawn(args, log, log, "/usr/bin/env");
+    }
+    const int one = Wait(pids[1]), zero = Wait(pids[0]);
+    return std::pair{zero, one};
+  };
+  const auto log = [&](const std::string& name, int rank) {
+    return Slurp(ws.string() + "." + name + std::to_string(rank) + ".log");
+  };
+  const auto [zero, one] = run("first");
+  ASSERT_EQ(zero, 0) << log("first", 0);
+  ASSERT_EQ(one, 0) << log("first", 1);
+  EXPECT_NE(log("first", 0).find("data-parallel over 2 ranks, 2 training views a step"), std::string::npos)
+      << log("first", 0);
+  EXPECT_NE(log("first", 1).find("rank 1 of 2: trained stages 1-2 beside rank 0"), std::string::npos)
+      << log("first", 1);
+  EXPECT_EQ(FileHash(ws / kModelDir / "model.pt"), FileHash(dir_ / "one" / "model.pt"));
+  EXPECT_NE(Headforge({"status", ws.string()}).out.find("train      done"), std::string::npos);
+
+  const auto [again0, again1] = run("again");
+  EXPECT_EQ(again0, 0) << log("again", 0);
+  EXPECT_EQ(again1, 0) << log("again", 1);
+  EXPECT_NE(log("again", 0).find("train: up to date"), std::string::npos) << log("again", 0);
+  EXPECT_NE(log("again", 1).find("rank 0 did not train"), std::string::npos) << log("again", 1);
 }
 
 }  // namespace

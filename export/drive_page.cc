@@ -228,4 +228,8 @@ html, body { margin: 0; height: 100%; background: #292b30; color: #ddd; font: 13
   return Status::Ok();
 }
 
+void AddDrivePageScripts(Hasher* hasher) {
+  for (const char* script : {kSplatGlScript, kFaceDriveScript, kDrivePageScript}) hasher->Add(std::string(script));
+}
+
 }  // namespace headforge

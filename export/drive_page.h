@@ -10,6 +10,7 @@
 #include <string>
 
 #include "core/fs.h"
+#include "core/hash.h"
 #include "core/status.h"
 
 namespace headforge {
@@ -43,5 +44,9 @@ struct DrivePageSummary {
 // points as linear functions of the expression weights for the tracked
 // subject, and the capture's camera: what the page solves against).
 Status WriteDrivePage(const fs::path& out_dir, const DrivePageOptions& options, DrivePageSummary* summary);
+
+// The page's own scripts, built into this program: what a page written by
+// another version may differ by (the export's fingerprint takes them).
+void AddDrivePageScripts(Hasher* hasher);
 
 }  // namespace headforge

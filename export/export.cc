@@ -181,6 +181,23 @@ std::vector<fs::path> BenchResultFiles(const ExportOptions& options, const fs::p
   return files;
 }
 
+Status AddExportAssets(const ExportOptions& options, Hasher* hasher) {
+  AddDrivePageScripts(hasher);
+  const fs::path models = options.vision_models.empty() ? DefaultVisionModelsDir() : options.vision_models;
+  for (const fs::path& file : {fs::path(options.chart_js), fs::path(options.playcanvas_js), fs::path(options.tfjs_js),
+                               models / "facemesh.json", models / "facemesh.bin"}) {
+    std::error_code ec;
+    hasher->Add(file.filename().string());
+    // One that is missing is said by the export that needs it.
+    if (file.empty() || !fs::is_regular_file(file, ec)) {
+      hasher->Add(std::string("none"));
+    } else {
+      HF_RETURN_IF_ERROR(hasher->AddFileDigest(file));
+    }
+  }
+  return Status::Ok();
+}
+
 bool ExportNeedsModel(const ExportOptions& options) {
   return Wants(options, "gaussians") || Wants(options, "weights") || Wants(options, "blendshapes") ||
          Wants(options, "videos") || !options.frames.empty();

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/fs.h"
+#include "core/hash.h"
 #include "core/options.h"
 #include "core/progress.h"
 #include "core/status.h"
@@ -80,6 +81,12 @@ struct ExportSummary {
 // Whether the formats asked for need a trained model (Gaussians, weights,
 // videos, a baked clip) or only the tracking (mesh, viewer, report).
 bool ExportNeedsModel(const ExportOptions& options);
+
+// What an export inlines besides the workspace's files, for its fingerprint:
+// the drive page's scripts built into this program, the npm files
+// (Chart.js, PlayCanvas, TensorFlow.js) and the face mesh model, so that
+// an upgrade of either makes the export run again.
+Status AddExportAssets(const ExportOptions& options, Hasher* hasher);
 
 // Writes into `out_dir` what options.formats asks for from `workspace`
 // (tracked; trained for the Gaussians, weights and videos).

@@ -44,7 +44,7 @@ class ExportJob : public StageJob {
       hasher->Add(fs::relative(file, workspace_).string());
       HF_RETURN_IF_ERROR(hasher->AddFileContents(file));
     }
-    return Status::Ok();
+    return AddExportAssets(options_, hasher);
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     if (ExportNeedsModel(options_))

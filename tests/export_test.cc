@@ -739,6 +739,22 @@ TEST(ExportBadInput, AnUntrainedWorkspaceExportsTheMeshAndTheReportAlone) {
   const Result bogus = Headforge({"export", "--workspace", ws.string(), "--formats", "mesh,glb"});
   EXPECT_EQ(bogus.code, 2) << bogus.err;
   EXPECT_NE(bogus.err.find("unknown format 'glb'"), std::string::npos) << bogus.err;
+
+  // What the export inlines from outside the workspace (here Chart.js) is
+  // part of its fingerprint: another version of it makes the export run again.
+  const fs::path chart = Scratch("untrained_chart.js");
+  ASSERT_TRUE(WriteFileAtomic(chart, "/* chart, first version */").ok());
+  const std::vector<std::string> report = {"export", "--workspace", ws.string(), "--formats", "report", "--chart-js",
+                                           chart.string()};
+  ASSERT_EQ(Headforge(report).code, 0);
+  const Result same = Headforge(report);
+  ASSERT_EQ(same.code, 0) << same.err;
+  EXPECT_NE(same.err.find("export: up to date"), std::string::npos) << same.err;
+  ASSERT_TRUE(WriteFileAtomic(chart, "/* chart, second version */").ok());
+  const Result upgraded = Headforge(report);
+  ASSERT_EQ(upgraded.code, 0) << upgraded.err;
+  EXPECT_EQ(upgraded.err.find("up to date"), std::string::npos) << upgraded.err;
+  EXPECT_NE(Slurp(ws / "export" / "report.html").find("chart, second version"), std::string::npos);
 }
 
 // Edits `file` (JSON) of `ws` in place.

@@ -317,19 +317,28 @@ TEST(Slurm, BatchOfCapturesRunsInOrderFailsAloneRequeuesAndSkipsWhatIsDone) {
   // One training over two ranks that srun starts in a job of two tasks:
   // Slurm's own variables (SLURM_PROCID, SLURM_STEP_NUM_TASKS) make them
   // ranks 0 and 1, and they train the model one process trains with both
-  // views a step. A pack of alpha's capture, 20 steps at 48 px.
-  const fs::path pack = dir / "alpha.pack";
-  const Result packed = Hf({"pack", "--workspace", (root / "alpha").string(), "--out", pack.string(), "--train-size",
-                            "48", "--steps", "20", "--init-gaussians", "600", "--max-gaussians", "800", "--densify-from",
-                            "5", "--densify-every", "5", "--densify-until", "15", "--eval-every", "0", "--preview-every",
-                            "0", "--log-every", "5", "--checkpoint-every", "10", "--max-minutes", "0", "--decoder-steps",
-                            "0"});
+  // views a step: headforge-train on a pack of alpha's capture, 20 steps at
+  // 48 px, then headforge train on a copy of alpha's workspace with the
+  // same options.
+  const std::vector<std::string> options = {"--train-size", "48", "--steps", "20", "--init-gaussians", "600",
+                                            "--max-gaussians", "800", "--densify-from", "5", "--densify-every", "5",
+                                            "--densify-until", "15", "--eval-every", "0", "--preview-every", "0",
+                                            "--log-every", "5", "--checkpoint-every", "10", "--max-minutes", "0",
+                                            "--decoder-steps", "0"};
+  const fs::path pack = dir / "alpha.pack", alpha = dir / "alpha_ranks";
+  std::vector<std::string> pack_args = {"pack", "--workspace", (root / "alpha").string(), "--out", pack.string()};
+  pack_args.insert(pack_args.end(), options.begin(), options.end());
+  const Result packed = Hf(pack_args);
   ASSERT_EQ(packed.code, 0) << packed.err;
+  fs::copy(root / "alpha", alpha, fs::copy_options::recursive);
   const fs::path trainer = dir / "headforge-train";
   fs::copy_file(HEADFORGE_TRAIN_BINARY, trainer);
   const fs::path ranks = dir / "ranks", script = dir / "ranks.sh", log = dir / "ranks.log";
-  ASSERT_TRUE(WriteFileAtomic(script, "#!/bin/sh\nexec srun " + trainer.string() + " " + pack.string() + " --out " +
-                                          ranks.string() + " --threads 1\n")
+  // Its own port: the first step's store may still hold the job's.
+  std::string on_workspace = "MASTER_PORT=" + std::to_string(FreePort()) + " exec srun " + g_headforge + " train --workspace " + alpha.string() + " --threads 1";
+  for (const std::string& option : options) on_workspace += " " + option;
+  ASSERT_TRUE(WriteFileAtomic(script, "#!/bin/sh\nsrun " + trainer.string() + " " + pack.string() + " --out " +
+                                          ranks.string() + " --threads 1 || exit 1\n" + on_workspace + "\n")
                   .ok());
   // The node's name need not resolve on a test machine: rank 0 is reached at 127.0.0.1.
   int code = -1;
@@ -339,13 +348,16 @@ TEST(Slurm, BatchOfCapturesRunsInOrderFailsAloneRequeuesAndSkipsWhatIsDone) {
              &code);
   const std::string said = Slurp(log);
   ASSERT_EQ(code, 0) << submitted << said;
-  for (const char* line : {"rank 0 of 2 (slurm)", "rank 1 of 2 (slurm)", "data-parallel over 2 ranks, 2 training views"})
+  for (const char* line : {"headforge-train: rank 0 of 2 (slurm)", "headforge-train: rank 1 of 2 (slurm)",
+                           "] train: rank 0 of 2 (slurm)", "] train: rank 1 of 2: trained stages 1-2 beside rank 0",
+                           "data-parallel over 2 ranks, 2 training views"})
     EXPECT_NE(said.find(line), std::string::npos) << line << "\n" << said;
   const Result alone = Headforge({pack.string(), "--out", (dir / "alone").string(), "--threads", "1", "--set",
                                   "views_per_step=2"},
                                  trainer.c_str());
   ASSERT_EQ(alone.code, 0) << alone.err;
   EXPECT_EQ(FileHash(ranks / "model.pt"), FileHash(dir / "alone" / "model.pt"));
+  EXPECT_EQ(FileHash(alpha / "models" / "gaussian_style" / "model.pt"), FileHash(dir / "alone" / "model.pt"));
 }
 
 }  // namespace

@@ -560,8 +560,17 @@ int64_t PruneUnseenGaussians(GaussianStyleAvatar& avatar, const AvatarDataset& d
   if (n == 0 || data.train.empty()) return 0;
   const torch::Device device = p.means.device();
   torch::Tensor seen = torch::zeros({n}, torch::TensorOptions().dtype(torch::kBool).device(device));
+  // Each Gaussian is posed on its own (its deformation, its triangle), so a
+  // view poses only those no earlier view has shown over the person: after
+  // the first views, a few per cent.
+  GaussianStyleAvatar open = avatar;
   for (const AvatarView& view : data.train) {
-    const PosedGaussians posed = avatar.Pose(data, view.condition, view.frame, avatar.deform);
+    const torch::Tensor unseen = (~seen).nonzero().view({-1});
+    if (unseen.numel() == 0) break;
+    const std::vector<torch::Tensor*> from = p.All(), to = open.gaussians.params.All();
+    for (size_t k = 0; k < from.size(); ++k) *to[k] = from[k]->index_select(0, unseen);
+    if (avatar.gaussians.binding.defined()) open.gaussians.binding = avatar.gaussians.binding.index_select(0, unseen);
+    const PosedGaussians posed = open.Pose(data, view.condition, view.frame, avatar.deform);
     const SplatCamera& c = view.view;
     const torch::Tensor rt = torch::tensor(std::vector<double>(c.cam_from_world.begin(), c.cam_from_world.end()))
                                  .view({3, 4})
@@ -574,7 +583,7 @@ int64_t PruneUnseenGaussians(GaussianStyleAvatar& avatar, const AvatarDataset& d
     const torch::Tensor inside = (z > 0.01) & (u >= 0) & (u < c.width) & (v >= 0) & (v < c.height);
     const torch::Tensor index = (v.clamp(0, c.height - 1) * c.width + u.clamp(0, c.width - 1)).to(torch::kLong);
     const torch::Tensor mask = view.mask.to(device).reshape({-1}) > 0.5;
-    seen |= inside & mask.index_select(0, index);
+    seen.index_put_({unseen}, inside & mask.index_select(0, index));
   }
   const torch::Tensor keep = seen.nonzero().view({-1});
   const int64_t pruned = n - keep.numel();

@@ -211,14 +211,13 @@ int StageCommand(const StageEntry& entry, const std::vector<std::string>& args) 
     return kExitOk;
   }
   std::unique_ptr<Workspace> workspace;
-  Status status;
   if (int code = OpenForWriting(common, &workspace); code >= 0) {
     job->Finish();
     return code;
   }
   StderrProgress progress;
   bool skipped = false;
-  status = RunStageJob(entry, job.get(), options, workspace.get(), settings, &progress, force, &skipped);
+  const Status status = RunStageJob(entry, job.get(), options, workspace.get(), settings, &progress, force, &skipped);
   job->Finish();
   if (!status.ok()) return ReportFailure(status);
   return kExitOk;

@@ -282,18 +282,6 @@ Status TrainRanks::Hear(bool* training) {
   return Status::Ok();
 }
 
-namespace {
-
-// The ranks of a data-parallel run train the gaussian-style model alone.
-Status CheckRanksModel(const TrainOptions& options) {
-  if (kGaussianStyle.Is(options.model)) return Status::Ok();
-  return Status::InvalidArgument("data-parallel training: the " + options.model +
-                                 " model trains in one process (it has no ranks' share of views yet); run headforge "
-                                 "train once, or --distributed off");
-}
-
-}  // namespace
-
 Status RunTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
                 const fs::path& out_dir, Progress* progress, TrainSummary* summary, TrainRanks* ranks) {
   UseTensorThreads();
@@ -306,7 +294,7 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
         "train: RANK and WORLD_SIZE=" + std::to_string(setup.world) + " ask for data-parallel training, which "
         "headforge train does when every rank runs it (headforge train --workspace WS), or headforge-train on a "
         "training pack (docs/cluster.md); unset RANK and WORLD_SIZE to train here in one process");
-  if (ranks != nullptr) HF_RETURN_IF_ERROR(CheckRanksModel(options));
+  if (ranks != nullptr) HF_RETURN_IF_ERROR(CheckDataParallelModel(options.model, "headforge train"));
   FaceModel model;
   HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
   TrainOptions resolved = options;
@@ -336,7 +324,7 @@ Status FollowTrain(const TrainOptions& options, const fs::path& workspace, const
   UseTensorThreads();
   *trained = false;
   HF_RETURN_IF_ERROR(options.Check());
-  HF_RETURN_IF_ERROR(CheckRanksModel(options));
+  HF_RETURN_IF_ERROR(CheckDataParallelModel(options.model, "headforge train"));
   bool training = false;
   HF_RETURN_IF_ERROR(ranks->Hear(&training));
   if (!training) return Status::Ok();

@@ -9,6 +9,7 @@
 #include "avatar/model_table.h"
 #include "avatar/torch_runtime.h"
 #include "avatar/train/dataset_pack.h"
+#include "avatar/train/distributed.h"
 #include "avatar/train/image_file.h"
 #include "core/log.h"
 
@@ -92,9 +93,7 @@ Status TrainFromPack(const fs::path& pack, const std::vector<std::string>& setti
                     "--side-by-side draws them once the model is in its workspace";
   options.collective = collective;
   if (kGaussianStyle.Is(options.model)) return TrainGaussianStyleRun(options, data, out_dir, progress, summary);
-  if (collective != nullptr)
-    return Status::InvalidArgument("data-parallel training: the gan-avatar model trains in one process (it has no "
-                                   "ranks' share of views yet); run headforge-train once, or --distributed off");
+  if (collective != nullptr) HF_RETURN_IF_ERROR(CheckDataParallelModel(options.model, "headforge-train"));
   if (!options.gan_avatar.generator_from.empty())
     return Status::InvalidArgument("--set generator_from: a pack trains the GAN itself; --generator-from is headforge "
                                    "train's, on the workspace");

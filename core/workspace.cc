@@ -279,7 +279,7 @@ Status Workspace::BeginStage(const std::string& stage, const std::string& finger
 Status Workspace::CommitStage(const std::string& stage, const std::vector<std::string>& outputs,
                               double wall_time_s, const std::string& message, bool forced) {
   HF_CHECK(mode_ == Mode::kReadWrite);
-  const fs::path staging = root_ / kStagingDir / stage;
+  const fs::path staging = StagingPath(root_, stage);
   for (const auto& output : outputs) {
     std::error_code ec;
     if (!fs::exists(staging / output, ec))
@@ -312,7 +312,7 @@ Status Workspace::RecordMadeFrom(const std::string& stage, const std::vector<std
 
 Status Workspace::FailStage(const std::string& stage, std::string* message, double wall_time_s) {
   HF_CHECK(mode_ == Mode::kReadWrite);
-  const fs::path staging = root_ / kStagingDir / stage;
+  const fs::path staging = StagingPath(root_, stage);
   // Keep what the attempt wrote, unless that is only its options file.
   std::error_code ec;
   bool wrote = false;

@@ -6,6 +6,8 @@
 #include <cstdlib>
 #include <map>
 
+#include "avatar/model_table.h"
+
 #ifdef HEADFORGE_WITH_GLOO
 #include <torch/csrc/distributed/c10d/ProcessGroupGloo.hpp>
 #include <torch/csrc/distributed/c10d/TCPStore.hpp>
@@ -31,6 +33,13 @@ Status ParseInt(const std::string& name, const std::string& text, int low, int h
 }
 
 }  // namespace
+
+Status CheckDataParallelModel(const std::string& model, const std::string& program) {
+  if (kGaussianStyle.Is(model)) return Status::Ok();
+  return Status::InvalidArgument("data-parallel training: the " + model +
+                                 " model trains in one process (it has no ranks' share of views yet); run " + program +
+                                 " once, or --distributed off");
+}
 
 std::string FirstSlurmHost(const std::string& nodes) {
   // The first entry: up to a comma outside brackets.

@@ -34,6 +34,11 @@ struct DistributedSetup {
 // process. A value that does not parse is an error naming the variable.
 Status ReadDistributedSetup(const std::string& mode, DistributedSetup* setup);
 
+// Only the gaussian-style model trains over ranks: `model` other than it
+// is refused, naming `program` (headforge train, headforge-train) to run
+// once instead.
+Status CheckDataParallelModel(const std::string& model, const std::string& program);
+
 // "node[07-09,12],gpu3" -> "node07": the first host of a Slurm node list.
 std::string FirstSlurmHost(const std::string& nodes);
 

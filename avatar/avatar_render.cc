@@ -288,6 +288,15 @@ std::pair<double, double> AzimuthElevation(const Eigen::Isometry3d& cam_from_wor
   return {std::atan2(c.x(), c.z()) * 180 / M_PI, std::asin(c.y() / c.norm()) * 180 / M_PI};
 }
 
+// The workspace's view of `camera` at `time_s` (within `tolerance` s), held
+// out or trained on, or null.
+const AvatarView* FindView(const AvatarDataset& data, const std::string& camera, double time_s, double tolerance) {
+  for (const auto* split : {&data.test, &data.train})
+    for (const AvatarView& v : *split)
+      if (v.camera == camera && std::abs(v.time_s - time_s) <= tolerance) return &v;
+  return nullptr;
+}
+
 }  // namespace
 
 Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
@@ -349,8 +358,15 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
         const auto [azimuth, elevation] = AzimuthElevation(novel);
         out[k].yaw_deg = azimuth - azimuth0;
         out[k].pitch_deg = elevation - elevation0;
+        // A camera the workspace calibrated at this instant is drawn through
+        // its own pose (where align's scale is off, the truth's placement
+        // relative to the training camera would put it at another distance);
+        // any other through the truth's, relative to the training camera.
         SplatCamera camera = lenses[k];
-        SetCameraPose(novel * world_from_head, &camera);
+        if (const AvatarView* own = FindView(data, out[k].camera, view.time_s, 0.5 / fps))
+          camera = own->view;
+        else
+          SetCameraPose(novel * world_from_head, &camera);
         const torch::Tensor render = avatar.draw(view.condition, camera);
         const fs::path image_path = truth / cam.at("input").get<std::string>() / file;
         const fs::path mask_path = truth / "masks" / out[k].camera / file;

@@ -2,6 +2,8 @@
 
 #include <torch/torch.h>
 
+#include <algorithm>
+
 #include "avatar/gan_avatar/render_expressions.h"
 #include "avatar/gan_avatar/trainer.h"
 #include "avatar/gaussian_style/trainer.h"
@@ -15,6 +17,7 @@
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/paths.h"
+#include "reconstruction/tracking_io.h"
 
 namespace headforge {
 
@@ -33,9 +36,9 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   std::string models;
   for (const AvatarModel& m : kAvatarModels) models += " " + m.Name() + ": " + std::string(m.summary) + ".";
   o->Add("train.model", &t->model,
-         "Avatar model." + models + " The train stage's auto chooses " + kGanAvatar.Name() +
-             " for several cameras or views spread 120 degrees or more round the head (a 360-degree or multi-view "
-             "capture), else " + kGaussianStyle.Name() + ".",
+         "Avatar model." + models + " The train stage's auto chooses " + kGaussianStyle.Name() +
+             " for every capture the tracker read (one camera, a walk-around, a rig), " + kGanAvatar.Name() +
+             " when it found the face in no frame.",
          "model");
   o->Add("train.preset", &t->preset,
          "draft (2 CPU cores, 256 px, within 15 min), standard (one GPU, 512 px), high (the paper's scale); it sets "
@@ -56,8 +59,10 @@ void AddTrainOptions(OptionSet* o, TrainOptions* t) {
   o->Add("train.mask", &t->data.mask,
          "The head masks trained and scored on: ingest (the workspace's masks), mesh (the workspace's masks cut to "
          "the tracked mesh's silhouette, grown by --mask-hair over the scalp and --mask-skin elsewhere: background "
-         "of the skin's colour beside the head is left out) or auto (mesh for gaussian-style, ingest for "
-         "gan-avatar).",
+         "of the skin's colour beside the head is left out), hull (one camera carried round a still head: every "
+         "view's mask made to agree with the others', the shape most views' masks hold seen from each view, so "
+         "that a mask that took background or lost the face in a few views is put right) or auto (hull for a "
+         "camera carried round a still head; else mesh for gaussian-style, ingest for gan-avatar).",
          "mask");
   o->Add("train.mask_hair", &t->data.mask_hair,
          "--mask mesh: how far (metres) the mask may reach beyond the tracked scalp, for hair; raise it for big hair.",
@@ -172,20 +177,29 @@ Status ChooseModel(const fs::path& workspace, std::string* model, std::string* w
   CameraSet cameras;
   HF_RETURN_IF_ERROR(CameraSet::Read(workspace / "cameras_head.json", &cameras)
                          .WithContext("train: --model auto reads the aligned cameras (run headforge align)"));
+  // Measured (docs/benchmarks/capture_360.md): gaussian-style on every kind
+  // of capture the tracker can read, a walk-around and a 20-camera dome
+  // included (29.7 and 21.5 dB held out against gan-avatar's 21.6 and 19.1);
+  // gan-avatar where the tracker found the face in no frame, since it trains
+  // without tracked expressions.
   const double spread = cameras.AzimuthSpreadDeg();
-  char text[160];
-  if (cameras.cameras.size() > 1) {
+  char text[200];
+  if (cameras.cameras.size() > 1)
     std::snprintf(text, sizeof(text), "%zu cameras: a multi-view capture", cameras.cameras.size());
-    *model = kGanAvatar.Name();
-  } else if (cameras.WalksRoundTheHead()) {
+  else if (cameras.WalksRoundTheHead())
     std::snprintf(text, sizeof(text), "one camera whose views spread %.0f deg round the head", spread);
-    *model = kGanAvatar.Name();
-  } else {
+  else
     std::snprintf(text, sizeof(text), "one camera, its views within %.0f deg of one another (%s cameras)", spread,
                   cameras.mode.c_str());
-    *model = kGaussianStyle.Name();
-  }
+  *model = kGaussianStyle.Name();
   *why = text;
+  TrackingFile tracking;
+  if (ReadTracking(workspace / "tracking.json", &tracking).ok() && !tracking.frames.empty() &&
+      std::all_of(tracking.frames.begin(), tracking.frames.end(),
+                  [](const TrackedFrame& f) { return f.interpolated; })) {
+    *model = kGanAvatar.Name();
+    *why += "; the tracker found the face in no frame";
+  }
   return Status::Ok();
 }
 
@@ -202,6 +216,13 @@ Status LoadTrainingData(const TrainOptions& options, const fs::path& workspace, 
   HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, model, loading, data).WithContext("train"));
   HF_LOG(Info) << "train: " << data->train.size() << " training and " << data->test.size() << " held-out views at "
                << data->width << "x" << data->height << " (held out: " << data->HeldOutText() << ")";
+  if (data->one_state)
+    HF_LOG(Info) << "train: a still head one camera goes round: every view carries one expression (the median of "
+                 << data->one_state_facing_views << " views that face the face) and frame 0's latent";
+  if (data->mask == "hull")
+    HF_LOG(Info) << "train: masks made to agree across the views (--mask hull): " << data->hull_stats.agreeing << " of "
+                 << data->hull_stats.views << " training views' masks agreed on the shape; "
+                 << data->hull_stats.replaced << " view(s) whose mask did not took its silhouette whole";
   return Status::Ok();
 }
 

@@ -38,7 +38,7 @@ struct TrainLoopSettings {
 };
 
 // The views training loads: DatasetOptions' defaults but --mask auto (each
-// model's own masks, TrainOptions::MaskFor).
+// model's own masks, or hull: TrainOptions::DataFor).
 inline DatasetOptions TrainingDatasetOptions() {
   DatasetOptions data;
   data.mask = "auto";
@@ -83,14 +83,11 @@ struct TrainOptions {
   // an option: set by the program that connected them. Null: one process.
   Collective* collective = nullptr;
 
-  // The mask `model` trains with under these options: ingest or mesh.
-  std::string MaskFor(const AvatarModel& model_entry) const {
-    return data.mask != "auto" ? data.mask : std::string(model_entry.default_mask);
-  }
-  // The views as `model_entry` loads them: `data` with its mask resolved.
+  // The views as `model_entry` loads them: `data` with the model's own mask
+  // for --mask auto (which the loader resolves by the capture).
   DatasetOptions DataFor(const AvatarModel& model_entry) const {
     DatasetOptions resolved = data;
-    resolved.mask = MaskFor(model_entry);
+    resolved.auto_mask = std::string(model_entry.default_mask);
     return resolved;
   }
 

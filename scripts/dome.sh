@@ -4,7 +4,7 @@
 # the head masks a studio's matting would give), runs `headforge run` on the
 # 20 folders with those masks and the rig's calibration (ingest keeps the
 # cameras that never see the face, calibrate reads the rig file, align,
-# track, train picks gan-avatar
+# track, train picks the gaussian-style avatar
 # and holds three cameras out whole: the subject's left side, the back and
 # the right side), then scores the held-out cameras' views against the
 # simulator's frames and masks (`render --truth`).

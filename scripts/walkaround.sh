@@ -2,7 +2,8 @@
 # The 360-degree path end to end on a simulated walk-around video: simulates
 # scenes/walkaround_360.toml (one camera walked once round a still head,
 # written as an H.264 video), runs `headforge run` on the video (ingest keeps
-# whole frames, COLMAP, align, track, train picks gan-avatar, export writes
+# whole frames, COLMAP, align, track, train picks the gaussian-style avatar
+# on masks made to agree across the views (--mask auto: hull), export writes
 # the 360-degree orbit video and the viewer), then scores the held-out
 # frames against the simulator's own clean frames and masks from the true
 # cameras (`render --truth`).

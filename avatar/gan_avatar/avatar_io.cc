@@ -35,7 +35,7 @@ DatasetOptions TrainedData(const nlohmann::json& config) {
     data.mask_hair = training.value("mask_hair", data.mask_hair);
     data.mask_skin = training.value("mask_skin", data.mask_skin);
   }
-  if (data.mask == "auto") data.mask = std::string(kGanAvatar.default_mask);
+  data.auto_mask = std::string(kGanAvatar.default_mask);
   return data;
 }
 

@@ -225,8 +225,8 @@ Status DecoderTrainer::Start(const fs::path& checkpoint, const fs::path& stage2_
   for (torch::Tensor& t : fuse_d_params_) adam_fuse_d_.Add(&t, options_.lr_discriminator, false);
   decoder.w.requires_grad_(false);
 
-  for (size_t i = 0; i < data_.train.size(); ++i)
-    if (!data_.train[i].unreliable) usable_.push_back(int64_t(i));
+  std::string note;
+  usable_ = UsableTrainingViews(data_, &note);
   if (usable_.empty()) return Status::DataError("train: no reliably tracked training view for stage 3");
   if (stage3_.adversarial_weight > 0)
     for (int64_t i : usable_)
@@ -321,7 +321,7 @@ void DecoderTrainer::FuseStep(int step, RunningStats* stats) {
   if (slot == 0) order_ = torch::randperm(views, gen_);
   const int64_t index = usable_[size_t(order_[slot].item<int64_t>())];
   const AvatarView& view = data_.train[size_t(index)];
-  PosedGaussians posed = avatar_->Pose(data_, view.condition, view.frame, avatar_->deform);
+  PosedGaussians posed = avatar_->Pose(data_, view.condition, data_.TrainingLatent(view), avatar_->deform);
   if (avatar_->pose_corrections.defined()) posed = CorrectPose(posed, avatar_->pose_corrections[index]);
   const SquareCanvas canvas = MakeSquareCanvas(view.view, side_);
   torch::Tensor background = torch::zeros({posed.features.size(1)}, posed.features.options());

@@ -19,7 +19,8 @@ Status LoadTrained(const fs::path& workspace, const fs::path& model_dir, const s
   loading->min_train_frames = 1;
   loading->holdout = trained.holdout;
   loading->holdout_order = trained.holdout_order;
-  loading->mask = trained.mask != "auto" ? trained.mask : std::string(kGaussianStyle.default_mask);
+  loading->mask = trained.mask;
+  loading->auto_mask = std::string(kGaussianStyle.default_mask);
   loading->mask_hair = trained.mask_hair;
   loading->mask_skin = trained.mask_skin;
   HF_RETURN_IF_ERROR(LoadAvatarDataset(workspace, *model, *loading, data).WithContext("render"));

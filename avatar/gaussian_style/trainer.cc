@@ -63,6 +63,8 @@ class Trainer : public LoopTrainer {
       world_ = group_->world();
     }
     views_per_step_ = style_.views_per_step > 0 ? style_.views_per_step : world_;
+    // One state of the head in every view: nothing for a deformation to follow.
+    if (data.one_state) options_.gaussian_style.deform = false;
     const int steps = options.loop.steps;
     const int canonical = style_.deform ? int(std::lround(style_.canonical_fraction * steps)) : steps;
     stage1_steps_ = std::clamp(canonical, 0, steps);
@@ -127,6 +129,8 @@ Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   architecture.triplane.resolution = options_.triplane_resolution;
   architecture.expressions = int64_t(data_.expression_names.size());
   architecture.mesh_riding = style_.mesh_riding;
+  if (data_.one_state && rank_ == 0)
+    HF_LOG(Info) << "train: stage 1 alone (a still head, one expression: no deformation to learn)";
   torch::manual_seed(uint64_t(options_.seed));  // the networks' initial weights
   avatar_.model = GaussianStyle(architecture, data_.num_frames);
   avatar_.deform = style_.deform;
@@ -167,18 +171,20 @@ Status Trainer::Start(const fs::path& checkpoint, StatsLog* stats) {
   for (size_t i = 0; i < data_.train.size(); ++i) {
     images_.push_back(data_.train[i].image.to(device_));
     masks_.push_back(data_.train[i].mask.to(device_));
-    if (!data_.train[i].unreliable) usable_.push_back(int64_t(i));
   }
   // Frames the tracker interpolated or flagged would teach the deformation
   // the wrong expression: they are left out.
-  if (usable_.size() < data_.train.size())
+  std::string note;
+  usable_ = UsableTrainingViews(data_, &note);
+  if (!note.empty() && rank_ == 0)
+    HF_LOG(Warning) << "train: " << note;
+  else if (usable_.size() < data_.train.size() && rank_ == 0)
     HF_LOG(Info) << "train: " << data_.train.size() - usable_.size() << " of " << data_.train.size()
                  << " training views left out (tracking interpolated or low-confidence)";
   if (usable_.empty())
-    return Status::DataError("train: the tracker flagged every training frame as interpolated or low-confidence; "
-                             "check overlay_<camera>.mp4 and run headforge track again (a capture that goes round "
-                             "the head, whose sides the landmark detector cannot read: --model gan-avatar, which "
-                             "trains without tracked expressions)");
+    return Status::DataError("train: the tracker found the face in no training frame (every one interpolated); "
+                             "check overlay_<camera>.mp4 and run headforge track again, give frontal cameras, or "
+                             "train --model gan-avatar, which trains without tracked expressions");
   std::error_code ec;
   if (fs::exists(checkpoint, ec)) HF_RETURN_IF_ERROR(LoadCheckpoint(checkpoint, stats));
   return Status::Ok();
@@ -205,7 +211,7 @@ void Trainer::Step(int step, RunningStats* stats) {
     // A random background each step: only the head may be opaque.
     const torch::Tensor background = torch::rand({3}, gen_).to(device_);
     // Frame 0's latent in place of the view's own, for --latent-dropout of them.
-    int64_t latent = view.frame;
+    int64_t latent = data_.TrainingLatent(view);
     if (stage2 && style_.latent_dropout > 0 && torch::rand({1}, gen_).item<double>() < style_.latent_dropout)
       latent = 0;
     if (j % world_ != rank_) continue;
@@ -413,6 +419,11 @@ Status Trainer::LoadCheckpoint(const fs::path& path, StatsLog* stats) {
   densify_->LoadState("densify.", c);
   gen_.set_state(generator);
   if (!c.Get("order", &order_)) order_ = torch::Tensor();
+  if (order_.defined() && order_.numel() != int64_t(usable_.size()))
+    return Status::DataError(path.string() + " was saved by a training over " + std::to_string(order_.numel()) +
+                             " training views, this one trains on " + std::to_string(usable_.size()) +
+                             " (the tracking, or which of its frames this version trains on, changed): delete it "
+                             "to start over");
   HF_LOG(Info) << "train: resuming from the checkpoint at step " << state_.step << " (" << p.size() << " Gaussians)";
   return stats->Truncate(state_.stats_lines);
 }
@@ -501,7 +512,7 @@ std::vector<ViewScores> ScoreViews(GaussianStyleAvatar& avatar, const AvatarData
     // Inference takes frame 0's latent: a held-out frame has none of its own.
     // Training views are scored as trained, with their own.
     const auto start = std::chrono::steady_clock::now();
-    PosedGaussians posed = avatar.Pose(data, view.condition, training_views ? view.frame : 0, avatar.deform);
+    PosedGaussians posed = avatar.Pose(data, view.condition, training_views ? data.TrainingLatent(view) : 0, avatar.deform);
     if (training_views && avatar.pose_corrections.defined())
       posed = CorrectPose(posed, avatar.pose_corrections[int64_t(i)]);
     const torch::Tensor render = avatar.Draw(posed, view.view, background).clamp(0, 1).cpu();
@@ -570,7 +581,7 @@ int64_t PruneUnseenGaussians(GaussianStyleAvatar& avatar, const AvatarDataset& d
     const std::vector<torch::Tensor*> from = p.All(), to = open.gaussians.params.All();
     for (size_t k = 0; k < from.size(); ++k) *to[k] = from[k]->index_select(0, unseen);
     if (avatar.gaussians.binding.defined()) open.gaussians.binding = avatar.gaussians.binding.index_select(0, unseen);
-    const PosedGaussians posed = open.Pose(data, view.condition, view.frame, avatar.deform);
+    const PosedGaussians posed = open.Pose(data, view.condition, data.TrainingLatent(view), avatar.deform);
     const SplatCamera& c = view.view;
     const torch::Tensor rt = torch::tensor(std::vector<double>(c.cam_from_world.begin(), c.cam_from_world.end()))
                                  .view({3, 4})

@@ -10,6 +10,7 @@
 
 #include <Eigen/Geometry>
 
+#include "avatar/train/hull_masks.h"
 #include "avatar/train/tensor_image.h"
 #include "capture/capture_io.h"
 #include "core/camera_set.h"
@@ -101,7 +102,59 @@ cv::Mat MeshCoverage(const Eigen::Matrix3Xf& vertices, const Eigen::Matrix3Xi& t
   return out.triangle >= 0;
 }
 
+// The angle (degrees) between the face's direction (+z in the head frame)
+// and the way from the head's origin to the camera of `cam_from_canonical`.
+double FaceAngleDeg(const Eigen::Isometry3d& cam_from_canonical) {
+  const Eigen::Vector3d facing = cam_from_canonical.linear() * Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d to_camera = -cam_from_canonical.translation().normalized();
+  return std::acos(std::clamp(facing.dot(to_camera), -1.0, 1.0)) * 180.0 / M_PI;
+}
+
+// One camera carried round a still head: the expression every view carries,
+// each weight's median over the tracked frames whose view faces the face
+// (within the tracker's fitted yaw, 35 degrees), else over every frame the
+// tracker fitted (not interpolated), else zero.
+Eigen::VectorXf SharedExpression(const IngestedCapture& capture, const CameraSet& cameras,
+                                 const TrackingFile& tracking, int* facing_frames) {
+  std::vector<const TrackedFrame*> facing, fitted;
+  for (const IngestedCamera& cam : capture.cameras)
+    for (const IngestedFrame& f : cam.frames) {
+      const CameraView* registered = cameras.FindView(cam.name, f.index);
+      if (!registered || !registered->registered) continue;
+      const TrackedFrame& tracked = tracking.frames[size_t(f.index)];
+      if (tracked.interpolated) continue;
+      fitted.push_back(&tracked);
+      if (FaceAngleDeg(registered->cam_from_world * tracked.head_motion) <= 35.0) facing.push_back(&tracked);
+    }
+  *facing_frames = int(facing.size());
+  const std::vector<const TrackedFrame*>& from = facing.empty() ? fitted : facing;
+  const Eigen::Index n = Eigen::Index(tracking.expression_names.size());
+  Eigen::VectorXf shared = Eigen::VectorXf::Zero(n);
+  std::vector<double> values(from.size());
+  for (Eigen::Index e = 0; e < n && !from.empty(); ++e) {
+    for (size_t i = 0; i < from.size(); ++i) values[i] = from[i]->expression[e];
+    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+    shared[e] = float(values[values.size() / 2]);
+  }
+  return shared;
+}
+
 }  // namespace
+
+std::vector<int64_t> UsableTrainingViews(const AvatarDataset& data, std::string* note) {
+  std::vector<int64_t> reliable, fitted;
+  for (size_t i = 0; i < data.train.size(); ++i) {
+    if (!data.train[i].unreliable) reliable.push_back(int64_t(i));
+    if (!data.train[i].interpolated) fitted.push_back(int64_t(i));
+  }
+  note->clear();
+  if (2 * reliable.size() >= data.train.size()) return reliable;
+  *note = "the tracker flagged " + std::to_string(data.train.size() - reliable.size()) + " of " +
+          std::to_string(data.train.size()) +
+          " training views low-confidence or interpolated; training on the low-confidence ones too (only the " +
+          std::to_string(data.train.size() - fitted.size()) + " interpolated left out)";
+  return fitted;
+}
 
 cv::Mat MeshCutMask(const cv::Mat& mask, const torch::Tensor& vertices, const torch::Tensor& rest,
                     const torch::Tensor& triangles, const SplatCamera& camera, double hair, double skin) {
@@ -131,8 +184,8 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   TrackingFile tracking;
   HF_RETURN_IF_ERROR(ReadTrackedWorkspace(workspace, model, &capture, &cameras, &tracking));
   const int frames = capture.num_frames();
-  if (options.mask != "ingest" && options.mask != "mesh")
-    return Status::InvalidArgument("--mask must be ingest or mesh, not '" + options.mask + "'");
+  if (options.mask != "auto" && options.mask != "ingest" && options.mask != "mesh" && options.mask != "hull")
+    return Status::InvalidArgument("--mask must be auto, ingest, mesh or hull, not '" + options.mask + "'");
   if (options.resolution < 16) return Status::InvalidArgument("the training resolution must be at least 16 pixels");
   AvatarDataset out;
   out.num_frames = frames;
@@ -164,6 +217,22 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   out.triangles = torch::from_blob(const_cast<int*>(tris.data()), {tris.cols(), 3}, torch::kInt32).to(torch::kInt64);
   for (const auto& [name, region] : model.regions())
     out.mesh_parts[name] = {region.first_triangle, region.last_triangle};
+  // A still head that one camera goes round shows one state throughout.
+  out.one_state = tracking.head_held_by_cameras && cameras.mode != "head-pose" && capture.cameras.size() == 1;
+  Eigen::VectorXf shared_expression;
+  if (out.one_state) shared_expression = SharedExpression(capture, cameras, tracking, &out.one_state_facing_views);
+  out.mask = options.mask == "auto" ? (out.one_state ? "hull" : options.auto_mask) : options.mask;
+  if (out.mask != "ingest" && out.mask != "mesh" && out.mask != "hull")
+    return Status::InvalidArgument("--mask auto stands for '" + out.mask + "', which is no mask");
+  if (out.mask == "hull" && !out.one_state)
+    return Status::InvalidArgument("--mask hull makes the masks of one camera carried round a still head agree; "
+                                   "this capture is not one (" + std::to_string(capture.cameras.size()) +
+                                   " camera(s), head " + (tracking.head_held_by_cameras ? "held" : "moving") +
+                                   "): give --mask ingest or mesh");
+  const bool hull = options.images && out.mask == "hull";
+  // The views' masks before the hull, each with where its view went.
+  std::vector<cv::Mat> hull_masks;
+  std::vector<std::pair<bool, size_t>> hull_views;  // (training, index)
 
   // Names given one by one or comma-separated ("cam3,cam6").
   const std::vector<std::string> held_cameras = SplitCommaList(options.holdout_cameras);
@@ -187,7 +256,9 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       view.frame = f.index;
       view.time_s = f.time_s;
       view.camera = cam.name;
-      view.unreliable = tracked.interpolated || tracked.low_confidence;
+      // One state for every view: no frame's own expression to be wrong.
+      view.unreliable = !out.one_state && (tracked.interpolated || tracked.low_confidence);
+      view.interpolated = !out.one_state && tracked.interpolated;
       cv::Mat image, mask;
       if (options.images) {
         HF_RETURN_IF_ERROR(ReadView(capture, cam, *lens, f.index, size, &image, &mask));
@@ -208,11 +279,12 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       view.view.cy = (lens->cy + 0.5) * scale - 0.5;
       view.view.width = size.width;
       view.view.height = size.height;
-      const Eigen::VectorXf expression = tracked.expression.cast<float>();
+      view.face_angle_deg = FaceAngleDeg(cam_from_canonical);
+      const Eigen::VectorXf expression = out.one_state ? shared_expression : tracked.expression.cast<float>();
       view.condition = torch::cat({torch::from_blob(const_cast<float*>(expression.data()), {expression.size()}).clone(),
                                    PoseCondition(rotation, translation)});
       const bool training = !out.HeldOut(f.index) && !held_camera;
-      const bool cut_mask = options.images && options.mask == "mesh";
+      const bool cut_mask = options.images && out.mask == "mesh";
       const bool uv_map = training && options.uv_map_side > 0;
       // The frame's tracked mesh, for the mask's cut and the UV map.
       torch::Tensor vertices;
@@ -221,11 +293,32 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       if (cut_mask)
         view.mask = MaskToTensor(MeshCutMask(mask, vertices, out.identity_vertices, out.triangles, view.view,
                                              options.mask_hair, options.mask_skin));
-      if (f.landmarks) RegionBoxes(*f.landmarks, *lens, scale, &view);
+      if (f.landmarks && view.face_angle_deg <= kLandmarkViewDeg) RegionBoxes(*f.landmarks, *lens, scale, &view);
       if (uv_map) view.uv_map = RenderUvMap(model, vertices, out.identity_vertices, view.view, options.uv_map_side);
+      if (hull) {
+        hull_masks.push_back(mask);
+        hull_views.emplace_back(training, (training ? out.train : out.test).size());
+      }
       (training ? out.train : out.test).push_back(std::move(view));
       out.width = size.width;
       out.height = size.height;
+    }
+  }
+  if (hull) {
+    // The training views vote; every view's mask is remade.
+    std::vector<SplatCamera> hull_cameras;
+    std::vector<int> voters;
+    for (size_t i = 0; i < hull_views.size(); ++i) {
+      const auto [training, index] = hull_views[i];
+      hull_cameras.push_back((training ? out.train : out.test)[index].view);
+      if (training) voters.push_back(int(i));
+    }
+    std::vector<cv::Mat> agreed;
+    HF_RETURN_IF_ERROR(HullMasks(hull_cameras, hull_masks, voters, HullOptions(), &agreed, &out.hull_stats)
+                           .WithContext("--mask hull"));
+    for (size_t i = 0; i < hull_views.size(); ++i) {
+      const auto [training, index] = hull_views[i];
+      (training ? out.train : out.test)[index].mask = MaskToTensor(agreed[i]);
     }
   }
   if (int(out.train.size()) < options.min_train_frames)

@@ -21,6 +21,7 @@
 #include "avatar/avatar_train.h"
 #include "avatar/splat/splat_camera.h"
 #include "avatar/train/dataset_options.h"
+#include "avatar/train/hull_masks.h"
 #include "core/face_model.h"
 #include "core/fs.h"
 #include "core/status.h"
@@ -37,8 +38,16 @@ struct AvatarView {
   torch::Tensor condition;  // [E + 9] expression weights, then the head's pose (below)
   // Left eye, right eye, mouth: (x0, y0, x1, y1) pixels; all zero without landmarks.
   std::array<std::array<float, 4>, 3> regions{};
+  // Its landmarks are the face's: found by ingest, and the camera within
+  // kLandmarkViewDeg of the face (a detector's points on a head's side or
+  // back are not the eyes and mouth); otherwise the view trains appearance
+  // only.
   bool has_landmarks = false;
+  // The angle (degrees) between the way the tracked face looks and the way
+  // to the camera: 0 facing it, 180 from behind.
+  double face_angle_deg = 0;
   bool unreliable = false;  // tracking interpolated it or flagged it low-confidence
+  bool interpolated = false;  // tracking interpolated it (no landmarks in any view of its frame)
   // The tracked mesh's texture coordinates where it covers the view drawn on
   // a square canvas (MakeSquareCanvas, DatasetOptions::uv_map_side): [3, S,
   // S] uint8, u and v (0..255 over the model's UV range) and covered (255);
@@ -54,6 +63,11 @@ struct AvatarView {
 cv::Mat MeshCutMask(const cv::Mat& mask, const torch::Tensor& vertices, const torch::Tensor& rest,
                     const torch::Tensor& triangles, const SplatCamera& camera, double hair, double skin);
 
+// Views whose camera is further than this from the face's direction carry no
+// landmarks (AvatarView::has_landmarks): the tracker's own limit for a
+// readable face (TrackOptions::max_yaw_deg).
+inline constexpr double kLandmarkViewDeg = 60.0;
+
 struct AvatarDataset {
   int width = 0, height = 0;
   int num_frames = 0;
@@ -65,6 +79,16 @@ struct AvatarDataset {
   // the loader or a pack.
   std::vector<AvatarView> validation;
   std::vector<std::string> expression_names;
+  // One camera carried round a head held still (track's still head, a
+  // walk-around video): every view shows one state of the head, so every
+  // view carries one expression (the median of the views that face the
+  // face; its sides and back cannot be tracked) and one latent (frame 0's).
+  bool one_state = false;
+  int one_state_facing_views = 0;  // the views its expression is the median of (0: every fitted frame's)
+  // The masks the views carry: ingest, mesh or hull (DatasetOptions::mask,
+  // auto resolved), and the hull's vote when hull.
+  std::string mask;
+  HullStats hull_stats;
   // The subject's mesh: identity shape [V, 3] (head frame, metres), the
   // expression basis [V * 3, E] and triangles [T, 3] (int64).
   torch::Tensor identity_vertices, expression_basis, triangles;
@@ -75,12 +99,23 @@ struct AvatarDataset {
   bool HeldOut(int frame) const {
     return frame >= first_test_frame || (holdout_every > 0 && frame % holdout_every == holdout_every / 2);
   }
+  // The frame latent `view` is drawn with in training: its own, or frame 0's
+  // when every view shows one state of the head.
+  int64_t TrainingLatent(const AvatarView& view) const { return one_state ? 0 : view.frame; }
   // "the last 25 of 125" or "one frame in 5 from frame 2 (30 of 150)".
   std::string HeldOutText() const;
 
   // The tracked mesh for `expression` [E]: [V, 3].
   torch::Tensor Vertices(const torch::Tensor& expression) const;
 };
+
+// The training views (indices into data.train) whose tracking the avatar
+// may learn expressions from: those neither interpolated nor flagged
+// low-confidence. When the flag would leave out more than half of them (a
+// rig's views from the sides raise every instant's residual) the flagged
+// views come back and only the interpolated ones stay out; `note` then says
+// so (else it is cleared).
+std::vector<int64_t> UsableTrainingViews(const AvatarDataset& data, std::string* note);
 
 // 8-bit channels [C, H, W] (uint8) -> floats in [0, 1]: every image the
 // dataset holds, from a workspace's frames or from a pack, goes through it.

@@ -13,8 +13,8 @@ Status DatasetOptions::Check() const {
   if (holdout_order != "auto" && holdout_order != "last" && holdout_order != "interleaved")
     return Status::InvalidArgument("train: --holdout-order must be auto, last or interleaved, not '" + holdout_order +
                                    "'");
-  if (mask != "auto" && mask != "ingest" && mask != "mesh")
-    return Status::InvalidArgument("train: --mask must be auto, ingest or mesh, not '" + mask +
+  if (mask != "auto" && mask != "ingest" && mask != "mesh" && mask != "hull")
+    return Status::InvalidArgument("train: --mask must be auto, ingest, mesh or hull, not '" + mask +
                                    "' (your own masks: a folder given to ingest's --mask-folder)");
   if (!(mask_hair >= 0 && mask_hair <= 0.3) || !(mask_skin >= 0 && mask_skin <= 0.3))
     return Status::InvalidArgument("train: --mask-hair and --mask-skin must be in [0, 0.3] metres");

@@ -37,9 +37,12 @@ struct DatasetOptions {
   // On talking_static at 128 px the skin's margin against the simulator's
   // masks (mean IoU; GrabCut's alone 0.963): 2 mm 0.959, 6 mm 0.966, 12 mm
   // 0.973, 16 mm 0.976, 24 mm 0.975; the tracked mesh is a pixel or two off.
-  // Train's options also take "auto" (each model's own: TrainOptions::MaskFor),
-  // which the loader does not.
+  // "hull" (one camera carried round a still head, AvatarDataset::one_state):
+  // the workspace's masks made to agree across the views (hull_masks.h), the
+  // training views voting. "auto": hull for such a capture, else `auto_mask`
+  // (the model's own: TrainOptions::DataFor).
   std::string mask = "ingest";
+  std::string auto_mask = "ingest";
   double mask_hair = 0.03;
   double mask_skin = 0.016;
 

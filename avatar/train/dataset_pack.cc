@@ -51,6 +51,8 @@ Status WriteDatasetPack(const AvatarDataset& data, const nlohmann::json& options
                           {"holdout_every", data.holdout_every},
                           {"expression_names", data.expression_names},
                           {"mesh_parts", parts}}}};
+  // Only when set: a pack of any other capture reads as it was written before.
+  if (data.one_state) doc["dataset"]["one_state"] = true;
   file.tensors.push_back(ToSafeTensor("identity_vertices", data.identity_vertices));
   file.tensors.push_back(ToSafeTensor("expression_basis", data.expression_basis));
   file.tensors.push_back(ToSafeTensor("triangles", data.triangles.to(torch::kInt64)));
@@ -75,6 +77,7 @@ Status WriteDatasetPack(const AvatarDataset& data, const nlohmann::json& options
                        {"has_landmarks", v.has_landmarks},
                        {"unreliable", v.unreliable},
                        {"uv_map", v.uv_map.defined()}});
+      if (v.interpolated) views.back()["interpolated"] = true;  // only when set: other packs' bytes as before
       ++k;
     }
   }
@@ -106,6 +109,7 @@ Status ReadDatasetPack(const fs::path& path, AvatarDataset* data, nlohmann::json
     out.num_frames = d.at("num_frames").get<int>();
     out.first_test_frame = d.at("first_test_frame").get<int>();
     out.holdout_every = d.value("holdout_every", 0);
+    out.one_state = d.value("one_state", false);
     out.expression_names = d.at("expression_names").get<std::vector<std::string>>();
     for (const auto& [name, range] : d.at("mesh_parts").items())
       out.mesh_parts[name] = {range.at(0).get<int>(), range.at(1).get<int>()};
@@ -126,6 +130,7 @@ Status ReadDatasetPack(const fs::path& path, AvatarDataset* data, nlohmann::json
       v.regions = j.at("regions").get<std::array<std::array<float, 4>, 3>>();
       v.has_landmarks = j.at("has_landmarks").get<bool>();
       v.unreliable = j.at("unreliable").get<bool>();
+      v.interpolated = j.value("interpolated", false);
       const std::string prefix = "view." + std::to_string(k++) + ".";
       torch::Tensor image, mask;
       if (!tensor(prefix + "image", &image) || !tensor(prefix + "mask", &mask) ||

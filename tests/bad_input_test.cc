@@ -107,7 +107,7 @@ std::vector<BadInput> CommandLineCases() {
        [](const fs::path& d) {
          return std::vector<std::string>{"train", "--workspace", (d / "ws").string(), "--mask", (d / "my_masks").string()};
        },
-       2, {"--mask must be auto, ingest or mesh", "ingest's --mask-folder"}, true},
+       2, {"--mask must be auto, ingest, mesh or hull", "ingest's --mask-folder"}, true},
       {"an unknown camera among the held-out ones (comma-separated)",
        [](const fs::path& d) {
          return std::vector<std::string>{"train", "--workspace", (d / "ws").string(), "--holdout-cameras",

@@ -26,8 +26,10 @@ const char* const kViewerScript = R"JS(
   const camera = new pc.Entity('camera');
   camera.addComponent('camera', { clearColor: new pc.Color(0.16, 0.17, 0.19), nearClip: 0.01, farClip: 50, fov: 30 });
   app.root.addChild(camera);
-  // Orbit round the point between the two heads: drag turns, the wheel zooms.
-  const orbit = { yaw: 0, pitch: 0, distance: 0.9, target: new pc.Vec3(0, 0.0, 0) };
+  // Orbit round the point between the two heads: drag turns, the wheel zooms;
+  // ?yaw=DEG opens the page turned (180: from behind, for a 360-degree capture).
+  const startYaw = Number(new URLSearchParams(location.search).get('yaw')) || 0;
+  const orbit = { yaw: startYaw, pitch: 0, distance: 0.9, target: new pc.Vec3(0, 0.0, 0) };
   const place = () => {
     const q = new pc.Quat().setFromEulerAngles(orbit.pitch, orbit.yaw, 0);
     const back = q.transformVector(new pc.Vec3(0, 0, orbit.distance));

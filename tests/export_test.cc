@@ -632,22 +632,31 @@ TEST_F(ExportStage, TheReportOpensInChromiumWithoutErrors) {
 
 // viewer/index.html, a file opened from disk, shows both avatars: no console
 // error, and the page's left and right halves hold a head each (pixels away
-// from the background's colour).
+// from the background's colour), from the front and, opened with ?yaw=180,
+// from behind (another picture).
 TEST_F(ExportStage, TheViewerPageShowsBothAvatars) {
   ASSERT_EQ(exported_.code, 0) << exported_.err;
-  const fs::path shot = Artefact("viewer.png");
-  const std::string command = OpenPageCommand(reference_ / "export" / "viewer", "index.html", 640, 400, shot);
-  ASSERT_EQ(std::system(command.c_str()), 0) << command;
-  const cv::Mat page = cv::imread(shot.string());
-  ASSERT_EQ(page.size(), cv::Size(640, 400));
-  const cv::Vec3b background = page.at<cv::Vec3b>(390, 5);
-  for (const cv::Rect half : {cv::Rect(0, 40, 320, 360), cv::Rect(320, 40, 320, 360)}) {
-    int head = 0;
-    for (int y = half.y; y < half.br().y; ++y)
-      for (int x = half.x; x < half.br().x; ++x)
-        head += cv::norm(cv::Vec3i(page.at<cv::Vec3b>(y, x)) - cv::Vec3i(background)) > 40 ? 1 : 0;
-    EXPECT_GT(head, 5000) << "x from " << half.x;
+  std::vector<cv::Mat> pages;
+  for (const std::string query : {"", "--query yaw=180"}) {
+    const fs::path shot = Artefact(query.empty() ? "viewer.png" : "viewer_back.png");
+    const std::string command = OpenPageCommand(reference_ / "export" / "viewer", "index.html", 640, 400, shot, query);
+    ASSERT_EQ(std::system(command.c_str()), 0) << command;
+    const cv::Mat page = cv::imread(shot.string());
+    ASSERT_EQ(page.size(), cv::Size(640, 400));
+    const cv::Vec3b background = page.at<cv::Vec3b>(390, 5);
+    for (const cv::Rect half : {cv::Rect(0, 40, 320, 360), cv::Rect(320, 40, 320, 360)}) {
+      int head = 0;
+      for (int y = half.y; y < half.br().y; ++y)
+        for (int x = half.x; x < half.br().x; ++x)
+          head += cv::norm(cv::Vec3i(page.at<cv::Vec3b>(y, x)) - cv::Vec3i(background)) > 40 ? 1 : 0;
+      EXPECT_GT(head, 5000) << "x from " << half.x << " " << query;
+    }
+    pages.push_back(page);
   }
+  // The back of the head is not the face: the two pictures differ.
+  cv::Mat diff;
+  cv::absdiff(pages[0], pages[1], diff);
+  EXPECT_GT(cv::mean(diff)[0] + cv::mean(diff)[1] + cv::mean(diff)[2], 3.0);
 }
 #endif
 

@@ -43,27 +43,32 @@ RenderPointDetector Detector68(FaceDetector* faces, const LandmarkPredictor* pre
 // Renders the mean face by `scene_text`, detects the 68 points in every frame
 // and hands each one that lands on the head to `use`.
 Status ForEachDetectedPoint(const std::string& scene_text, const FaceModel& model, const FaceDetectorOptions& detector,
-                            const std::string& landmark_model, int threads, const RenderedPointUse& use) {
+                            const std::string& landmark_model, int threads, const RenderedPointUse& use,
+                            const RenderedDirectionFilter& want = nullptr) {
   std::unique_ptr<FaceDetector> faces;
   HF_RETURN_IF_ERROR(FaceDetector::Create(detector, &faces));
   std::unique_ptr<LandmarkPredictor> predictor;
   HF_RETURN_IF_ERROR(LandmarkPredictor::Load(landmark_model, &predictor));
-  return ForEachRenderedPoint(scene_text, model, threads, Detector68(faces.get(), predictor.get()), use);
+  return ForEachRenderedPoint(scene_text, model, threads, Detector68(faces.get(), predictor.get()), use, want);
 }
 
 }  // namespace
 
 Status ForEachRenderedPoint(const std::string& scene_text, const FaceModel& model, int threads,
-                            const RenderPointDetector& detect, const RenderedPointUse& use) {
+                            const RenderPointDetector& detect, const RenderedPointUse& use,
+                            const RenderedDirectionFilter& want) {
   Scene scene;
   HF_RETURN_IF_ERROR(ParseScene(scene_text, "landmark embedding scene", &scene));
   std::unique_ptr<Simulator> sim;
   HF_RETURN_IF_ERROR(Simulator::Create(scene, model, threads, &sim));
   for (int f = 0; f < sim->num_frames(); ++f) {
+    // The camera RenderView places, and the head's pose at the frame's time.
+    const double t = sim->FrameTime(f);
+    const Eigen::Isometry3d head_from_cam =
+        sim->StateAt(t).world_from_head.inverse() * sim->CameraAt(0, t).cam_from_world.inverse();
+    if (want && !want(head_from_cam.translation())) continue;
     const SimulatedView view = sim->RenderView(f, 0);
     const std::vector<cv::Point2f> points = detect(view.image);
-    const Eigen::Isometry3d head_from_cam =
-        sim->StateAt(sim->FrameTime(f)).world_from_head.inverse() * view.camera.cam_from_world.inverse();
     for (size_t i = 0; i < points.size(); ++i) {
       const int x = static_cast<int>(std::lround(points[i].x)), y = static_cast<int>(std::lround(points[i].y));
       if (x < 0 || y < 0 || x >= view.render.depth.cols || y >= view.render.depth.rows) continue;
@@ -134,7 +139,8 @@ Status MeasureSubjectLandmarks(const FaceModel& model, const FaceDetectorOptions
 }
 
 Status MeasureViewLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
-                                    const std::string& landmark_model, int threads, LandmarkEmbedding* embedding) {
+                                    const std::string& landmark_model, int threads, LandmarkEmbedding* embedding,
+                                    const std::vector<int>& only_nodes) {
   LandmarkEmbedding out;
   HF_RETURN_IF_ERROR(MeasureLandmarkEmbedding(model, detector, landmark_model, threads, &out.points));
   for (int y = -60; y <= 60; y += 10) out.yaw_deg.push_back(y);
@@ -142,15 +148,28 @@ Status MeasureViewLandmarkEmbedding(const FaceModel& model, const FaceDetectorOp
   const size_t num_nodes = out.yaw_deg.size() * out.pitch_deg.size();
   std::vector<Eigen::Vector3d> sum(num_nodes * 68, Eigen::Vector3d::Zero());
   std::vector<double> weight(num_nodes * 68, 0.0);
+  std::vector<bool> measured(num_nodes, only_nodes.empty());
+  for (int n : only_nodes) {
+    if (n < 0 || size_t(n) >= num_nodes) return Status::InvalidArgument("no view grid node " + std::to_string(n));
+    measured[size_t(n)] = true;
+  }
+  RenderedDirectionFilter want;
+  if (!only_nodes.empty())
+    want = [&](const Eigen::Vector3d& toward) {
+      for (const auto& [node, w] : out.NodeWeights(toward))
+        if (measured[size_t(node)] && w > 0) return true;
+      return false;
+    };
   // Turning +-65 degrees and nodding +-22, each detection shared among the
   // four nodes around its direction by the bilinear weights.
   HF_RETURN_IF_ERROR(ForEachDetectedPoint(EmbeddingScene(400, 65.0, 3.3, 22.0, 0.7), model, detector, landmark_model,
                                           threads, [&](int i, const Eigen::Vector3d& p, const Eigen::Vector3d& toward) {
                                             for (const auto& [node, w] : out.NodeWeights(toward)) {
+                                              if (!measured[size_t(node)]) continue;
                                               sum[node * 68 + i] += w * p;
                                               weight[node * 68 + i] += w;
                                             }
-                                          }));
+                                          }, want));
   // A node that saw a landmark little leans toward the points over every
   // direction: three detections' weight make it the node's own.
   constexpr double kFullWeight = 3.0;

@@ -54,9 +54,12 @@ Status ReadLandmarkEmbedding(const std::string& path, LandmarkEmbedding* embeddi
 Status WriteLandmarkEmbedding(const std::string& path, const LandmarkEmbedding& embedding);
 // MeasureLandmarkEmbedding's points, and a grid of yaw -60..60 and pitch
 // -20..20 degrees (10 apart) measured as the mean face turns +-65 degrees and
-// nods +-22 before the camera.
+// nods +-22 before the camera. `only_nodes` (indices into `nodes`; empty:
+// all) measures those nodes alone: the renders none of them draws on are
+// skipped and the other nodes keep the points over every direction.
 Status MeasureViewLandmarkEmbedding(const FaceModel& model, const FaceDetectorOptions& detector,
-                                    const std::string& landmark_model, int threads, LandmarkEmbedding* embedding);
+                                    const std::string& landmark_model, int threads, LandmarkEmbedding* embedding,
+                                    const std::vector<int>& only_nodes = {});
 // One subject's sweep: the face model with identity `alpha`, skin colour
 // `skin` and a light from `light` (head frame, toward the light) turns +-25
 // degrees and nods +-12 over 60 renders. `points` gets each landmark's mean
@@ -82,11 +85,14 @@ using RenderPointDetector = std::function<std::vector<cv::Point2f>(const cv::Mat
 // A found point: its index, its head-frame position (metres) and the
 // camera's centre in the head frame.
 using RenderedPointUse = std::function<void(int, const Eigen::Vector3d&, const Eigen::Vector3d&)>;
+// Whether a render from this camera centre (head frame) is wanted.
+using RenderedDirectionFilter = std::function<bool(const Eigen::Vector3d&)>;
 // Renders `scene_text` (the face model) and hands every point `detect` finds
 // that lands on the head to `use`, carried to the head frame through the
-// render's depth and its known pose.
+// render's depth and its known pose. Frames `want` refuses are not rendered.
 Status ForEachRenderedPoint(const std::string& scene_text, const FaceModel& model, int threads,
-                            const RenderPointDetector& detect, const RenderedPointUse& use);
+                            const RenderPointDetector& detect, const RenderedPointUse& use,
+                            const RenderedDirectionFilter& want = nullptr);
 
 // The embedding file when it exists and loads, else the model's landmark vertices.
 LandmarkEmbedding LoadLandmarkEmbedding(const FaceModel& model, const std::string& embedding_path);

@@ -327,7 +327,7 @@ void SummariseResiduals(AlignResult* r) {
 // the triangulation's poorly measured depths.
 bool RefineByReprojection(const std::vector<std::vector<Observation>>& per_landmark,
                           const std::vector<Eigen::Vector3d>& model_points, const std::vector<int>& landmarks,
-                          double robust_px, Sim3* head_from_world, double* median_px) {
+                          double robust_px, bool hold_scale, Sim3* head_from_world, double* median_px) {
   const Sim3 start = head_from_world->Inverse();
   double params[7];
   ceres::RotationMatrixToAngleAxis(ceres::ColumnMajorAdapter3x3(start.rotation.data()), params);
@@ -344,7 +344,9 @@ bool RefineByReprojection(const std::vector<std::vector<Observation>>& per_landm
   if (count < 12) return false;
   // The rotation stays: landmark depth (what a free rotation would lean on)
   // is what detectors measure worst, on oblique or unshaded faces.
-  problem.SetManifold(params, new ceres::SubsetManifold(7, {0, 1, 2}));
+  // A scale the cameras know (a rig file in metres) stays too.
+  problem.SetManifold(params, hold_scale ? new ceres::SubsetManifold(7, {0, 1, 2, 6})
+                                         : new ceres::SubsetManifold(7, {0, 1, 2}));
   ceres::Solver::Options solver;
   solver.linear_solver_type = ceres::DENSE_QR;
   solver.max_num_iterations = 100;
@@ -706,9 +708,22 @@ Status RunAlign(const AlignOptions& options, const IngestedCapture& capture, con
   // tried: that set is chosen under the diluted scale, often a few landmarks
   // near the nose, and left the scale far worse determined; the Huber loss
   // tempers the detections that stray.
+  // Cameras whose unit is known (a rig file that says it): the head frame
+  // keeps it as its scale, about the head's origin; a face's size differs
+  // from the mean face's by several percent, a calibrated rig's does not.
+  const bool metric = cameras.metres_per_unit > 0;
+  if (metric) {
+    const Eigen::Vector3d origin = best.head_from_world.Inverse() * Eigen::Vector3d::Zero();
+    HF_LOG(Info) << "align: the cameras' unit is " << cameras.metres_per_unit << " m: the head frame's scale "
+                 << best.head_from_world.scale << " from the landmarks is replaced by it";
+    best.head_from_world.scale = cameras.metres_per_unit;
+    best.head_from_world.translation = -best.head_from_world.scale * (best.head_from_world.rotation * origin);
+    best.method += "+unit";
+    Rescore(options, model_points, &best);
+  }
   if (options.refine == "reprojection") {
     double median_px = 0;
-    if (RefineByReprojection(best_observations, model_points, RigidLandmarks(), options.refine_robust_px,
+    if (RefineByReprojection(best_observations, model_points, RigidLandmarks(), options.refine_robust_px, metric,
                              &best.head_from_world, &median_px)) {
       best.method += "+reprojection";
       best.reprojection_median_px = median_px;

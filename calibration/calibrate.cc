@@ -207,6 +207,7 @@ bool SameIntrinsics(const CameraIntrinsics& a, const CameraIntrinsics& b) {
 
 Status ImportRig(const std::string& path, const IngestedCapture& capture, CameraSet* cameras) {
   std::map<std::string, std::pair<CameraIntrinsics, Eigen::Isometry3d>> rig;
+  double metres_per_unit = 0;  // the rig file's own word; a COLMAP model has no unit
   std::error_code ec;
   if (fs::is_directory(path, ec)) {
     // A COLMAP text model: image names "<camera>/..." or "<camera>.<ext>" name the camera.
@@ -239,6 +240,7 @@ Status ImportRig(const std::string& path, const IngestedCapture& capture, Camera
     nlohmann::json j;
     HF_RETURN_IF_ERROR(ReadJson(path, &j).WithContext("rig file"));
     try {
+      metres_per_unit = j.value("metres_per_unit", 0.0);
       for (const auto& c : j.at("cameras")) {
         const CameraIntrinsics in = CameraIntrinsics::FromJson(c);
         rig[in.name] = {in, PoseFromJson(c.at("cam_from_world"))};
@@ -251,6 +253,10 @@ Status ImportRig(const std::string& path, const IngestedCapture& capture, Camera
   set.mode = "rig";
   set.frame = "world";
   set.notes = "imported from " + path;
+  if (!(metres_per_unit >= 0) || !std::isfinite(metres_per_unit))
+    return Status::DataError("rig file " + path + ": metres_per_unit must be a positive number (1 for metres, 0.001 "
+                             "for millimetres) or absent");
+  set.metres_per_unit = metres_per_unit;
   for (const auto& cam : capture.cameras) {
     const auto it = rig.find(cam.name);
     if (it == rig.end()) return Status::DataError("rig file " + path + " has no camera named " + cam.name);

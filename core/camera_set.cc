@@ -104,9 +104,10 @@ Status CameraSet::Write(const fs::path& path) const {
     if (v.registered) j["cam_from_world"] = PoseToJson(v.cam_from_world);
     views_json.push_back(j);
   }
-  const nlohmann::json root = {{"version", kVersion},  {"mode", mode},       {"frame", frame},
-                               {"notes", notes}, {"cameras", cams},    {"views", views_json},
-                               {"registered", registered()}, {"total", views.size()}};
+  nlohmann::json root = {{"version", kVersion},  {"mode", mode},       {"frame", frame},
+                         {"notes", notes}, {"cameras", cams},    {"views", views_json},
+                         {"registered", registered()}, {"total", views.size()}};
+  if (metres_per_unit > 0) root["metres_per_unit"] = metres_per_unit;
   return WriteJsonAtomic(path, root, 1);
 }
 
@@ -120,6 +121,7 @@ Status CameraSet::Read(const fs::path& path, CameraSet* set) {
     s.mode = root.value("mode", "");
     s.frame = root.value("frame", "world");
     s.notes = root.value("notes", "");
+    s.metres_per_unit = root.value("metres_per_unit", 0.0);
     for (const auto& c : root.at("cameras")) {
       const CameraIntrinsics in = CameraIntrinsics::FromJson(c);
       s.cameras.push_back(in);

@@ -54,6 +54,9 @@ struct CameraSet {
   std::vector<CameraIntrinsics> cameras;
   std::vector<CameraView> views;
   std::string notes;  // how they were obtained, in a line
+  // The world's unit in metres where calibrate knows it (a rig file that says
+  // so); 0: unknown (COLMAP's world has no unit).
+  double metres_per_unit = 0.0;
 
   const CameraIntrinsics* FindCamera(const std::string& name) const;
   const CameraView* FindView(const std::string& camera, int frame) const;

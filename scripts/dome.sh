@@ -10,7 +10,8 @@
 # simulator's frames and masks (`render --truth`).
 #   scripts/dome.sh [out] [run options]   (default /tmp/headforge_dome; resumes)
 # DOME_SCENE picks the scene file in scenes/ (dome_360, or dome_360_lit: the
-# same dome under one light).
+# same dome under one light; or any rig scene, e.g. rig_8cam), DOME_HOLDOUT
+# the cameras held out whole (default cam3,cam6,cam9).
 # Options after the folder go to `headforge run`; without any, --fps 12.5
 # (25 instants of the 2-second scene).
 set -euo pipefail
@@ -32,16 +33,19 @@ if [ ! -f "$out/rig.json" ]; then
 import json, sys
 truth = json.load(open(sys.argv[1]))
 views = truth["frames"][0]["views"]
-rig = {"cameras": [dict({k: c[k] for k in ("name", "width", "height", "fx", "fy", "cx", "cy", "k1", "k2")},
+# The simulator's world is in metres, as a studio's calibration is.
+rig = {"metres_per_unit": 1.0,
+       "cameras": [dict({k: c[k] for k in ("name", "width", "height", "fx", "fy", "cx", "cy", "k1", "k2")},
                         cam_from_world=views[c["name"]]["cam_from_world"]) for c in truth["cameras"]]}
 json.dump(rig, open(sys.argv[2], "w"), indent=1)
 PY
 fi
+count=$(python3 -c 'import json, sys; print(len(json.load(open(sys.argv[1]))["cameras"]))' "$out/sim/ground_truth.json")
 cameras=()
-for c in $(seq 0 19); do cameras+=("$out/sim/cam$c"); done
+for c in $(seq 0 $((count - 1))); do cameras+=("$out/sim/cam$c"); done
 start=$(date +%s)
 "$bin" run --video "${cameras[@]}" --mask-folder "$out/sim/masks" --mode rig --rig "$out/rig.json" \
-  --holdout-cameras cam3,cam6,cam9 --workspace "$out/ws" "$@"
+  --holdout-cameras "${DOME_HOLDOUT:-cam3,cam6,cam9}" --workspace "$out/ws" "$@"
 echo "dome: run took $(( $(date +%s) - start )) s"
 "$bin" status "$out/ws"
 "$bin" render --workspace "$out/ws" --truth "$out/sim" --out "$out/novel_views"

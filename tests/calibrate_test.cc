@@ -529,6 +529,27 @@ TEST(Calibrate, RigFilesAreImportedThroughTheCrop) {
   EXPECT_NEAR(in.cx, (179.5 + 0.5 - cam.crop_x0) * cam.crop_scale - 0.5, 1e-9);
   EXPECT_EQ(cameras.registered(), 3);
   EXPECT_NEAR(cameras.views[2].cam_from_world.translation().z(), 0.7, 1e-12);
+  EXPECT_EQ(cameras.metres_per_unit, 0.0);  // the file does not say its unit
+  // A rig file that says its unit (millimetres) carries it into cameras.json;
+  // a negative unit is refused.
+  nlohmann::json millimetres = rig;
+  millimetres["metres_per_unit"] = 0.001;
+  ASSERT_TRUE(WriteJsonAtomic(dir / "rig_mm.json", millimetres).ok());
+  options.rig = (dir / "rig_mm.json").string();
+  CameraSet metric;
+  ASSERT_TRUE(RunCalibrate(options, capture, Model(), dir / "out_mm", &progress, &metric, &result).ok());
+  EXPECT_EQ(metric.metres_per_unit, 0.001);
+  ASSERT_TRUE(metric.Write(dir / "cameras_mm.json").ok());
+  CameraSet read_back;
+  ASSERT_TRUE(CameraSet::Read(dir / "cameras_mm.json", &read_back).ok());
+  EXPECT_EQ(read_back.metres_per_unit, 0.001);
+  millimetres["metres_per_unit"] = -1;
+  ASSERT_TRUE(WriteJsonAtomic(dir / "rig_negative.json", millimetres).ok());
+  options.rig = (dir / "rig_negative.json").string();
+  const Status negative = RunCalibrate(options, capture, Model(), dir / "out_negative", &progress, &metric, &result);
+  EXPECT_EQ(negative.code(), Status::Code::kDataError);
+  EXPECT_NE(negative.message().find("metres_per_unit must be a positive number"), std::string::npos)
+      << negative.message();
   // The same rig as a COLMAP text model folder (pixel centres at +0.5 there).
   fs::create_directories(dir / "colmap_rig");
   ASSERT_TRUE(WriteFileAtomic(dir / "colmap_rig" / "cameras.txt", "# comment\n1 PINHOLE 360 288 600 600 180 144\n").ok());

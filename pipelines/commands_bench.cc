@@ -8,6 +8,7 @@
 // `headforge bench truth-workspace`: a copy of a tracked workspace of a
 // simulated capture with the simulator's cameras, expressions and identity in
 // place of the tracked ones, to train on: what registration costs the avatar.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <nlohmann/json.hpp>
@@ -93,6 +94,7 @@ struct Setting {
   // Fixed rig: the simulator's own cameras as a rig file (calibrate --mode
   // rig) instead of COLMAP, so that the row measures align alone.
   bool rig_file = false;
+  bool rig_in_metres = false;  // the file says its unit (metres_per_unit 1)
 };
 
 struct Row {
@@ -130,6 +132,7 @@ Row RunSetting(const std::string& scene, const Setting& s, const IngestedCapture
       row.error = std::string("the ground truth has no rig to write: ") + e.what();
       return row;
     }
+    if (s.rig_in_metres) rig["metres_per_unit"] = 1.0;
     std::error_code ec;
     fs::create_directories(dir, ec);
     options.rig = (dir / "rig.json").string();
@@ -155,7 +158,17 @@ Row RunSetting(const std::string& scene, const Setting& s, const IngestedCapture
   if (status.ok()) status = RunAlign(AlignOptions(), capture, cameras, model, &aligned);
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (status.ok()) status = EvaluateWorldCameras(cameras, capture, truth, &aligned.head_from_world, &row.world);
-  if (status.ok()) status = EvaluateHeadCameras(aligned.cameras, capture, truth, &row.head);
+  if (status.ok()) {
+    // Several cameras watching a moving head: align's head frame is the
+    // head at its reference instant, so it is scored there; at the other
+    // instants the head has moved (track's head motion follows it).
+    CameraSet scored = aligned.cameras;
+    if (aligned.reference_frame >= 0)
+      scored.views.erase(std::remove_if(scored.views.begin(), scored.views.end(),
+                                        [&](const CameraView& v) { return v.frame != aligned.reference_frame; }),
+                         scored.views.end());
+    status = EvaluateHeadCameras(scored, capture, truth, &row.head);
+  }
   if (status.ok() && aligned.surface_points > 0) {
     // What the surface fit bought: the landmarks' head frame, before the fit.
     CameraErrors head, world;
@@ -281,6 +294,8 @@ void PrintCalibrateHeader() {
   std::printf("| scene | setting | wall time | registered | rotation error median / max (deg) | centre error median / "
               "max (mm) | align scale error | focal error | aligned rotation (deg) | aligned centre (mm) | aligned "
               "rotation / scale error without the surface fit |\n");
+  std::printf("(a rig's aligned rotation and centre: its cameras at align's reference instant, the head moving "
+              "between instants)\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
 }
 
@@ -288,7 +303,11 @@ void PrintCalibrateHeader() {
 std::vector<Setting> CalibrateSettings(const std::string& scene, bool rig, bool quick, const std::vector<int>& instants) {
   std::vector<Setting> settings;
   // The rig's own calibration first: what align alone leaves.
-  if (rig) settings.push_back({"rig file (the simulator's cameras)", 4096, "exhaustive", 1, 1, true, "SIMPLE_RADIAL", true});
+  if (rig) {
+    settings.push_back({"rig file (the simulator's cameras)", 4096, "exhaustive", 1, 1, true, "SIMPLE_RADIAL", true});
+    settings.push_back({"rig file in metres (metres_per_unit 1)", 4096, "exhaustive", 1, 1, true, "SIMPLE_RADIAL", true,
+                        true});
+  }
   if (rig && !instants.empty()) {
     for (int n : instants)
       settings.push_back({"4k SIFT, exhaustive, " + std::to_string(n) + (n == 1 ? " instant" : " instants"), 4096,

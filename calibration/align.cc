@@ -32,6 +32,8 @@ Status AlignOptions::Check() const {
   if (!(refine_robust_px > 0)) return Status::InvalidArgument("--align-refine-robust must be positive");
   if (!(max_residual_mm > 0)) return Status::InvalidArgument("--max-align-residual must be positive");
   if (surface != "points" && surface != "off") return Status::InvalidArgument("--align-surface must be points or off");
+  if (rig_view_poses != "mesh" && rig_view_poses != "landmarks")
+    return Status::InvalidArgument("--align-rig-view-poses must be mesh or landmarks");
   if (!(surface_noise_mm > 0)) return Status::InvalidArgument("--align-surface-noise must be positive");
   return Status::Ok();
 }
@@ -73,6 +75,12 @@ void AddAlignOptions(OptionSet* o, AlignOptions* a) {
          "Surface fit: the points' noise (mm), against which one standard deviation of an identity coefficient "
          "weighs.",
          "align-surface-noise");
+  o->Add("align.rig_view_poses", &a->rig_view_poses,
+         "Several cameras (a rig): mesh: each view's head pose from the face mesh's 468 points where ingest found "
+         "them (the 68-point predictor reads a turned face as nearly frontal); landmarks: from the 68 points.",
+         "align-rig-view-poses");
+  o->Add("align.mesh_embedding", &a->mesh_embedding, "The face mesh's points on the face model (embed-mesh).",
+         "align-mesh-embedding");
   o->Add("align.drop_misplaced", &a->drop_misplaced,
          "Leave out the views whose frames show the head but whose camera calibrate placed with the head behind it "
          "or well outside its frame (a wrong registration), and say which; more than half of them: fail.",
@@ -388,6 +396,12 @@ std::map<int, std::vector<ViewPose>> CollectViewPoses(const AlignOptions& option
                                                       const std::vector<Eigen::Vector3d>& model_points,
                                                       bool per_frame) {
   const bool head_frame = cameras.frame == "head";
+  // A rig's views: head poses from the face mesh where a frame has it.
+  std::vector<Eigen::Vector3d> mesh_points;
+  if (per_frame && options.rig_view_poses == "mesh" &&
+      !ReadMeshEmbedding(options.mesh_embedding, &mesh_points).ok())
+    HF_LOG(Warning) << "align: no face mesh embedding at '" << options.mesh_embedding
+                    << "'; the views' head poses come from their 68 landmarks";
   std::map<int, std::vector<ViewPose>> view_poses;
   for (const auto& cam : capture.cameras) {
     const CameraIntrinsics* in = cameras.FindCamera(cam.name);
@@ -407,7 +421,13 @@ std::map<int, std::vector<ViewPose>> CollectViewPoses(const AlignOptions& option
       // their points drift. Note whether the view's head yaw (from PnP against
       // the model) is within the limit.
       if (!head_frame) {
-        const PnpResult pose = SolvePnp(model_points, undistorted, in->K());
+        PnpResult pose;
+        if (mesh_points.size() == f.mesh.size() && !f.mesh.empty()) {
+          std::vector<Eigen::Vector2d> mesh;
+          for (const cv::Point3f& p : f.mesh) mesh.push_back(in->Undistort(Eigen::Vector2d(p.x, p.y)));
+          pose = SolvePnp(mesh_points, mesh, in->K());
+        }
+        if (!pose.ok) pose = SolvePnp(model_points, undistorted, in->K());
         if (!pose.ok) continue;
         const Eigen::Vector3d eye = pose.cam_from_object.inverse().translation();
         v.cam_from_head = pose.cam_from_object;

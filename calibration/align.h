@@ -9,6 +9,7 @@
 
 #include "core/camera_set.h"
 #include "calibration/landmark_embedding.h"
+#include "calibration/mesh_embedding.h"
 #include "calibration/similarity.h"
 #include "capture/capture_io.h"
 #include "core/face_model.h"
@@ -47,6 +48,12 @@ struct AlignOptions {
   // World-frame cameras: fail when the triangulated landmarks miss the model by
   // more than this median (mm), a sign of a broken reconstruction.
   double max_residual_mm = 40.0;
+  // Several cameras watching the head (a rig): where a view's frame has the
+  // face mesh (468 points, ingest's FaceMesh), its head pose comes from
+  // them ("mesh"): the 68-point predictor reads a turned face as nearly
+  // frontal, the mesh network far less. "landmarks": from the 68 points.
+  std::string rig_view_poses = "mesh";
+  std::string mesh_embedding = DefaultMeshEmbedding();  // the mesh's points on the model
   // World-frame cameras: leave out the views FindMisplacedViews finds (more
   // than half of them: fail).
   bool drop_misplaced = true;

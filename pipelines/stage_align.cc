@@ -31,7 +31,13 @@ class AlignJob : public StageJob {
   void AddOptions(OptionSet* options) override { AddAlignOptions(options, &options_); }
   Status Check() const override { return options_.Check(); }
   Status AddInputs(Hasher* hasher) const override {
-    return AddLandmarkEmbeddingInputs({options_.landmark_embedding}, hasher);
+    HF_RETURN_IF_ERROR(AddLandmarkEmbeddingInputs({options_.landmark_embedding}, hasher));
+    // The face mesh's embedding, where a rig's view poses read it.
+    if (options_.rig_view_poses == "mesh" && fs::exists(options_.mesh_embedding)) {
+      hasher->Add(std::string("mesh embedding"));
+      HF_RETURN_IF_ERROR(hasher->AddFileDigest(options_.mesh_embedding).WithContext("mesh embedding"));
+    }
+    return Status::Ok();
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     IngestedCapture capture;

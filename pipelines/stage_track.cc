@@ -20,7 +20,10 @@ class TrackJob : public StageJob {
                                                                                  IdentityLandmarkEmbedding()}
                                                       : std::vector<std::string>{options_.landmark_embedding},
                                                   hasher));
-    return AddMeshEmbeddingInputs(options_.fit.mesh_weight > 0 ? options_.mesh_embedding : "", hasher);
+    // The mesh's embedding counts wherever a fit may read it (a rig's
+    // surrounding views take multiview_mesh_weight).
+    const bool read = options_.fit.mesh_weight > 0 || options_.multiview_mesh_weight > 0;
+    return AddMeshEmbeddingInputs(read ? options_.mesh_embedding : "", hasher);
   }
   Status Run(const StageEnv& env, const StageContext& context, StageResult* result) override {
     IngestedCapture capture;

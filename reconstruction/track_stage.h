@@ -36,6 +36,14 @@ struct TrackStageOptions {
   // the contour put the rig_8cam head frame 1-2 deg off in pitch (rotation
   // 2.0-2.2 deg at 0.5, 1.3-1.4 deg at 0.05).
   double multiview_contour_weight = 0.05;
+  // The face mesh's weight (instead of fit.mesh_weight) when the views of a
+  // frame surround the head (0: fit.mesh_weight stays). The 68-point
+  // predictor reads a turned face as nearly frontal, the mesh network far
+  // less: on the unlit dome_360 the tracked face in cam0 is 9.77 deg off the
+  // truth at 0 and 2.29 deg at 0.4; on the lit rig_8cam 0.4 turns the head
+  // 1.35 -> 1.21 deg off but mouthSmile_R's error 0.10 -> 0.23, so it is
+  // not the default.
+  double multiview_mesh_weight = 0.0;
   // With head-pose cameras (which carry each frame's head pose), refine that
   // pose together with the fitted shape and expressions; false holds it as
   // calibrated (on talking_static: blendshape errors 0.08-0.10 refined against

@@ -13,14 +13,16 @@
 # same dome under one light; or any rig scene, e.g. rig_8cam), DOME_HOLDOUT
 # the cameras held out whole (default cam3,cam6,cam9).
 # Options after the folder go to `headforge run`; without any, --fps 12.5
-# (25 instants of the 2-second scene).
+# (25 instants of the 2-second scene) --multiview-mesh-weight 0.4 (track
+# fits the face mesh beside the 68 points: the unlit dome's turned views
+# defeat the 68-point predictor; docs/tracking.md).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${HEADFORGE_BUILD_DIR:-$root/build}"
 bin="$build/pipelines/headforge"
 out="${1:-/tmp/headforge_dome}"
 shift || true
-[ $# -gt 0 ] || set -- --fps 12.5
+[ $# -gt 0 ] || set -- --fps 12.5 --multiview-mesh-weight 0.4
 mkdir -p "$out"
 scene="${DOME_SCENE:-dome_360}"
 [ -f "$root/scenes/$scene.toml" ] || { echo "dome.sh: no scene scenes/$scene.toml" >&2; exit 2; }

@@ -6,6 +6,7 @@
 
 #include <nlohmann/json.hpp>
 #include <cmath>
+#include <functional>
 #include <random>
 
 #include <opencv2/imgcodecs.hpp>
@@ -245,6 +246,45 @@ TEST(Align, RecoversTheSimilarityFromLandmarkViews) {
   EXPECT_NE(broken.message().find("the cameras do not agree on the face"), std::string::npos) << broken.message();
 }
 
+// A rig: fixed 512 px cameras 0.7 m from a still head at `yaws` (degrees,
+// 5 deg above it), two instants, in a world related to the head by `truth`;
+// `detect(camera, project, frame)` fills each frame's detections, `project`
+// taking a head-frame point to its pixel in that view.
+using HeadProjection = std::function<cv::Point2f(const Eigen::Vector3d&)>;
+void MakeRig(const Sim3& truth, const std::vector<double>& yaws,
+             const std::function<void(size_t, const HeadProjection&, IngestedFrame*)>& detect,
+             IngestedCapture* capture, CameraSet* cameras) {
+  const Sim3 world_from_head = truth.Inverse();
+  cameras->mode = "rig";
+  cameras->frame = "world";
+  for (size_t c = 0; c < yaws.size(); ++c) {
+    CameraIntrinsics intrinsics;
+    intrinsics.name = "cam" + std::to_string(c);
+    intrinsics.width = intrinsics.height = 512;
+    intrinsics.fx = intrinsics.fy = 900;
+    intrinsics.cx = intrinsics.cy = 255.5;
+    cameras->cameras.push_back(intrinsics);
+    IngestedCamera cam;
+    cam.name = intrinsics.name;
+    cam.width = cam.height = cam.source_width = cam.source_height = 512;
+    for (int f = 0; f < 2; ++f) {
+      CameraView view = ViewFrom(EyeAt(yaws[c], 5.0, 0.7), truth, f);
+      view.camera = cam.name;
+      cameras->views.push_back(view);
+      const HeadProjection project = [&](const Eigen::Vector3d& head_point) {
+        const Eigen::Vector3d p = view.cam_from_world * (world_from_head * head_point);
+        return cv::Point2f(static_cast<float>(intrinsics.fx * p.x() / p.z() + intrinsics.cx),
+                           static_cast<float>(intrinsics.fy * p.y() / p.z() + intrinsics.cy));
+      };
+      IngestedFrame frame;
+      frame.index = frame.source_frame = f;
+      detect(c, project, &frame);
+      cam.frames.push_back(frame);
+    }
+    capture->cameras.push_back(cam);
+  }
+}
+
 // A rig of six fixed cameras (yaw -25..25, two instants) in a world measured
 // in millimetres, before a subject whose face is 8 % larger than the mean
 // face: from the landmarks alone align's scale is the mean face's (about 7 %
@@ -260,35 +300,13 @@ TEST(Align, ARigsKnownUnitIsTheHeadFramesScale) {
   const Sim3 world_from_head = truth.Inverse();
   IngestedCapture capture;
   CameraSet cameras;
-  cameras.mode = "rig";
-  cameras.frame = "world";
-  for (int c = 0; c < 6; ++c) {
-    CameraIntrinsics intrinsics;
-    intrinsics.name = "cam" + std::to_string(c);
-    intrinsics.width = intrinsics.height = 512;
-    intrinsics.fx = intrinsics.fy = 900;
-    intrinsics.cx = intrinsics.cy = 255.5;
-    cameras.cameras.push_back(intrinsics);
-    IngestedCamera cam;
-    cam.name = intrinsics.name;
-    cam.width = cam.height = cam.source_width = cam.source_height = 512;
-    for (int f = 0; f < 2; ++f) {
-      CameraView view = ViewFrom(EyeAt(-25.0 + 10.0 * c, 5.0, 0.7), truth, f);
-      view.camera = cam.name;
-      cameras.views.push_back(view);
-      IngestedFrame frame;
-      frame.index = frame.source_frame = f;
-      Landmarks68 landmarks;
-      for (int i = 0; i < 68; ++i) {
-        const Eigen::Vector3d p = view.cam_from_world * (world_from_head * subject[size_t(i)]);
-        landmarks[i] = cv::Point2f(static_cast<float>(intrinsics.fx * p.x() / p.z() + intrinsics.cx),
-                                   static_cast<float>(intrinsics.fy * p.y() / p.z() + intrinsics.cy));
-      }
-      frame.landmarks = landmarks;
-      cam.frames.push_back(frame);
-    }
-    capture.cameras.push_back(cam);
-  }
+  MakeRig(truth, {-25.0, -15.0, -5.0, 5.0, 15.0, 25.0},
+          [&](size_t, const HeadProjection& project, IngestedFrame* frame) {
+            Landmarks68 landmarks;
+            for (int i = 0; i < 68; ++i) landmarks[i] = project(subject[size_t(i)]);
+            frame->landmarks = landmarks;
+          },
+          &capture, &cameras);
   AlignOptions options;
   AlignResult free_scale, known;
   ASSERT_TRUE(RunAlign(options, capture, cameras, Model(), &free_scale).ok());
@@ -327,47 +345,24 @@ TEST(Align, ARigsViewPosesComeFromTheFaceMesh) {
   truth.scale = 0.25;
   truth.rotation = Eigen::AngleAxisd(-0.5, Eigen::Vector3d(0.2, 1.0, 0.1).normalized()).toRotationMatrix();
   truth.translation = Eigen::Vector3d(-0.02, 0.01, 0.04);
-  const Sim3 world_from_head = truth.Inverse();
   IngestedCapture capture;
   CameraSet cameras;
-  cameras.mode = "rig";
-  cameras.frame = "world";
   const std::vector<double> yaws = {-10.0, 5.0, 20.0, 35.0, 50.0, 65.0};  // lopsided, as a side-on rig is
-  for (size_t c = 0; c < yaws.size(); ++c) {
-    CameraIntrinsics intrinsics;
-    intrinsics.name = "cam" + std::to_string(c);
-    intrinsics.width = intrinsics.height = 512;
-    intrinsics.fx = intrinsics.fy = 900;
-    intrinsics.cx = intrinsics.cy = 255.5;
-    cameras.cameras.push_back(intrinsics);
-    IngestedCamera cam;
-    cam.name = intrinsics.name;
-    cam.width = cam.height = cam.source_width = cam.source_height = 512;
-    for (int f = 0; f < 2; ++f) {
-      CameraView view = ViewFrom(EyeAt(yaws[c], 5.0, 0.7), truth, f);
-      view.camera = cam.name;
-      cameras.views.push_back(view);
-      // The predictor's reading: the face turned toward the camera by two
-      // thirds of its angle, about the head's origin.
-      const Eigen::Matrix3d toward = Eigen::AngleAxisd(2.0 / 3.0 * yaws[c] * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
-      auto project = [&](const Eigen::Vector3d& head_point) {
-        const Eigen::Vector3d p = view.cam_from_world * (world_from_head * head_point);
-        return cv::Point2f(static_cast<float>(intrinsics.fx * p.x() / p.z() + intrinsics.cx),
-                           static_cast<float>(intrinsics.fy * p.y() / p.z() + intrinsics.cy));
-      };
-      IngestedFrame frame;
-      frame.index = frame.source_frame = f;
-      Landmarks68 landmarks;
-      for (int i = 0; i < 68; ++i) landmarks[i] = project(toward * points[size_t(i)]);
-      frame.landmarks = landmarks;
-      for (const Eigen::Vector3d& m : mesh) {
-        const cv::Point2f q = project(m);
-        frame.mesh.emplace_back(q.x, q.y, 0.0f);
-      }
-      cam.frames.push_back(frame);
-    }
-    capture.cameras.push_back(cam);
-  }
+  MakeRig(truth, yaws,
+          [&](size_t c, const HeadProjection& project, IngestedFrame* frame) {
+            // The predictor's reading: the face turned toward the camera by
+            // two thirds of its angle, about the head's origin.
+            const Eigen::Matrix3d toward =
+                Eigen::AngleAxisd(2.0 / 3.0 * yaws[c] * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+            Landmarks68 landmarks;
+            for (int i = 0; i < 68; ++i) landmarks[i] = project(toward * points[size_t(i)]);
+            frame->landmarks = landmarks;
+            for (const Eigen::Vector3d& m : mesh) {
+              const cv::Point2f q = project(m);
+              frame->mesh.emplace_back(q.x, q.y, 0.0f);
+            }
+          },
+          &capture, &cameras);
   auto turn_deg = [&](const AlignResult& a) {
     return Eigen::AngleAxisd(a.head_from_world.rotation.transpose() * truth.rotation).angle() * 180 / M_PI;
   };

@@ -185,11 +185,20 @@ Status WriteBlendshapeFiles(const GaussianBlendshapes& shapes, const BlendshapeS
        {{"views", scores.held_out_views},
         {"psnr_masked_network", scores.psnr_network},
         {"psnr_masked_blendshapes", scores.psnr_blendshapes},
+        {"psnr_masked_fitted", scores.psnr_fitted},
         {"ms_network", scores.ms_network},
         {"ms_blendshapes", scores.ms_blendshapes}}},
       {"data", ToJson(data)},
       {"samples", scores.samples},
-      {"fit_seconds", scores.fit_seconds}};
+      {"fit_seconds", scores.fit_seconds},
+      {"refinement",
+       {{"steps", scores.refine_steps},
+        {"kept_step", scores.refine_kept_step},
+        {"validation_views", scores.validation_views},
+        {"validation_psnr_masked_before", scores.validation_psnr_before},
+        {"validation_psnr_masked_after", scores.validation_psnr_after},
+        {"seconds", scores.refine_seconds},
+        {"validation_curve", scores.validation_curve}}}};
   HF_RETURN_IF_ERROR(WriteJsonAtomic(dir / "blendshapes.json", layout, 1));
   files->insert(files->end(), {"blendshapes.bin", "blendshapes.json"});
   return Status::Ok();
@@ -212,8 +221,9 @@ AvatarBlendshapes Arrays(const GaussianBlendshapes& shapes) {
 }  // namespace
 
 Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
-                               const fs::path& out_dir, BlendshapeScores* scores, std::vector<std::string>* files,
-                               AvatarBlendshapes* arrays) {
+                               const BlendshapeExportOptions& export_options, const fs::path& out_dir,
+                               BlendshapeScores* scores, std::vector<std::string>* files, AvatarBlendshapes* arrays,
+                               Progress* progress) {
   GaussianStyleAvatar avatar;
   FaceModel model;
   DatasetOptions loading;
@@ -224,7 +234,7 @@ Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_
     HF_LOG(Warning) << "export: the avatar trained without stage 2, so its blendshapes do not move it";
   const auto start = std::chrono::steady_clock::now();
   const DistilOptions options;
-  const GaussianBlendshapes shapes = DistilBlendshapes(avatar, data, options);
+  GaussianBlendshapes shapes = DistilBlendshapes(avatar, data, options);
   scores->fit_seconds = SecondsFrom(start);
   const int64_t k = int64_t(data.expression_names.size());
   scores->gaussians = int(shapes.neutral.size(0));
@@ -233,18 +243,37 @@ Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_
   const std::vector<ViewScores> network = ScoreHeldOut(data, [&](const AvatarView& view) {
     return avatar.Pose(data, view.condition, 0, avatar.deform);
   });
-  const std::vector<ViewScores> linear = ScoreHeldOut(data, [&](const AvatarView& view) {
-    return PoseBlendshapes(shapes, view.condition.slice(0, 0, k));
-  });
+  auto linear = [&] {
+    return ScoreHeldOut(data, [&](const AvatarView& view) { return PoseBlendshapes(shapes, view.condition.slice(0, 0, k)); });
+  };
+  const std::vector<ViewScores> fitted = linear();
   scores->held_out_views = int(data.test.size());
   scores->psnr_network = MeanScores(network).psnr_masked;
-  scores->psnr_blendshapes = MeanScores(linear).psnr_masked;
+  scores->psnr_fitted = MeanScores(fitted).psnr_masked;
   scores->ms_network = MeanRenderMs(network);
-  scores->ms_blendshapes = MeanRenderMs(linear);
   HF_LOG(Info) << "export: " << scores->gaussians << " Gaussians x " << k << " blendshapes fitted to "
                << scores->samples << " poses of the networks in " << scores->fit_seconds << " s; held out "
-               << scores->psnr_blendshapes << " dB over the head against the networks' " << scores->psnr_network
-               << " dB (" << scores->ms_blendshapes << " ms a view against " << scores->ms_network << ")";
+               << scores->psnr_fitted << " dB over the head against the networks' " << scores->psnr_network << " dB";
+  std::vector<ViewScores> final_scores = fitted;
+  if (export_options.refine_steps > 0) {
+    BlendshapeRefineOptions refine;
+    refine.steps = export_options.refine_steps;
+    refine.max_minutes = export_options.refine_minutes;
+    BlendshapeRefineReport report;
+    HF_RETURN_IF_ERROR(RefineBlendshapes(data, refine, &shapes, &report, progress).WithContext("export blendshapes"));
+    scores->refine_steps = report.steps;
+    scores->refine_kept_step = report.kept_step;
+    scores->validation_views = report.validation_views;
+    scores->validation_psnr_before = report.validation_psnr_before;
+    scores->validation_psnr_after = report.validation_psnr_after;
+    scores->refine_seconds = report.seconds;
+    scores->validation_curve = report.curve;
+    final_scores = linear();
+  }
+  scores->psnr_blendshapes = MeanScores(final_scores).psnr_masked;
+  scores->ms_blendshapes = MeanRenderMs(final_scores);
+  HF_LOG(Info) << "export: the blendshapes score " << scores->psnr_blendshapes << " dB held out over the head ("
+               << scores->ms_blendshapes << " ms a view against the networks' " << scores->ms_network << ")";
   HF_RETURN_IF_ERROR(WriteBlendshapeFiles(shapes, *scores, loading, out_dir, files));
   if (arrays) *arrays = Arrays(shapes);
   return Status::Ok();

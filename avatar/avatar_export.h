@@ -11,6 +11,10 @@
 #include "core/status.h"
 
 namespace headforge {
+class Progress;
+}
+
+namespace headforge {
 
 // Gaussians in the avatar's head frame (metres, +y up, the face toward +z).
 struct AvatarSplats {
@@ -57,8 +61,18 @@ Status ExportGanWeights(const fs::path& workspace, const fs::path& model_dir, co
 struct BlendshapeScores {
   int gaussians = 0, expressions = 0, samples = 0, held_out_views = 0;
   double psnr_network = 0, psnr_blendshapes = 0;  // over the head, mean of the held-out views
+  double psnr_fitted = 0;  // the blendshapes as fitted to the networks, before a refinement
   double ms_network = 0, ms_blendshapes = 0;      // posing and drawing one view
   double fit_seconds = 0;
+  // The refinement against the training frames (none: refine_steps 0).
+  int refine_steps = 0, refine_kept_step = 0, validation_views = 0;
+  double validation_psnr_before = 0, validation_psnr_after = 0, refine_seconds = 0;
+  std::vector<std::pair<int, double>> validation_curve;  // (step, PSNR over the head) at each evaluation
+};
+// The refinement through the rasterizer after the fit (blendshapes.h).
+struct BlendshapeExportOptions {
+  int refine_steps = 0;
+  double refine_minutes = 0;
 };
 // The blendshapes as plain arrays: the Gaussians with every weight 0 and
 // each expression's offsets of the 13 attributes (position 3, rotation w, x,
@@ -70,7 +84,8 @@ struct AvatarBlendshapes {
   std::vector<float> neutral_attributes;  // [N, 13]: the neutral state before normalising, exp and clamping
 };
 Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
-                               const fs::path& out_dir, BlendshapeScores* scores, std::vector<std::string>* files,
-                               AvatarBlendshapes* arrays);
+                               const BlendshapeExportOptions& options, const fs::path& out_dir,
+                               BlendshapeScores* scores, std::vector<std::string>* files, AvatarBlendshapes* arrays,
+                               Progress* progress);
 
 }  // namespace headforge

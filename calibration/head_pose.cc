@@ -24,6 +24,7 @@ Status HeadPoseOptions::Check() const {
   if (refine != "face-model" && refine != "off")
     return Status::InvalidArgument("head-pose refine must be face-model or off");
   if (refine_rounds < 1) return Status::InvalidArgument("head-pose refine rounds must be at least 1");
+  if (!(refine_mesh_weight >= 0)) return Status::InvalidArgument("--head-pose-mesh-weight must be zero or positive");
   return Status::Ok();
 }
 

@@ -41,6 +41,11 @@ struct HeadPoseOptions {
   // skipped when `focal` is given); "off" keeps the fit to the mean face.
   std::string refine = "face-model";
   int refine_rounds = 6;  // fits at most, until the focal length changes by less than 1%
+  // The face mesh's 468 points (where ingest found them) in that refinement,
+  // each at this weight against 1 for each of the 68 landmarks; 0 leaves the
+  // mesh out. Not a command-line option: on talking_static the mesh pulls the
+  // focal length 26-40 % long (bench calibrate --head-pose-mesh-weight).
+  double refine_mesh_weight = 0.0;
   // The 68 head-frame points the detector's landmarks stand for (see
   // landmark_embedding.h); empty: the model's landmark vertices.
   std::vector<Eigen::Vector3d> landmark_points;

@@ -109,7 +109,8 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
   o->Add("export.formats", &e->formats,
          "What to write: mesh (glTF avatar with blendshapes, animation, texture), gaussians (PLY and "
          "KHR_gaussian_splatting GLB), weights (safetensors + config.json), blendshapes (the Gaussian avatar as "
-         "linear Gaussian blendshapes any renderer poses with a weighted sum, fitted to its networks; blendshapes/), "
+         "linear Gaussian blendshapes any renderer poses with a weighted sum, fitted to its networks and refined "
+         "against the frames; blendshapes/), "
          "drive (drive/index.html: a page where the webcam or a recorded take drives the blendshapes), "
          "videos, viewer (viewer/index.html), report (report.html); or all.",
          "formats");
@@ -131,6 +132,14 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "The mesh avatar's texture: texels per side of the skin's square (the atlas is twice it on each side).",
          "texture-size");
   o->Add("export.bake_views", &e->bake_views, "Views, spread over the capture, baked into the texture.", "bake-views");
+  o->Add("export.blendshape_refine_steps", &e->blendshape_refine_steps,
+         "blendshapes: steps refining them through the rasterizer against the training frames after their fit to "
+         "the avatar's networks (a tenth of the training views set aside judge it; the best state is kept, the fit "
+         "itself when no step beats it); 0: the fit alone.",
+         "blendshape-refine-steps");
+  o->Add("export.blendshape_refine_minutes", &e->blendshape_refine_minutes,
+         "blendshapes: the refinement stops after this many minutes (0: after its steps).",
+         "blendshape-refine-minutes");
   o->Add("export.orbit_deg", &e->orbit_deg,
          "The orbit video swings the camera this many degrees each way; 180 turns it all the way round; 0 chooses: "
          "45 for a capture from one side, 180 for one whose cameras go more than half way round the head.",
@@ -312,8 +321,11 @@ Status WriteBlendshapes(ExportJob* job) {
   BlendshapeScores scores;
   AvatarBlendshapes shapes;
   const fs::path dir = job->out_dir / "blendshapes";
-  HF_RETURN_IF_ERROR(
-      ExportAvatarBlendshapes(job->workspace, job->model_dir, job->face_model, dir, &scores, &files, &shapes));
+  BlendshapeExportOptions options;
+  options.refine_steps = job->options.blendshape_refine_steps;
+  options.refine_minutes = job->options.blendshape_refine_minutes;
+  HF_RETURN_IF_ERROR(ExportAvatarBlendshapes(job->workspace, job->model_dir, job->face_model, options, dir, &scores,
+                                             &files, &shapes, job->progress));
   HF_RETURN_IF_ERROR(WriteGaussianBlendshapeGlb(dir / "blendshapes.glb", shapes));
   files.push_back("blendshapes.glb");
   for (const std::string& f : files) job->out.files.push_back("blendshapes/" + f);

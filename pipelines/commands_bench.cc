@@ -192,16 +192,23 @@ Row RunSetting(const std::string& scene, const Setting& s, const IngestedCapture
   return row;
 }
 
-// Head-pose cameras; `focal` > 0 gives the true focal length instead of estimating it.
+// Head-pose cameras; `focal` > 0 gives the true focal length instead of
+// estimating it; `mesh_weight` > 0 refines with the face mesh at that weight.
 Row RunHeadPose(const std::string& scene, const IngestedCapture& capture, const nlohmann::json& truth,
-                const FaceModel& model, const fs::path& dir, double focal) {
+                const FaceModel& model, const fs::path& dir, double focal, double mesh_weight = 0.0) {
   Row row;
   row.scene = scene;
   row.label = focal > 0 ? "head-pose, true focal given" : "head-pose, focal estimated";
+  if (mesh_weight > 0) {
+    std::ostringstream weight;
+    weight << mesh_weight;
+    row.label += ", face mesh " + weight.str();
+  }
   row.mode = "head-pose";
   CalibrateOptions options;
   options.mode = "head-pose";
   options.head_pose.focal = focal;
+  options.head_pose.refine_mesh_weight = mesh_weight;
   const auto start = std::chrono::steady_clock::now();
   CameraSet cameras;
   CalibrateSummary summary;
@@ -390,6 +397,11 @@ int BenchCalibrate(const std::vector<std::string>& args) {
               "Fixed rigs: run only the baseline setting at each of these numbers of synchronised instants "
               "(e.g. 1,3) instead of the settings list.",
               "rig-instants");
+  std::vector<double> mesh_weights;
+  options.Add("bench.head_pose_mesh_weight", &mesh_weights,
+              "talking_static: a head-pose row more for each weight, the face mesh's 468 points joining calibrate's "
+              "face-model refinement at that weight against 1 for each of the 68 landmarks (default: none).",
+              "head-pose-mesh-weight");
   int repeat = 1;
   options.Add("bench.repeat", &repeat,
               "Run each COLMAP setting this many times (COLMAP's results vary from run to run); one row per run.",
@@ -446,6 +458,8 @@ int BenchCalibrate(const std::vector<std::string>& args) {
     std::vector<Row> results;
     if (scene == "talking_static") {
       results.push_back(RunHeadPose(scene, capture, truth, model, dir / "runs" / "head_pose", 0.0));
+      for (double w : mesh_weights)
+        if (w > 0) results.push_back(RunHeadPose(scene, capture, truth, model, dir / "runs" / "head_pose_mesh", 0.0, w));
       const double true_focal = truth["cameras"][0]["fx"].get<double>() * capture.cameras[0].crop_scale;
       results.push_back(RunHeadPose(scene, capture, truth, model, dir / "runs" / "head_pose_known", true_focal));
       // The focal length from landmarks depends on how the subject's face
@@ -454,6 +468,9 @@ int BenchCalibrate(const std::vector<std::string>& args) {
         Variant v;
         if (Status s = prepare_variant(seed, &v); !s.ok()) return ReportFailure(s);
         results.push_back(RunHeadPose(v.label, v.capture, v.truth, model, v.dir / "runs" / "head_pose", 0.0));
+        for (double w : mesh_weights)
+          if (w > 0)
+            results.push_back(RunHeadPose(v.label, v.capture, v.truth, model, v.dir / "runs" / "head_pose_mesh", 0.0, w));
       }
     } else {
       const bool rig = capture.cameras.size() > 1;

@@ -430,7 +430,8 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
 
 Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capture, const TrackOptions& options,
                              const std::string& landmark_embedding, int max_rounds, double min_change,
-                             double prior_focal, bool fit_focal, CameraSet* cameras, HeadPoseRefinement* result) {
+                             double prior_focal, bool fit_focal, CameraSet* cameras, HeadPoseRefinement* result,
+                             const std::string& mesh_embedding) {
   if (cameras->mode != "head-pose" || cameras->frame != "head")
     return Status::InvalidArgument("the face-model refinement applies to head-pose cameras");
   if (capture.cameras.size() != 1 || cameras->cameras.size() != 1)
@@ -442,6 +443,8 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
   // turns, which the focal length's fit would read as perspective.
   LandmarkBasis basis;
   HF_RETURN_IF_ERROR(BuildLandmarkBasis(model, LoadLandmarkEmbedding(model, embedding), options.identity_modes, &basis));
+  LandmarkBasis mesh;
+  if (options.mesh_weight > 0) HF_RETURN_IF_ERROR(LoadMeshBasis(model, mesh_embedding, options.identity_modes, &mesh));
   TrackOptions fit = options;
   fit.fixed_head = false;
   fit.fit_focal = fit_focal;
@@ -457,7 +460,7 @@ Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capt
     // The uncertainty of the last round's estimate; which round is last shows only after it.
     fit.focal_uncertainty = fit_focal;
     TrackResult tracked;
-    HF_RETURN_IF_ERROR(TrackSequence(basis, views, capture.num_frames(), fit, &tracked));
+    HF_RETURN_IF_ERROR(TrackSequence(basis, views, capture.num_frames(), fit, &tracked, mesh.size() > 0 ? &mesh : nullptr));
     out.focal_log_sigma = tracked.focal_log_sigma;
     in.fx *= tracked.focal_scale;
     in.fy *= tracked.focal_scale;
@@ -496,12 +499,13 @@ Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCaptu
   TrackOptions fit;
   fit.threads = threads > 0 ? threads : DefaultThreads();
   fit.focal_prior_sigma = calibrate.head_pose.prior_sigma;
+  fit.mesh_weight = calibrate.head_pose.refine_mesh_weight;
   const double prior_focal = fit_focal ? HeadPosePriorFocal(calibrate.head_pose, capture) : 0.0;
   progress->Start("calibrate: refining with the face model", 0);
   HeadPoseRefinement refined;
   HF_RETURN_IF_ERROR(RefineHeadPoseCameras(model, capture, fit, calibrate.landmark_embedding,
                                            fit_focal ? calibrate.head_pose.refine_rounds : 1, 0.01, prior_focal,
-                                           fit_focal, cameras, &refined));
+                                           fit_focal, cameras, &refined, DefaultMeshEmbedding()));
   progress->Finish();
   std::string how;
   if (!fit_focal) {

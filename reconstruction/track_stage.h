@@ -107,7 +107,8 @@ struct HeadPoseRefinement {
 // given by the user): the poses alone move.
 Status RefineHeadPoseCameras(const FaceModel& model, const IngestedCapture& capture, const TrackOptions& options,
                              const std::string& landmark_embedding, int max_rounds, double min_change,
-                             double prior_focal, bool fit_focal, CameraSet* cameras, HeadPoseRefinement* result);
+                             double prior_focal, bool fit_focal, CameraSet* cameras, HeadPoseRefinement* result,
+                             const std::string& mesh_embedding = "");
 
 // The calibrate stage's last step for head-pose cameras (calibrate's result
 // when it chose head-pose): RefineHeadPoseCameras as `calibrate.head_pose.refine`

@@ -151,13 +151,16 @@ TEST_F(ExportStage, TheExportedGaussiansLieWhereTheMasksShowThePerson) {
 
 // --formats blendshapes: the avatar as linear Gaussian blendshapes (a
 // neutral state and one offset per expression for every Gaussian), fitted
-// to its networks. On the held-out frames they score within 0.5 dB of the
-// networks (0.02 dB below them here) in less time a view; the binary holds
-// what its JSON lays out (and blendshapes.glb as morph targets, validated),
-// render --model draws a frame with them as the networks do,
-// and with every weight 0 the Gaussians sit where
-// the exported neutral ones do (0.04 mm RMS here; those are posed at frame
-// 0's head pose, the blendshapes at the training views' mean).
+// to its networks, then refined against the training frames. As fitted
+// they score within 0.5 dB of the networks on the held-out frames (0.02 dB
+// below them here); the refinement, judged by training views set aside,
+// keeps a state those views score higher, and the held-out frames no worse;
+// posing and drawing a view takes less time than the networks; the binary
+// holds what its JSON lays out (and blendshapes.glb as morph targets,
+// validated), render --model draws a frame with them close to the
+// networks' drawing, and with every weight 0 the Gaussians sit where the
+// exported neutral ones do (those are posed at frame 0's head pose, the
+// blendshapes at the training views' mean).
 TEST_F(ExportStage, BlendshapesPoseTheAvatarAsItsNetworksDo) {
   ASSERT_EQ(exported_.code, 0) << exported_.err;
   const fs::path ws = CopyOf(reference_, Scratch("blendshapes"));
@@ -176,12 +179,24 @@ TEST_F(ExportStage, BlendshapesPoseTheAvatarAsItsNetworksDo) {
   ASSERT_EQ(bytes.size(), 4 * (n + n * a * (1 + k)));
   EXPECT_EQ(layout["binary"]["offsets"]["offset"].get<size_t>(), 4 * n * (1 + a));
   const nlohmann::json& held = layout["held_out"];
-  const double network = held["psnr_masked_network"], linear = held["psnr_masked_blendshapes"];
-  std::printf("held out over the head: blendshapes %.2f dB, networks %.2f dB; %.1f against %.1f ms a view\n", linear,
-              network, held["ms_blendshapes"].get<double>(), held["ms_network"].get<double>());
+  const double network = held["psnr_masked_network"], fitted = held["psnr_masked_fitted"],
+               linear = held["psnr_masked_blendshapes"];
+  std::printf("held out over the head: blendshapes %.2f dB (as fitted %.2f dB), networks %.2f dB; %.1f against %.1f "
+              "ms a view\n",
+              linear, fitted, network, held["ms_blendshapes"].get<double>(), held["ms_network"].get<double>());
   EXPECT_EQ(held["views"], 25);
-  EXPECT_GT(linear, network - 0.5);
+  EXPECT_GT(fitted, network - 0.5);
+  EXPECT_GT(linear, fitted - 0.2);
   EXPECT_GT(network, 22.0);
+  const nlohmann::json& refined = layout["refinement"];
+  std::printf("refinement: %d steps, step %d kept, the %d views set aside %.2f -> %.2f dB\n",
+              refined["steps"].get<int>(), refined["kept_step"].get<int>(), refined["validation_views"].get<int>(),
+              refined["validation_psnr_masked_before"].get<double>(),
+              refined["validation_psnr_masked_after"].get<double>());
+  EXPECT_EQ(refined["steps"], 300);
+  EXPECT_GT(refined["validation_views"].get<int>(), 0);
+  EXPECT_GE(refined["validation_psnr_masked_after"].get<double>(), refined["validation_psnr_masked_before"].get<double>());
+  EXPECT_EQ(refined["validation_curve"].size(), 7u);  // before, every 50 steps, the last
   EXPECT_LT(held["ms_blendshapes"].get<double>(), held["ms_network"].get<double>());
 
   GaussianCloud neutral;
@@ -209,7 +224,7 @@ TEST_F(ExportStage, BlendshapesPoseTheAvatarAsItsNetworksDo) {
   ASSERT_FALSE(by_networks.empty() || by_blendshapes.empty());
   const double agreement = cv::PSNR(by_networks, by_blendshapes);
   std::printf("frame 110 drawn by the blendshapes against the networks: %.1f dB\n", agreement);
-  EXPECT_GT(agreement, 45.0);  // 54.9 dB here
+  EXPECT_GT(agreement, 36.0);  // 42.4 dB here refined (54.9 dB as fitted, the networks' own drawing)
   // Blendshapes whose binary lost its end are refused, saying what to do.
   std::filesystem::resize_file(dir / "blendshapes.bin", fs::file_size(dir / "blendshapes.bin") - 4);
   const Result cut = Headforge({"render", "--workspace", ws.string(), "--frames", "110", "--model", dir.string(),

@@ -47,6 +47,35 @@ GaussianBlendshapes DistilBlendshapes(GaussianStyleAvatar& avatar, const AvatarD
 // The Gaussians at `expression` [K], ready for the rasterizer (features: RGB).
 PosedGaussians PoseBlendshapes(const GaussianBlendshapes& shapes, const torch::Tensor& expression);
 
+// The blendshapes refined through the rasterizer against the training frames
+// (L1 and SSIM over the head, a random background each step, as training
+// has it): every attribute of the neutral state, the offsets and the
+// opacities, by Adam at a tenth of training's first step sizes decaying to
+// a hundredth. Every n-th training view (`validation`) is set aside and
+// scored every `eval_every` steps; the state it scores highest is kept,
+// the fit to the networks when no step beats it.
+struct BlendshapeRefineOptions {
+  int steps = 0;            // 0: none
+  double max_minutes = 0;   // > 0: stop after this much time
+  double lr_scale = 0.1;    // of training's first step sizes
+  double offset_lr_ratio = 0.5;  // the offsets' step sizes against the neutral state's
+  double ssim_weight = 0.2;
+  double validation = 0.1;  // the fraction of training views set aside
+  int eval_every = 50;
+  uint64_t seed = 1;
+  Status Check() const;
+};
+struct BlendshapeRefineReport {
+  int steps = 0;       // steps run
+  int kept_step = 0;   // the step whose state was kept (0: the fit to the networks)
+  int validation_views = 0;
+  double validation_psnr_before = 0, validation_psnr_after = 0;  // over the head, the views set aside
+  double seconds = 0;
+  std::vector<std::pair<int, double>> curve;  // (step, the views set aside's PSNR) at each evaluation
+};
+Status RefineBlendshapes(const AvatarDataset& data, const BlendshapeRefineOptions& options,
+                         GaussianBlendshapes* shapes, BlendshapeRefineReport* report, Progress* progress);
+
 // Whether `dir` holds exported blendshapes (blendshapes.json).
 bool IsBlendshapeFolder(const fs::path& dir);
 // Reads what ExportAvatarBlendshapes wrote into `dir`; `*data` the dataset

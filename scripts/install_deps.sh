@@ -28,6 +28,9 @@ PACKAGES=(
   # headforge batch's cluster test brings up a one-node Slurm 22.05 of its own
   # (tests/slurm_test.cc); no service is enabled or configured here.
   slurmctld slurmd slurm-client munge
+  # Data-parallel training across hosts is tested on hosts made of network
+  # namespaces (ip netns; tests/distributed_test.cc).
+  iproute2
 )
 
 missing=()

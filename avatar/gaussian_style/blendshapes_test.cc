@@ -6,6 +6,7 @@
 
 #include <cmath>
 
+#include "avatar/splat/splat_test_util.h"
 #include "core/progress.h"
 
 namespace headforge {
@@ -59,25 +60,6 @@ TEST(GaussianBlendshapes, PosingIsTheNeutralPlusTheWeightedOffsets) {
   EXPECT_TRUE(torch::equal(posed.opacities, shapes.opacities));
 }
 
-// A camera on a horizontal ring of `radius` round the origin, looking at it
-// (y down, world +y up), `side` pixels square.
-SplatCamera RingCamera(double angle, double radius, int side) {
-  const double ex = radius * std::sin(angle), ez = -radius * std::cos(angle);
-  const double z[3] = {-ex / radius, 0, -ez / radius};
-  const double y[3] = {0, -1, 0};
-  const double x[3] = {y[1] * z[2] - y[2] * z[1], y[2] * z[0] - y[0] * z[2], y[0] * z[1] - y[1] * z[0]};
-  const double* rows[3] = {x, y, z};
-  SplatCamera c;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) c.cam_from_world[4 * i + j] = rows[i][j];
-    c.cam_from_world[4 * i + 3] = -(rows[i][0] * ex + rows[i][2] * ez);
-  }
-  c.width = c.height = side;
-  c.fx = c.fy = 1.2 * side;
-  c.cx = c.cy = side / 2.0 - 0.5;
-  return c;
-}
-
 double Psnr(const torch::Tensor& a, const torch::Tensor& b) {
   return -10 * std::log10((a - b).pow(2).mean().item<double>());
 }
@@ -110,7 +92,7 @@ TEST(GaussianBlendshapes, RefinementAgainstTheFramesRecoversWhatTheFitMissed) {
   const torch::Tensor black = torch::zeros({3}), white_features = torch::ones({n, 3});
   for (int i = 0; i < 40; ++i) {
     AvatarView view;
-    view.view = RingCamera(2 * M_PI * i / 40, 1.0, 40);
+    view.view = splat_test::RingCamera(2 * M_PI * i / 40, 1.0, 40);
     view.condition = torch::cat({torch::rand({k}, gen), torch::zeros({9})});
     PosedGaussians posed = PoseBlendshapes(truth, view.condition.slice(0, 0, k));
     const torch::Tensor drawn = RenderRgb(posed, view.view, black);

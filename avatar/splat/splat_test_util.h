@@ -162,6 +162,26 @@ struct Loss {
   }
 };
 
+// A camera on a horizontal ring of `radius` round the origin, looking at it
+// (OpenCV axes: y down, world +y up).
+inline SplatCamera RingCamera(double angle, double radius, int side) {
+  const double ex = radius * std::sin(angle), ez = -radius * std::cos(angle);
+  const double z[3] = {-ex / radius, 0, -ez / radius};  // toward the origin
+  const double y[3] = {0, -1, 0};
+  const double x[3] = {y[1] * z[2] - y[2] * z[1], y[2] * z[0] - y[0] * z[2],
+                       y[0] * z[1] - y[1] * z[0]};
+  const double* rows[3] = {x, y, z};
+  SplatCamera c;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) c.cam_from_world[4 * i + j] = rows[i][j];
+    c.cam_from_world[4 * i + 3] = -(rows[i][0] * ex + rows[i][2] * ez);
+  }
+  c.width = c.height = side;
+  c.fx = c.fy = 1.2 * side;
+  c.cx = c.cy = side / 2.0 - 0.5;
+  return c;
+}
+
 inline double MaxAbs(const torch::Tensor& t) {
   return t.numel() == 0 ? 0.0 : t.abs().max().item<double>();
 }

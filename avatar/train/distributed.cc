@@ -2,6 +2,12 @@
 
 #include <torch/torch.h>
 
+#include <arpa/inet.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
 #include <chrono>
 #include <cstdlib>
 #include <map>
@@ -14,6 +20,35 @@
 #endif
 
 namespace headforge {
+
+std::string LocalAddressToward(const std::string& host, int port) {
+  addrinfo hints{};
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_DGRAM;
+  addrinfo* found = nullptr;
+  if (::getaddrinfo(host.c_str(), std::to_string(port).c_str(), &hints, &found) != 0) return "";
+  std::string out;
+  for (const addrinfo* a = found; a != nullptr && out.empty(); a = a->ai_next) {
+    // A datagram socket's connect sends nothing: it only picks the route,
+    // and with it the local address.
+    const int fd = ::socket(a->ai_family, SOCK_DGRAM, 0);
+    if (fd < 0) continue;
+    sockaddr_storage local{};
+    socklen_t length = sizeof(local);
+    if (::connect(fd, a->ai_addr, a->ai_addrlen) == 0 &&
+        ::getsockname(fd, reinterpret_cast<sockaddr*>(&local), &length) == 0) {
+      char text[INET6_ADDRSTRLEN] = {};
+      const void* where = local.ss_family == AF_INET
+                              ? static_cast<const void*>(&reinterpret_cast<const sockaddr_in*>(&local)->sin_addr)
+                              : static_cast<const void*>(&reinterpret_cast<const sockaddr_in6*>(&local)->sin6_addr);
+      if (::inet_ntop(local.ss_family, where, text, sizeof(text)) != nullptr) out = text;
+    }
+    ::close(fd);
+  }
+  ::freeaddrinfo(found);
+  return out;
+}
+
 namespace {
 
 std::string Env(const char* name) {
@@ -123,15 +158,18 @@ Status ProcessGroup::Connect(const DistributedSetup& setup, double timeout_s, st
     options.timeout = timeout;
     group->impl_->store = c10::make_intrusive<c10d::TCPStore>(setup.address, options);
     auto gloo = c10d::ProcessGroupGloo::Options::create(timeout);
-    // GLOO_SOCKET_IFNAME's interface where it is set; else the address of
-    // rank 0 where it is this host's (one machine); else this host's name's.
+    // GLOO_SOCKET_IFNAME's interface where it is set; else this host's
+    // address on the route to rank 0, which the other ranks reach it at
+    // (this host's name may say 127.0.1.1, as Debian's /etc/hosts has it);
+    // else gloo's choice from the host's name.
     const char* interface = std::getenv("GLOO_SOCKET_IFNAME");
     if (interface != nullptr && *interface != '\0') {
       gloo->devices.push_back(c10d::ProcessGroupGloo::createDeviceForInterface(interface));
     } else {
-      try {
-        gloo->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname(setup.address));
-      } catch (const std::exception&) {  // rank 0 is on another host
+      const std::string local = LocalAddressToward(setup.address, setup.port);
+      if (!local.empty()) {
+        gloo->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname(local));
+      } else {
         gloo->devices.push_back(c10d::ProcessGroupGloo::createDefaultDevice());
       }
     }

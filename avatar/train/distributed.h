@@ -39,6 +39,11 @@ Status ReadDistributedSetup(const std::string& mode, DistributedSetup* setup);
 // once instead.
 Status CheckDataParallelModel(const std::string& model, const std::string& program);
 
+// This host's address on the route to `host` (rank 0's, a name or an
+// address; `port` its store's): where the other ranks can reach this one.
+// Empty when `host` does not resolve or no route leads to it.
+std::string LocalAddressToward(const std::string& host, int port);
+
 // "node[07-09,12],gpu3" -> "node07": the first host of a Slurm node list.
 std::string FirstSlurmHost(const std::string& nodes);
 

@@ -51,6 +51,18 @@ TEST(DistributedSetup, SlurmNodeListsGiveTheirFirstHost) {
   EXPECT_EQ(FirstSlurmHost("rack[2-3]-n[01-04]"), "rack2-n[01-04]");
 }
 
+// Where the other ranks reach this one: the local end of the route to rank
+// 0's host (this machine's loopback for itself), nothing for a host that
+// does not resolve.
+TEST(DistributedSetup, ThisHostsAddressIsTheOneOnTheRouteToRankZero) {
+  EXPECT_EQ(LocalAddressToward("127.0.0.1", 29500), "127.0.0.1");
+  EXPECT_EQ(LocalAddressToward("localhost", 29500).rfind("127.", 0) == 0 ||
+                LocalAddressToward("localhost", 29500) == "::1",
+            true)
+      << LocalAddressToward("localhost", 29500);
+  EXPECT_EQ(LocalAddressToward("no-such-host.invalid", 29500), "");
+}
+
 TEST(DistributedSetup, TorchrunsAndSlurmsVariablesNameTheRanks) {
   DistributedSetup s;
   {

@@ -18,26 +18,6 @@
 namespace headforge::splat_test {
 namespace {
 
-// A camera on a horizontal ring of `radius` round the origin, looking at it
-// (OpenCV axes: y down, world +y up).
-SplatCamera RingCamera(double angle, double radius, int side) {
-  const double ex = radius * std::sin(angle), ez = -radius * std::cos(angle);
-  const double z[3] = {-ex / radius, 0, -ez / radius};  // toward the origin
-  const double y[3] = {0, -1, 0};
-  const double x[3] = {y[1] * z[2] - y[2] * z[1], y[2] * z[0] - y[0] * z[2],
-                       y[0] * z[1] - y[1] * z[0]};
-  const double* rows[3] = {x, y, z};
-  SplatCamera c;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) c.cam_from_world[4 * i + j] = rows[i][j];
-    c.cam_from_world[4 * i + 3] = -(rows[i][0] * ex + rows[i][2] * ez);
-  }
-  c.width = c.height = side;
-  c.fx = c.fy = 1.2 * side;
-  c.cx = c.cy = side / 2.0 - 0.5;
-  return c;
-}
-
 TEST(SplatFit, FitsASyntheticSceneOnTheKernelDevice) {
   // The truth: 400 Gaussians in a 0.4 m cube, opaque enough to hide the
   // black background, seen by 16 cameras at 1.5 m; every 4th is held out.

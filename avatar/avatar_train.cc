@@ -307,13 +307,13 @@ Status RunTrain(const TrainOptions& options, const fs::path& workspace, const st
                 const fs::path& out_dir, Progress* progress, TrainSummary* summary, TrainRanks* ranks) {
   UseTensorThreads();
   HF_RETURN_IF_ERROR(options.Check());
-  // Ranks of torchrun's that were not joined (headforge run) would each train
-  // the workspace alone, and meet at its lock.
+  // Ranks of torchrun's that were not joined (--distributed off) would each
+  // train the workspace alone, and meet at its lock.
   if (DistributedSetup setup;
       ranks == nullptr && ReadDistributedSetup("auto", &setup).ok() && setup.source == "torchrun" && setup.world > 1)
     return Status::InvalidArgument(
         "train: RANK and WORLD_SIZE=" + std::to_string(setup.world) + " ask for data-parallel training, which "
-        "headforge train does when every rank runs it (headforge train --workspace WS), or headforge-train on a "
+        "headforge train and headforge run do when every rank runs them (--distributed auto), or headforge-train on a "
         "training pack (docs/cluster.md); unset RANK and WORLD_SIZE to train here in one process");
   if (ranks != nullptr) HF_RETURN_IF_ERROR(CheckDataParallelModel(options.model, "headforge train"));
   FaceModel model;
@@ -346,9 +346,6 @@ Status FollowTrain(const TrainOptions& options, const fs::path& workspace, const
   *trained = false;
   HF_RETURN_IF_ERROR(options.Check());
   HF_RETURN_IF_ERROR(CheckDataParallelModel(options.model, "headforge train"));
-  bool training = false;
-  HF_RETURN_IF_ERROR(ranks->Hear(&training));
-  if (!training) return Status::Ok();
   FaceModel model;
   HF_RETURN_IF_ERROR(FaceModel::Load(face_model, &model));
   AvatarDataset data;

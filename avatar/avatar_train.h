@@ -180,10 +180,10 @@ class TrainRanks {
 // the other ranks.
 Status RunTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
                 const fs::path& out_dir, Progress* progress, TrainSummary* summary, TrainRanks* ranks = nullptr);
-// A rank above 0 of a data-parallel `headforge train`: waits for rank 0's
-// word and, when it trains, trains stages 1-2 beside it on the same views,
-// reading rank 0's `out_dir` (its checkpoint, on a resume) and writing
-// nothing. `*trained`: whether rank 0 trained.
+// A rank above 0 of a data-parallel `headforge train`, once rank 0 has said
+// it trains (TrainRanks::Hear): trains stages 1-2 beside it on the same
+// views, reading rank 0's `out_dir` (its checkpoint, on a resume) and
+// writing nothing. `*trained`: true when it did.
 Status FollowTrain(const TrainOptions& options, const fs::path& workspace, const std::string& face_model,
                    const fs::path& out_dir, TrainRanks* ranks, bool* trained);
 

@@ -56,7 +56,8 @@ class StageJob {
   virtual Status Run(const StageEnv& env, const StageContext& context, StageResult* result) = 0;
 
   // One stage run by several processes (train under torchrun or srun): the
-  // stage's own command calls Join before it opens the workspace. A process
+  // stage's own command, and `headforge run` when it reaches the stage,
+  // call Join before they open the workspace. A process
   // that follows another (`*follows`) calls Follow in place of the stage:
   // it works beside the leading one without the workspace's lock and writes
   // nothing. The leading process runs the stage, then Finish (whether the

@@ -286,6 +286,30 @@ int RunCommand(const std::vector<std::string>& args) {
     if (table[i].name == until) break;
   }
   ApplyCommonOptions(common);
+  // Started once per rank (torchrun, srun): rank 0 runs every stage and
+  // trains with the others, which wait for it at train (within
+  // --distributed-timeout), train beside it and end.
+  StageJob* train = nullptr;
+  for (size_t i = 0; i < table.size(); ++i) {
+    if (table[i].name == "train" && jobs[i] && table[i].unavailable.empty()) train = jobs[i].get();
+    if (table[i].name == until) break;
+  }
+  if (train != nullptr) {
+    bool follows = false;
+    if (Status s = train->Join(&follows); !s.ok()) return ReportFailure(s);
+    if (follows) {
+      HF_LOG(Info) << "run: a rank above 0: waiting for rank 0 to run the stages before train";
+      if (Status s = train->Follow(settings, common.workspace); !s.ok()) return ReportFailure(s);
+      return kExitOk;
+    }
+  }
+  // The ranks waiting at train are told, however this run ends.
+  struct TellWaitingRanks {
+    StageJob* job;
+    ~TellWaitingRanks() {
+      if (job) job->Finish();
+    }
+  } tell{train};
   std::unique_ptr<Workspace> workspace;
   if (int code = OpenForWriting(common, &workspace); code >= 0) return code;
   StderrProgress progress;

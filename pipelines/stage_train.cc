@@ -113,6 +113,15 @@ class TrainJob : public StageJob {
     return Status::Ok();
   }
   Status Follow(const StageSettings& settings, const fs::path& workspace) override {
+    // Rank 0's word first: under headforge run it comes once the stages
+    // before train have run, and the model's choice reads what they made.
+    bool training = false;
+    HF_RETURN_IF_ERROR(ranks_->Hear(&training).WithContext("rank " + std::to_string(ranks_->rank())));
+    if (!training) {
+      HF_LOG(Info) << "train: rank " << ranks_->rank() << ": rank 0 did not train (the stage was up to date, or "
+                   << "it stopped before training: its log says why)";
+      return Status::Ok();
+    }
     std::string model, why;
     const TrainOptions* options = nullptr;
     HF_RETURN_IF_ERROR(Choose(workspace, &model, &why, &options));
@@ -123,9 +132,6 @@ class TrainJob : public StageJob {
     if (trained)
       HF_LOG(Info) << "train: rank " << ranks_->rank() << " of " << ranks_->world()
                    << ": trained stages 1-2 beside rank 0, which wrote the model";
-    else
-      HF_LOG(Info) << "train: rank " << ranks_->rank() << ": rank 0 did not train (the stage was up to date, or "
-                   << "it stopped before training: its log says why)";
     return Status::Ok();
   }
   void Finish() override {

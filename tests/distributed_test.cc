@@ -260,23 +260,26 @@ TEST_F(DataParallel, ARankThatDiesFailsTheOtherWithinItsTimeout) {
 // runs the stage (its lock, its staging folder, the model it commits), rank
 // 1 trains beside it and writes nothing; the model is the one a pack of the
 // same options trains in one process with both views a step. Run again, the
-// stage is up to date on rank 0, and rank 1 is told so and ends.
+// stage is up to date on rank 0, and rank 1 is told so and ends. `headforge
+// run` as ranks: rank 0 runs the stages (here up to date) and trains with
+// rank 1, which waited for it at train: the same model again.
 TEST_F(DataParallel, HeadforgeTrainOnAWorkspaceTrainsAsRanks) {
   ASSERT_EQ(packed_.code, 0) << packed_.err;
   ASSERT_EQ(one_.code, 0) << one_.err;
-  const fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("data_parallel_ws"));
-  const auto run = [&](const std::string& name) {
+  fs::path ws = CopyOf(TrackedTalkingStatic(), Scratch("data_parallel_ws"));
+  const auto run = [&](const std::string& name, const std::vector<std::string>& command = {"train"}) {
     const int port = FreePort();
     pid_t pids[2];
     for (int rank = 0; rank < 2; ++rank) {
       std::vector<std::string> args = {"RANK=" + std::to_string(rank), "WORLD_SIZE=2", "MASTER_ADDR=127.0.0.1",
-                                       "MASTER_PORT=" + std::to_string(port), HEADFORGE_BINARY, "train",
-                                       "--workspace", ws.string(), "--train-size", "48", "--steps", "40",
+                                       "MASTER_PORT=" + std::to_string(port), HEADFORGE_BINARY};
+      args.insert(args.end(), command.begin(), command.end());
+      args.insert(args.end(), {"--workspace", ws.string(), "--train-size", "48", "--steps", "40",
                                        "--canonical-fraction", "0.5", "--init-gaussians", "1500", "--max-gaussians",
                                        "2500", "--densify-from", "10", "--densify-every", "10", "--densify-until",
                                        "30", "--eval-every", "0", "--preview-every", "0", "--log-every", "5",
                                        "--checkpoint-every", "5", "--max-minutes", "0", "--decoder-steps", "0",
-                                       "--threads", "1", "--distributed-timeout", "60"};
+                                       "--threads", "1", "--distributed-timeout", "60"});
       const fs::path log = ws.string() + "." + name + std::to_string(rank) + ".log";
       pids[rank] = Spawn(args, log, log, "/usr/bin/env");
     }
@@ -301,6 +304,17 @@ TEST_F(DataParallel, HeadforgeTrainOnAWorkspaceTrainsAsRanks) {
   EXPECT_EQ(again1, 0) << log("again", 1);
   EXPECT_NE(log("again", 0).find("train: up to date"), std::string::npos) << log("again", 0);
   EXPECT_NE(log("again", 1).find("rank 0 did not train"), std::string::npos) << log("again", 1);
+
+  ws = CopyOf(TrackedTalkingStatic(), Scratch("data_parallel_run"));
+  const auto [run0, run1] = run("run", {"run", "--until", "train"});
+  ASSERT_EQ(run0, 0) << log("run", 0);
+  ASSERT_EQ(run1, 0) << log("run", 1);
+  EXPECT_NE(log("run", 0).find("track: up to date"), std::string::npos) << log("run", 0);
+  EXPECT_NE(log("run", 1).find("waiting for rank 0"), std::string::npos) << log("run", 1);
+  EXPECT_NE(log("run", 1).find("rank 1 of 2: trained stages 1-2 beside rank 0"), std::string::npos) << log("run", 1);
+  EXPECT_EQ(log("run", 1).find("up to date"), std::string::npos) << log("run", 1);  // the stages are rank 0's
+  EXPECT_EQ(log("run", 1).find("warning"), std::string::npos) << log("run", 1);
+  EXPECT_EQ(FileHash(ws / kModelDir / "model.pt"), FileHash(dir_ / "one" / "model.pt"));
 }
 
 }  // namespace

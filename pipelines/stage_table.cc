@@ -180,6 +180,31 @@ int OpenForWriting(const CommonOptions& common, std::unique_ptr<Workspace>* work
   return -1;
 }
 
+// `headforge run` started once per rank (torchrun, srun): rank 0 runs every
+// stage and trains with the others, which wait for it at train (within
+// --distributed-timeout), train beside it and end. `*train`: the train
+// stage's job where the run reaches it (rank 0 tells the others through it
+// once the run ends); `*followed`: this process was a rank above 0 and has
+// trained beside rank 0.
+Status JoinRanksAtTrain(const std::vector<StageEntry>& table, const std::vector<std::unique_ptr<StageJob>>& jobs,
+                        const std::string& until, const StageSettings& settings, const std::string& workspace,
+                        StageJob** train, bool* followed) {
+  *train = nullptr;
+  *followed = false;
+  for (size_t i = 0; i < table.size(); ++i) {
+    if (table[i].name == "train" && jobs[i] && table[i].unavailable.empty()) *train = jobs[i].get();
+    if (table[i].name == until) break;
+  }
+  if (*train == nullptr) return Status::Ok();
+  bool follows = false;
+  HF_RETURN_IF_ERROR((*train)->Join(&follows));
+  if (!follows) return Status::Ok();
+  HF_LOG(Info) << "run: a rank above 0: waiting for rank 0 to run the stages before train";
+  HF_RETURN_IF_ERROR((*train)->Follow(settings, workspace));
+  *followed = true;
+  return Status::Ok();
+}
+
 }  // namespace
 
 int StageCommand(const StageEntry& entry, const std::vector<std::string>& args) {
@@ -286,23 +311,11 @@ int RunCommand(const std::vector<std::string>& args) {
     if (table[i].name == until) break;
   }
   ApplyCommonOptions(common);
-  // Started once per rank (torchrun, srun): rank 0 runs every stage and
-  // trains with the others, which wait for it at train (within
-  // --distributed-timeout), train beside it and end.
   StageJob* train = nullptr;
-  for (size_t i = 0; i < table.size(); ++i) {
-    if (table[i].name == "train" && jobs[i] && table[i].unavailable.empty()) train = jobs[i].get();
-    if (table[i].name == until) break;
-  }
-  if (train != nullptr) {
-    bool follows = false;
-    if (Status s = train->Join(&follows); !s.ok()) return ReportFailure(s);
-    if (follows) {
-      HF_LOG(Info) << "run: a rank above 0: waiting for rank 0 to run the stages before train";
-      if (Status s = train->Follow(settings, common.workspace); !s.ok()) return ReportFailure(s);
-      return kExitOk;
-    }
-  }
+  bool followed = false;
+  if (Status s = JoinRanksAtTrain(table, jobs, until, settings, common.workspace, &train, &followed); !s.ok())
+    return ReportFailure(s);
+  if (followed) return kExitOk;
   // The ranks waiting at train are told, however this run ends.
   struct TellWaitingRanks {
     StageJob* job;

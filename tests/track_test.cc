@@ -344,10 +344,15 @@ TEST(SimulatedTrack, Rig8Cam) {
   // 0.062-0.064, eyeBlink L/R 0.039-0.040 / 0.030-0.031, mouthSmile L/R
   // 0.107-0.124 / 0.093-0.106: the smile's constant part (0.3) is partly
   // taken for the face's shape in 20 frames (0.053-0.059 over the whole
-  // scene, docs/tracking.md). The scene's one blink comes later.
+  // scene, docs/tracking.md). The scene's one blink comes later. Since
+  // align takes each view's head pose from the face mesh (rigs' default,
+  // --align-rig-view-poses mesh) the head frame is nearer the truth and the
+  // 68 points fit a little worse: residual 1.61-1.63 px, rotation
+  // 1.04-1.08 deg in three runs (the same cameras aligned from the 68
+  // points: 1.45 px); on rigs the residual is not the accuracy.
   for (const char* name : {"jawOpen", "eyeBlink_L", "eyeBlink_R"}) EXPECT_LT(s.mae.at(name), 0.1) << name;
   for (const char* name : {"mouthSmile_L", "mouthSmile_R"}) EXPECT_LT(s.mae.at(name), 0.15) << name;
-  EXPECT_LT(s.residual_px, 1.55);
+  EXPECT_LT(s.residual_px, 1.75);
   EXPECT_LT(s.rotation_deg, 1.7);
   // The eight cameras mostly agree: 0 of the 160 views were left out.
   EXPECT_LE(s.dropped_views, 8);

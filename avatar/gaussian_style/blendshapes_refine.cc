@@ -32,18 +32,19 @@ constexpr int kGroups = 4;
 class BlendshapeRefiner : public LoopTrainer {
  public:
   BlendshapeRefiner(const AvatarDataset& data, const std::vector<size_t>& train, const std::vector<size_t>& validation,
-                    const BlendshapeRefineOptions& options, GaussianBlendshapes* shapes)
-      : data_(data), train_(train), validation_(validation), options_(options), shapes_(shapes),
-        gen_(at::detail::createCPUGenerator(options.seed)) {
-    k_ = shapes->offsets.size(0);
-    // Step sizes in the head frame's units, a tenth of what training starts
-    // with (lr_scale): the blendshapes already agree with the networks.
+                    const BlendshapeRefineOptions& options, const GaussianBlendshapes& shapes)
+      : data_(data), train_(train), validation_(validation), options_(options), gen_(at::detail::createCPUGenerator(options.seed)) {
+    k_ = shapes.offsets.size(0);
+    // Training's first step sizes in the blendshapes' units (positions over
+    // a 0.3 m head, colours through the sigmoid's slope at its middle),
+    // scaled by lr_scale (a tenth: the blendshapes already agree with the
+    // networks).
     const double lr[kGroups] = {1.6e-4 * 0.3, 1e-3, 5e-3, 2.5e-3 * 0.25};
     for (int g = 0; g < kGroups; ++g) {
-      neutral_[g] = shapes->neutral.slice(1, kGroupStart[g], kGroupStart[g + 1]).clone().requires_grad_(true);
-      offsets_[g] = shapes->offsets.slice(2, kGroupStart[g], kGroupStart[g + 1]).clone().requires_grad_(true);
+      neutral_[g] = shapes.neutral.slice(1, kGroupStart[g], kGroupStart[g + 1]).clone().requires_grad_(true);
+      offsets_[g] = shapes.offsets.slice(2, kGroupStart[g], kGroupStart[g + 1]).clone().requires_grad_(true);
     }
-    opacity_logits_ = torch::logit(shapes->opacities.clamp(1e-4, 1 - 1e-4)).requires_grad_(true);
+    opacity_logits_ = torch::logit(shapes.opacities.clamp(1e-4, 1 - 1e-4)).requires_grad_(true);
     for (int g = 0; g < kGroups; ++g) {
       adam_.Add(&neutral_[g], lr[g] * options.lr_scale, false);
       base_lr_.push_back(lr[g] * options.lr_scale);
@@ -117,10 +118,12 @@ class BlendshapeRefiner : public LoopTrainer {
     best_.opacities = torch::sigmoid(opacity_logits_).detach().clone();
   }
 
-  void AddToCurve(int step, double psnr) { curve_.emplace_back(step, psnr); }
-  void SetStart(double psnr) {
+  // The state before any step: the views set aside score `psnr` on it.
+  void Begin(double psnr) {
     best_psnr_ = psnr;
     best_step_ = 0;
+    curve_.emplace_back(0, psnr);
+    Keep();
   }
   double best_psnr() const { return best_psnr_; }
   int best_step() const { return best_step_; }
@@ -148,7 +151,6 @@ class BlendshapeRefiner : public LoopTrainer {
   const std::vector<size_t>& train_;
   const std::vector<size_t>& validation_;
   const BlendshapeRefineOptions& options_;
-  GaussianBlendshapes* shapes_;
   at::Generator gen_;
   torch::Tensor order_;
   int64_t k_ = 0;
@@ -176,12 +178,10 @@ Status RefineBlendshapes(const AvatarDataset& data, const BlendshapeRefineOption
     return Status::InvalidArgument("blendshape refinement: " + std::to_string(data.train.size()) +
                                    " training views are too few to set some aside; export without refinement "
                                    "(--blendshape-refine-steps 0)");
-  BlendshapeRefiner refiner(data, train, validation, options, shapes);
+  BlendshapeRefiner refiner(data, train, validation, options, *shapes);
   const auto start = std::chrono::steady_clock::now();
   const double before = refiner.ValidationPsnr();
-  refiner.SetStart(before);
-  refiner.AddToCurve(0, before);
-  refiner.Keep();
+  refiner.Begin(before);
   LoopOptions loop;
   loop.label = "export: refining the blendshapes";
   loop.what = "the blendshape refinement";

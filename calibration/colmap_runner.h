@@ -33,8 +33,9 @@ struct ColmapOptions {
   int rig_instants = 1;
   int threads = 0;                        // 0: all
   // Mapper runs: a second one, with relaxed initialisation, when the first
-  // registers fewer than `retry_below` of the images.
-  int mapper_attempts = 2;
+  // registers fewer than `retry_below` of the images; a third, with the
+  // defaults again, when both started a model that stopped short.
+  int mapper_attempts = 3;
   double retry_below = 0.9;
   // Sequential matching only links frames near in time: a video that comes
   // back to a view it left (a second pass round the head) can break into

@@ -186,11 +186,18 @@ Status WriteBlendshapeFiles(const GaussianBlendshapes& shapes, const BlendshapeS
         {"psnr_masked_network", scores.psnr_network},
         {"psnr_masked_blendshapes", scores.psnr_blendshapes},
         {"psnr_masked_fitted", scores.psnr_fitted},
+        {"psnr_masked_pruned", scores.psnr_pruned},
         {"ms_network", scores.ms_network},
         {"ms_blendshapes", scores.ms_blendshapes}}},
       {"data", ToJson(data)},
       {"samples", scores.samples},
       {"fit_seconds", scores.fit_seconds},
+      {"pruning",
+       {{"gaussians_fitted", scores.gaussians_fitted},
+        {"gaussians_kept", scores.gaussians},
+        {"light_kept", scores.prune_light_kept},
+        {"seconds", scores.prune_seconds},
+        {"kept", scores.pruned_kept}}},
       {"refinement",
        {{"steps", scores.refine_steps},
         {"kept_step", scores.refine_kept_step},
@@ -255,6 +262,20 @@ Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_
                << scores->samples << " poses of the networks in " << scores->fit_seconds << " s; held out "
                << scores->psnr_fitted << " dB over the head against the networks' " << scores->psnr_network << " dB";
   std::vector<ViewScores> final_scores = fitted;
+  scores->gaussians_fitted = scores->gaussians;
+  scores->psnr_pruned = scores->psnr_fitted;
+  if (export_options.prune > 0) {
+    BlendshapePruneReport pruned;
+    HF_RETURN_IF_ERROR(PruneBlendshapes(data, export_options.prune, &shapes, &pruned).WithContext("export blendshapes"));
+    scores->gaussians = pruned.after;
+    scores->prune_light_kept = pruned.light_kept;
+    scores->prune_seconds = pruned.seconds;
+    scores->pruned_kept = pruned.kept;
+    final_scores = linear();
+    scores->psnr_pruned = MeanScores(final_scores).psnr_masked;
+    HF_LOG(Info) << "export: " << pruned.after << " Gaussians left score " << scores->psnr_pruned
+                 << " dB held out over the head before the refinement";
+  }
   if (export_options.refine_steps > 0) {
     BlendshapeRefineOptions refine;
     refine.steps = export_options.refine_steps;

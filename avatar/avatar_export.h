@@ -64,6 +64,10 @@ struct BlendshapeScores {
   double psnr_fitted = 0;  // the blendshapes as fitted to the networks, before a refinement
   double ms_network = 0, ms_blendshapes = 0;      // posing and drawing one view
   double fit_seconds = 0;
+  // Pruning before the refinement (none: gaussians_fitted == gaussians).
+  int gaussians_fitted = 0;
+  double psnr_pruned = 0, prune_light_kept = 1, prune_seconds = 0;
+  std::vector<int64_t> pruned_kept;  // the kept Gaussians' indices in the avatar's (gaussians.ply's) order
   // The refinement against the training frames (none: refine_steps 0).
   int refine_steps = 0, refine_kept_step = 0, validation_views = 0;
   double validation_psnr_before = 0, validation_psnr_after = 0, refine_seconds = 0;
@@ -71,6 +75,7 @@ struct BlendshapeScores {
 };
 // The refinement through the rasterizer after the fit (blendshapes.h).
 struct BlendshapeExportOptions {
+  double prune = 0;  // the fraction of the Gaussians removed before the refinement (the least light first)
   int refine_steps = 0;
   double refine_minutes = 0;
 };

@@ -132,6 +132,12 @@ void AddExportOptions(OptionSet* o, ExportOptions* e) {
          "The mesh avatar's texture: texels per side of the skin's square (the atlas is twice it on each side).",
          "texture-size");
   o->Add("export.bake_views", &e->bake_views, "Views, spread over the capture, baked into the texture.", "bake-views");
+  o->Add("export.blendshape_prune", &e->blendshape_prune,
+         "blendshapes: the fraction of the Gaussians removed after the fit, those giving the least light over the "
+         "training views, so that they draw faster (the refinement then lets the rest take their place; "
+         "docs/benchmarks/export.md has what each fraction costs: half of them cost 0.02 dB on the training views "
+         "set aside and drew in half the time); 0: keep every one.",
+         "blendshape-prune");
   o->Add("export.blendshape_refine_steps", &e->blendshape_refine_steps,
          "blendshapes: steps refining them through the rasterizer against the training frames after their fit to "
          "the avatar's networks (a tenth of the training views set aside judge it; the best state is kept, the fit "
@@ -322,6 +328,7 @@ Status WriteBlendshapes(ExportJob* job) {
   AvatarBlendshapes shapes;
   const fs::path dir = job->out_dir / "blendshapes";
   BlendshapeExportOptions options;
+  options.prune = job->options.blendshape_prune;
   options.refine_steps = job->options.blendshape_refine_steps;
   options.refine_minutes = job->options.blendshape_refine_minutes;
   HF_RETURN_IF_ERROR(ExportAvatarBlendshapes(job->workspace, job->model_dir, job->face_model, options, dir, &scores,
@@ -535,6 +542,10 @@ Status ExportOptions::Check() const {
   if (!(orbit_deg >= 0 && orbit_deg <= 180)) return Status::InvalidArgument("export: --orbit-deg must lie in [0, 180]");
   if (splat_frame < -1) return Status::InvalidArgument("export: --splat-frame is a frame number, or -1 for the neutral pose");
   HF_RETURN_IF_ERROR(CheckClipFormat(clip_format));
+  if (!(blendshape_prune >= 0 && blendshape_prune < 1))
+    return Status::InvalidArgument("export: --blendshape-prune is the fraction of the Gaussians removed, in [0, 1) "
+                                   "(0.5 removes half)");
+  if (blendshape_refine_steps < 0) return Status::InvalidArgument("export: --blendshape-refine-steps must be 0 or more");
   if (model != "auto" && !FindAvatarModel(model))
     return Status::InvalidArgument("export: --model must be auto, " + AvatarModelNames() + ", not '" + model + "'");
   return Status::Ok();

@@ -41,6 +41,7 @@ struct ExportOptions {
   // steps, and minutes at most (0: no limit); 0 steps: the fit alone. 300:
   // on GRID swiz3n's draft avatar the views set aside gain 1.4 dB by then
   // and 1.7 dB by step 1 000, the held-out frames 0.35 dB either way.
+  double blendshape_prune = 0.5;
   int blendshape_refine_steps = 300;
   double blendshape_refine_minutes = 0;
   std::string drive;         // a tracked workspace whose expressions drive a cross-reenactment video

@@ -5,6 +5,7 @@
 // fed with the capture's own frames, its weights against the simulator's
 // truth and track's.
 #include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <map>
@@ -20,10 +21,12 @@ class DrivePage : public TrainStage {
  protected:
   static void SetUpTestSuite() {
     CopyReference("drive_reference");
-    // The blendshapes as fitted to the networks: the page draws whichever
-    // it is given, and their refinement has its own tests.
+    // The blendshapes as fitted to the networks, a quarter of them pruned:
+    // the page draws whichever it is given (their refinement has its own
+    // tests).
     exported_ = Headforge({"export", "--workspace", reference_.string(), "--formats", "mesh", "blendshapes", "drive",
-                           "--texture-size", "128", "--bake-views", "8", "--blendshape-refine-steps", "0"});
+                           "--texture-size", "128", "--bake-views", "8", "--blendshape-refine-steps", "0",
+                           "--blendshape-prune", "0.25"});
   }
   static Result exported_;
 };
@@ -89,6 +92,21 @@ TEST_F(DrivePage, WritesThePageAndAFaceBasisThatLandsOnTheFaceMesh) {
     std::printf("frame %d: the face basis %.2f px (median) from the face mesh found in it\n", frame, px);
     EXPECT_LT(px, 4.0);
   }
+  // The quarter giving the least light pruned: the rest draw the held-out
+  // frames nearly as well.
+  nlohmann::json layout;
+  ASSERT_TRUE(ReadJson(reference_ / "export" / "blendshapes" / "blendshapes.json", &layout).ok());
+  const nlohmann::json& pruning = layout["pruning"];
+  const int fitted = pruning["gaussians_fitted"], kept = pruning["gaussians_kept"];
+  const double before = layout["held_out"]["psnr_masked_fitted"], after = layout["held_out"]["psnr_masked_pruned"];
+  std::printf("pruned %d of %d Gaussians (%.1f%% of the light kept): held out %.2f -> %.2f dB\n", fitted - kept, fitted,
+              100 * pruning["light_kept"].get<double>(), before, after);
+  EXPECT_EQ(kept, int(std::lround(0.75 * fitted)));
+  EXPECT_EQ(layout["gaussians"], kept);
+  EXPECT_GT(pruning["light_kept"].get<double>(), 0.9);
+  EXPECT_GT(after, before - 1.0);
+  EXPECT_EQ(after, layout["held_out"]["psnr_masked_blendshapes"].get<double>());  // not refined
+
   const nlohmann::json data = PageData(drive / "index.html");
   ASSERT_TRUE(data.is_object());
   EXPECT_EQ(data["names"], tracking["expression_names"]);

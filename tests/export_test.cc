@@ -2,6 +2,8 @@
 // back by the tools that open it (glTF-Validator, three.js, PlayCanvas,
 // splat-transform, Chromium), a kill and a full disk mid-export, the
 // report's plots and links; and a workspace never trained.
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 
 #include "tests/train_fixture.h"
@@ -197,16 +199,33 @@ TEST_F(ExportStage, BlendshapesPoseTheAvatarAsItsNetworksDo) {
   EXPECT_GT(refined["validation_views"].get<int>(), 0);
   EXPECT_GE(refined["validation_psnr_masked_after"].get<double>(), refined["validation_psnr_masked_before"].get<double>());
   EXPECT_EQ(refined["validation_curve"].size(), 7u);  // before, every 50 steps, the last
+  // Half the Gaussians pruned by default, before the refinement.
+  const nlohmann::json& pruning = layout["pruning"];
+  std::printf("pruned to %d of %d Gaussians (%.1f%% of the light): held out %.2f dB before the refinement\n",
+              pruning["gaussians_kept"].get<int>(), pruning["gaussians_fitted"].get<int>(),
+              100 * pruning["light_kept"].get<double>(), held["psnr_masked_pruned"].get<double>());
+  EXPECT_EQ(pruning["gaussians_kept"], n);
+  EXPECT_EQ(n, size_t(std::lround(0.5 * pruning["gaussians_fitted"].get<double>())));
+  // A fraction to prune outside [0, 1) is refused before anything is touched.
+  const Result bad = Headforge({"export", "--workspace", ws.string(), "--formats", "blendshapes", "--blendshape-prune", "1"});
+  EXPECT_EQ(bad.code, 2) << bad.err;
+  EXPECT_NE(bad.err.find("0.5 removes half"), std::string::npos) << bad.err;
+  EXPECT_TRUE(fs::exists(dir / "blendshapes.json"));
   EXPECT_LT(held["ms_blendshapes"].get<double>(), held["ms_network"].get<double>());
 
   GaussianCloud neutral;
   ASSERT_TRUE(ReadGaussianPly(reference_ / "export" / "gaussians.ply", &neutral).ok());
-  ASSERT_EQ(neutral.size(), n);
+  ASSERT_EQ(neutral.size(), pruning["gaussians_fitted"].get<size_t>());
+  const std::vector<int64_t> kept = pruning["kept"];
+  ASSERT_EQ(kept.size(), n);
+  EXPECT_TRUE(std::is_sorted(kept.begin(), kept.end()));
+  EXPECT_LT(kept.back(), int64_t(neutral.size()));
   std::vector<float> values(n * a);
   std::memcpy(values.data(), bytes.data() + 4 * n, values.size() * sizeof(float));
   double squares = 0;
   for (size_t i = 0; i < n; ++i)
-    for (size_t c = 0; c < 3; ++c) squares += std::pow(double(values[i * a + c]) - neutral.means[3 * i + c], 2);
+    for (size_t c = 0; c < 3; ++c)
+      squares += std::pow(double(values[i * a + c]) - neutral.means[3 * size_t(kept[i]) + c], 2);
   const double rms_mm = 1000 * std::sqrt(squares / double(n));
   std::printf("neutral positions %.3f mm (RMS) from the exported neutral Gaussians\n", rms_mm);
   EXPECT_LT(rms_mm, 1.0);

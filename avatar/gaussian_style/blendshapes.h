@@ -76,6 +76,21 @@ struct BlendshapeRefineReport {
 Status RefineBlendshapes(const AvatarDataset& data, const BlendshapeRefineOptions& options,
                          GaussianBlendshapes* shapes, BlendshapeRefineReport* report, Progress* progress);
 
+// The Gaussians that give the least light removed, before a refinement lets
+// the rest take their place: each one's light is its alpha times the
+// transmittance before it, summed over the pixels it reaches in every
+// training view (at the view's expression and pose), and the `fraction`
+// with the least is dropped. Fewer Gaussians draw faster; what it costs is
+// measured by the held-out frames (docs/benchmarks/export.md).
+struct BlendshapePruneReport {
+  int before = 0, after = 0;
+  double light_kept = 1;  // the kept Gaussians' share of the light summed over the views
+  double seconds = 0;
+  std::vector<int64_t> kept;  // the kept Gaussians' indices before pruning, ascending (empty: none pruned)
+};
+Status PruneBlendshapes(const AvatarDataset& data, double fraction, GaussianBlendshapes* shapes,
+                        BlendshapePruneReport* report);
+
 // Whether `dir` holds exported blendshapes (blendshapes.json).
 bool IsBlendshapeFolder(const fs::path& dir);
 // Reads what ExportAvatarBlendshapes wrote into `dir`; `*data` the dataset

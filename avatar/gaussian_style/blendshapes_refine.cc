@@ -4,6 +4,7 @@
 
 #include "avatar/gaussian_style/blendshapes.h"
 #include "avatar/metrics/image_metrics.h"
+#include "avatar/splat/splat_ops.h"
 #include "avatar/train/adam.h"
 #include "avatar/train/loop.h"
 #include "avatar/train/view_scores.h"
@@ -212,6 +213,44 @@ Status RefineBlendshapes(const AvatarDataset& data, const BlendshapeRefineOption
                << " dB after (" << (report->kept_step > 0 ? "step " + std::to_string(report->kept_step) + " kept"
                                                           : "no step scored higher: the fit to the networks kept")
                << ")";
+  return Status::Ok();
+}
+
+Status PruneBlendshapes(const AvatarDataset& data, double fraction, GaussianBlendshapes* shapes,
+                        BlendshapePruneReport* report) {
+  *report = BlendshapePruneReport();
+  const int64_t n = shapes->neutral.size(0), k = shapes->offsets.size(0);
+  report->before = report->after = int(n);
+  if (!(fraction >= 0 && fraction < 1))
+    return Status::InvalidArgument("blendshape pruning: the fraction removed must be in [0, 1)");
+  if (fraction == 0 || n == 0) return Status::Ok();
+  if (data.train.empty()) return Status::InvalidArgument("blendshape pruning: no training views to weigh them in");
+  const auto start = std::chrono::steady_clock::now();
+  // Each Gaussian's light: drawn with one channel, its value s_g (1), the
+  // image's sum has the derivative sum(alpha T) over pixels by s_g.
+  torch::Tensor light = torch::zeros({n}, torch::kFloat64);
+  for (const AvatarView& view : data.train) {
+    const PosedGaussians posed = PoseBlendshapes(*shapes, view.condition.slice(0, 0, k));
+    const torch::Tensor unit = torch::ones({n, 1}, torch::kFloat32).requires_grad_(true);
+    const torch::Tensor image = RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities, unit,
+                                                torch::zeros({1}), view.view)
+                                    .image;
+    image.sum().backward();
+    light += unit.grad().view({n}).to(torch::kFloat64);
+  }
+  const int64_t keep = std::max<int64_t>(1, int64_t(std::llround(double(n) * (1 - fraction))));
+  const torch::Tensor kept = std::get<0>(std::get<1>(torch::topk(light, keep)).sort());
+  const double total = light.sum().item<double>();
+  report->light_kept = total > 0 ? light.index_select(0, kept).sum().item<double>() / total : 1;
+  shapes->neutral = shapes->neutral.index_select(0, kept).contiguous();
+  shapes->offsets = shapes->offsets.index_select(1, kept).contiguous();
+  shapes->opacities = shapes->opacities.index_select(0, kept).contiguous();
+  report->after = int(keep);
+  report->kept.assign(kept.data_ptr<int64_t>(), kept.data_ptr<int64_t>() + keep);
+  report->seconds = SecondsSince(start);
+  HF_LOG(Info) << "export: " << n - keep << " of " << n << " Gaussians pruned, the least light in "
+               << data.train.size() << " training views (the rest give " << 100 * report->light_kept << "% of it) in "
+               << report->seconds << " s";
   return Status::Ok();
 }
 

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "avatar/splat/splat_test_util.h"
@@ -163,6 +164,70 @@ TEST(GaussianBlendshapes, RefinementAgainstTheFramesRecoversWhatTheFitMissed) {
   EXPECT_FALSE(few.ok());
   EXPECT_NE(few.message().find("too few"), std::string::npos) << few.message();
   EXPECT_TRUE(torch::equal(same.neutral, start.neutral));
+}
+
+// Pruning drops the Gaussians that give no light: 60 that draw the views
+// among 20 outside every view and 20 all but transparent. The two fifths
+// removed are exactly those, the rest in the order they had, the views drawn
+// as before; bad fractions are refused.
+TEST(GaussianBlendshapes, PruningRemovesTheGaussiansThatGiveNoLight) {
+  auto gen = at::detail::createCPUGenerator(22);
+  const int64_t real = 60, n = 100, k = 2;
+  GaussianBlendshapes shapes;
+  shapes.neutral = torch::zeros({n, kBlendshapeAttributes});
+  shapes.neutral.slice(1, 0, 3).copy_(torch::rand({n, 3}, gen) * 0.3 - 0.15);
+  shapes.neutral.slice(1, 3, 7).copy_(torch::randn({n, 4}, gen));
+  shapes.neutral.slice(1, 7, 10).fill_(std::log(0.02));
+  shapes.neutral.slice(1, 10, 13).copy_(torch::rand({n, 3}, gen));
+  shapes.offsets = torch::randn({k, n, kBlendshapeAttributes}, gen) * 0.01;
+  shapes.opacities = torch::full({n}, 0.9f);
+  shapes.names = {"a", "b"};
+  // Gaussians 60..79 two metres above the ring (its cameras see 23 deg
+  // either side), 80..99 at opacity 1e-4; interleaved with the others by a
+  // permutation, so that order is tested too.
+  const torch::Tensor order = torch::randperm(n, gen);
+  std::vector<int64_t> junk;
+  for (int64_t i = 0; i < n; ++i) {
+    const int64_t at = order[i].item<int64_t>();
+    if (i >= real) junk.push_back(at);
+    if (i >= real && i < 80) shapes.neutral[at][1] = 2.0;
+    if (i >= 80) shapes.opacities[at] = 1e-4f;
+  }
+  AvatarDataset data;
+  for (int i = 0; i < 16; ++i) {
+    AvatarView view;
+    view.view = splat_test::RingCamera(2 * M_PI * i / 16, 1.0, 40);
+    view.condition = torch::cat({torch::rand({k}, gen), torch::zeros({9})});
+    data.train.push_back(view);
+  }
+  GaussianBlendshapes pruned = shapes;
+  BlendshapePruneReport report;
+  ASSERT_TRUE(PruneBlendshapes(data, 0.4, &pruned, &report).ok());
+  EXPECT_EQ(report.before, 100);
+  EXPECT_EQ(report.after, 60);
+  EXPECT_GT(report.light_kept, 0.999);
+  std::vector<int64_t> kept;
+  for (int64_t i = 0; i < n; ++i)
+    if (std::find(junk.begin(), junk.end(), i) == junk.end()) kept.push_back(i);
+  const torch::Tensor index = torch::tensor(kept);
+  EXPECT_TRUE(torch::equal(pruned.neutral, shapes.neutral.index_select(0, index)));
+  EXPECT_TRUE(torch::equal(pruned.offsets, shapes.offsets.index_select(1, index)));
+  EXPECT_TRUE(torch::equal(pruned.opacities, shapes.opacities.index_select(0, index)));
+  const torch::Tensor grey = torch::full({3}, 0.5f);
+  for (const AvatarView& view : data.train) {
+    const torch::Tensor w = view.condition.slice(0, 0, k);
+    const double psnr =
+        Psnr(RenderRgb(PoseBlendshapes(pruned, w), view.view, grey), RenderRgb(PoseBlendshapes(shapes, w), view.view, grey));
+    EXPECT_GT(psnr, 50.0);
+  }
+  // Nothing removed at 0; a fraction outside [0, 1) refused, nothing touched.
+  GaussianBlendshapes same = shapes;
+  ASSERT_TRUE(PruneBlendshapes(data, 0.0, &same, &report).ok());
+  EXPECT_TRUE(torch::equal(same.neutral, shapes.neutral));
+  EXPECT_EQ(report.after, 100);
+  EXPECT_FALSE(PruneBlendshapes(data, 1.0, &same, &report).ok());
+  EXPECT_FALSE(PruneBlendshapes(data, -0.1, &same, &report).ok());
+  EXPECT_EQ(same.neutral.size(0), 100);
 }
 
 }  // namespace

@@ -65,6 +65,17 @@ double Psnr(const torch::Tensor& a, const torch::Tensor& b) {
   return -10 * std::log10((a - b).pow(2).mean().item<double>());
 }
 
+// n Gaussians of 2 cm in a 30 cm cube, random rotations and colours, at
+// rest (neutral only): what the refinement and pruning tests start from.
+torch::Tensor RandomNeutral(int64_t n, at::Generator& gen) {
+  torch::Tensor neutral = torch::zeros({n, kBlendshapeAttributes});
+  neutral.slice(1, 0, 3).copy_(torch::rand({n, 3}, gen) * 0.3 - 0.15);
+  neutral.slice(1, 3, 7).copy_(torch::randn({n, 4}, gen));
+  neutral.slice(1, 7, 10).fill_(std::log(0.02));
+  neutral.slice(1, 10, 13).copy_(torch::rand({n, 3}, gen));
+  return neutral;
+}
+
 // Blendshapes whose colours and expression offsets the fit got wrong are
 // refined through the rasterizer against frames of the true ones: views
 // never trained on come closer to the truth, the views set aside judge it,
@@ -73,11 +84,7 @@ TEST(GaussianBlendshapes, RefinementAgainstTheFramesRecoversWhatTheFitMissed) {
   auto gen = at::detail::createCPUGenerator(21);
   const int64_t n = 300, k = 2;
   GaussianBlendshapes truth;
-  truth.neutral = torch::zeros({n, kBlendshapeAttributes});
-  truth.neutral.slice(1, 0, 3).copy_(torch::rand({n, 3}, gen) * 0.3 - 0.15);
-  truth.neutral.slice(1, 3, 7).copy_(torch::randn({n, 4}, gen));
-  truth.neutral.slice(1, 7, 10).fill_(std::log(0.02));
-  truth.neutral.slice(1, 10, 13).copy_(torch::rand({n, 3}, gen));
+  truth.neutral = RandomNeutral(n, gen);
   truth.offsets = torch::zeros({k, n, kBlendshapeAttributes});
   truth.offsets[0].slice(1, 0, 1).fill_(0.03);                    // expression 0 moves every Gaussian in x
   truth.offsets[1].slice(1, 10, 13).copy_(torch::rand({n, 3}, gen) * 0.6 - 0.3);  // expression 1 recolours
@@ -174,11 +181,7 @@ TEST(GaussianBlendshapes, PruningRemovesTheGaussiansThatGiveNoLight) {
   auto gen = at::detail::createCPUGenerator(22);
   const int64_t real = 60, n = 100, k = 2;
   GaussianBlendshapes shapes;
-  shapes.neutral = torch::zeros({n, kBlendshapeAttributes});
-  shapes.neutral.slice(1, 0, 3).copy_(torch::rand({n, 3}, gen) * 0.3 - 0.15);
-  shapes.neutral.slice(1, 3, 7).copy_(torch::randn({n, 4}, gen));
-  shapes.neutral.slice(1, 7, 10).fill_(std::log(0.02));
-  shapes.neutral.slice(1, 10, 13).copy_(torch::rand({n, 3}, gen));
+  shapes.neutral = RandomNeutral(n, gen);
   shapes.offsets = torch::randn({k, n, kBlendshapeAttributes}, gen) * 0.01;
   shapes.opacities = torch::full({n}, 0.9f);
   shapes.names = {"a", "b"};

@@ -458,6 +458,11 @@ bool MapperAttemptWorthRunning(size_t attempt, int registered_so_far) {
   return attempt < 2 || registered_so_far > 0;
 }
 
+// What the log says of attempt `a`.
+const char* MapperAttemptLabel(size_t a) {
+  return a == 0 ? "" : a == 1 ? " (again, relaxed initialisation)" : " (once more, from another start)";
+}
+
 Status ColmapJob::Map() {
   const auto& attempts = MapperAttempts();
   const size_t num_attempts = std::min(attempts.size(), static_cast<size_t>(options_.mapper_attempts));
@@ -466,8 +471,7 @@ Status ColmapJob::Map() {
     const fs::path sparse = work_dir_ / ("sparse" + (run == 0 ? std::string() : "_" + std::to_string(run)));
     RemoveAll(sparse);
     HF_RETURN_IF_ERROR(EnsureDirectory(sparse));
-    HF_LOG(Info) << "calibrate: COLMAP mapper"
-                 << (a == 0 ? "" : a == 1 ? " (again, relaxed initialisation)" : " (once more, from another start)");
+    HF_LOG(Info) << "calibrate: COLMAP mapper" << MapperAttemptLabel(a);
     std::vector<std::string> mapper = {exe_, "mapper", "--database_path", database_.string(), "--image_path",
                                        image_path_, "--output_path", sparse.string(), "--Mapper.num_threads", threads_};
     mapper.insert(mapper.end(), attempts[a].begin(), attempts[a].end());
@@ -554,7 +558,7 @@ Status ColmapJob::MapKeyframes(int step) {
     RemoveAll(mapped);
     HF_RETURN_IF_ERROR(EnsureDirectory(mapped));
     HF_LOG(Info) << "calibrate: COLMAP mapper on " << keyframes.size() << " keyframes"
-                 << (a == 0 ? "" : a == 1 ? " (again, relaxed initialisation)" : " (once more, from another start)");
+                 << MapperAttemptLabel(a);
     std::vector<std::string> mapper = {exe_, "mapper", "--database_path", database_.string(), "--image_path",
                                        image_path_, "--output_path", mapped.string(), "--image_list_path",
                                        key_path.string(), "--Mapper.num_threads", threads_};

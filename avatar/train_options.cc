@@ -123,8 +123,13 @@ Status CheckStyleDecoder(const TrainOptions& t) {
 Status TrainOptions::Check() const {
   torch::Device parsed = torch::kCPU;
   HF_RETURN_IF_ERROR(ParseDevice("train", device, &parsed));
-  if (!FindAvatarModel(model))
+  if (!FindAvatarModel(model)) {
+    if (const AvatarModel* exported = FindAnyAvatarModel(model))
+      return Status::InvalidArgument("train: " + exported->Name() + " is not trained but exported from a trained " +
+                                     std::string(exported->made_from) + " avatar: train that, then headforge export " +
+                                     "--formats " + std::string(exported->export_format));
     return Status::InvalidArgument("train: --model must be " + AvatarModelNames() + ", not '" + model + "'");
+  }
   HF_RETURN_IF_ERROR(data.Check());
   HF_RETURN_IF_ERROR(loop.Check());
   // The gaussian-style model's stages 1-2 are checked whichever model trains, as they always were.

@@ -326,7 +326,7 @@ Status WriteBlendshapes(ExportJob* job) {
   std::vector<std::string> files;
   BlendshapeScores scores;
   AvatarBlendshapes shapes;
-  const fs::path dir = job->out_dir / "blendshapes";
+  const fs::path dir = job->out_dir / std::string(kGaussianBlendshapes.folder);
   BlendshapeExportOptions options;
   options.prune = job->options.blendshape_prune;
   options.refine_steps = job->options.blendshape_refine_steps;
@@ -335,24 +335,24 @@ Status WriteBlendshapes(ExportJob* job) {
                                              &files, &shapes, job->progress));
   HF_RETURN_IF_ERROR(WriteGaussianBlendshapeGlb(dir / "blendshapes.glb", shapes));
   files.push_back("blendshapes.glb");
-  for (const std::string& f : files) job->out.files.push_back("blendshapes/" + f);
+  for (const std::string& f : files) job->out.files.push_back(std::string(kGaussianBlendshapes.folder) + "/" + f);
   return Status::Ok();
 }
 
 // drive/index.html from the blendshapes: this export's, or else those of
 // the export before, kept (the stage replaces the whole export folder).
 Status WriteDrive(ExportJob* job) {
-  const fs::path shapes = job->out_dir / "blendshapes";
+  const fs::path shapes = job->out_dir / std::string(kGaussianBlendshapes.folder);
   std::error_code ec;
   if (!fs::exists(shapes / "blendshapes.json", ec)) {
-    const fs::path earlier = job->workspace / "export" / "blendshapes";
+    const fs::path earlier = kGaussianBlendshapes.Dir(job->workspace);
     if (!fs::exists(earlier / "blendshapes.json", ec))
       return Status::NotFound("export: the drive page poses the Gaussian blendshapes, and there are none: export "
                               "--formats blendshapes drive");
     fs::copy(earlier, shapes, fs::copy_options::recursive | fs::copy_options::overwrite_existing, ec);
     if (ec) return Status::IoError("export: could not keep " + earlier.string() + ": " + ec.message());
     for (const auto& entry : fs::directory_iterator(shapes))
-      job->out.files.push_back("blendshapes/" + entry.path().filename().string());
+      job->out.files.push_back(std::string(kGaussianBlendshapes.folder) + "/" + entry.path().filename().string());
     if (fs::exists(job->model_dir / "model.pt", ec) &&
         fs::last_write_time(job->model_dir / "model.pt", ec) > fs::last_write_time(earlier / "blendshapes.json", ec))
       HF_LOG(Warning) << "export: the blendshapes in " << earlier.string() << " are older than the trained model; "
@@ -362,7 +362,7 @@ Status WriteDrive(ExportJob* job) {
   DrivePageOptions drive;
   drive.workspace = job->workspace;
   drive.face_model = job->face_model;
-  drive.blendshapes_dir = job->out_dir / "blendshapes";
+  drive.blendshapes_dir = shapes;
   drive.tfjs_js = job->options.tfjs_js;
   drive.vision_models = job->options.vision_models.empty() ? DefaultVisionModelsDir() : job->options.vision_models;
   if (fs::exists(job->out_dir / "avatar_mesh.glb", ec)) drive.mesh_glb = job->out_dir / "avatar_mesh.glb";

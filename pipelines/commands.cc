@@ -8,6 +8,7 @@
 #include <cstring>
 #include <iostream>
 
+#include "avatar/model_table.h"
 #include "avatar/torch_runtime.h"
 #include "core/log.h"
 #include "core/parallel.h"
@@ -127,6 +128,18 @@ Status CheckTrackedWorkspace(const std::string& path, bool with_model, const std
     if (const std::string why = workspace->OutputsOutOfDate("train"); !why.empty())
       HF_LOG(Warning) << who << ": the trained model is older than the tracked capture (" << why
                       << "); headforge train makes it again from the present one";
+  return Status::Ok();
+}
+
+Status ResolveModelName(const std::string& workspace, std::string* model, const std::string& who) {
+  const AvatarModel* entry = FindAnyAvatarModel(*model);
+  if (!entry) return Status::Ok();
+  const fs::path dir = entry->Dir(workspace);
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec))
+    return Status::NotFound(who + ": the workspace has no " + entry->Name() + " model (no " + dir.string() +
+                            "); " + entry->MadeBy(workspace) + " makes it");
+  *model = dir.string();
   return Status::Ok();
 }
 

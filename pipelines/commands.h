@@ -61,6 +61,10 @@ int ReportFailure(const Status& status);
 // A folder with tracking.json but no manifest (bench truth-workspace's) is
 // not checked.
 Status CheckTrackedWorkspace(const std::string& workspace, bool with_model, const std::string& who);
+// `--model NAME` for a name of the model table (trained or exported): its
+// folder in `workspace`; anything else (a folder) is left as given. A model
+// the workspace does not have is an error that says what makes it.
+Status ResolveModelName(const std::string& workspace, std::string* model, const std::string& who);
 
 // Command entry points (the stages' own are in stage_table.h).
 int SimulateCommand(const std::vector<std::string>& args);

@@ -2,6 +2,7 @@
 #include <cstdio>
 
 #include "avatar/avatar_render.h"
+#include "avatar/model_table.h"
 #include "core/log.h"
 #include "pipelines/commands.h"
 
@@ -48,8 +49,9 @@ int RenderCommand(const std::vector<std::string>& args) {
   options.Add("render.background", &render.background, "Grey level behind the head, in [0, 1].", "background");
   options.Add("render.device", &render.device, "cpu, or cuda with a CUDA LibTorch.", "device");
   options.Add("render.model", &render.model,
-              "The model folder (default: the workspace's model trained last): a trained or exported model "
-              "(export/weights), or exported Gaussian blendshapes (export/blendshapes).",
+              "The model (default: the workspace's model trained last): a name, " + AvatarModelNames(true) +
+                  " (the last made by export), or a folder: a trained or exported model (export/weights), or "
+                  "exported Gaussian blendshapes.",
               "model");
   options.Add("render.truth", &truth,
               "Score instead of render: a simulated capture of the workspace's scene with more cameras "
@@ -66,6 +68,7 @@ int RenderCommand(const std::vector<std::string>& args) {
   if (!(render.background >= 0 && render.background <= 1))
     return ReportFailure(Status::InvalidArgument("--background must be in [0, 1]"));
   ApplyCommonOptions(common);
+  if (Status s = ResolveModelName(common.workspace, &render.model, "render"); !s.ok()) return ReportFailure(s);
   if (Status s = CheckTrackedWorkspace(common.workspace, render.model.empty(), "render"); !s.ok())
     return ReportFailure(s);
   const fs::path out_dir = out.empty() ? fs::path(common.workspace) / (truth.empty() ? "renders" : "novel_views")

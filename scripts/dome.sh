@@ -11,7 +11,9 @@
 #   scripts/dome.sh [out] [run options]   (default /tmp/headforge_dome; resumes)
 # DOME_SCENE picks the scene file in scenes/ (dome_360, or dome_360_lit: the
 # same dome under one light; or any rig scene, e.g. rig_8cam), DOME_HOLDOUT
-# the cameras held out whole (default cam3,cam6,cam9).
+# the cameras held out whole (default cam3,cam6,cam9), DOME_CAMERAS where the
+# cameras come from: rig (default: the rig file) or colmap (COLMAP on three
+# synchronised instants, --rig-instants 3, as without a studio calibration).
 # Options after the folder go to `headforge run`; without any, --fps 12.5
 # (25 instants of the 2-second scene) --multiview-mesh-weight 0.4 (track
 # fits the face mesh beside the 68 points: the unlit dome's turned views
@@ -46,7 +48,12 @@ count=$(python3 -c 'import json, sys; print(len(json.load(open(sys.argv[1]))["ca
 cameras=()
 for c in $(seq 0 $((count - 1))); do cameras+=("$out/sim/cam$c"); done
 start=$(date +%s)
-"$bin" run --video "${cameras[@]}" --mask-folder "$out/sim/masks" --mode rig --rig "$out/rig.json" \
+case "${DOME_CAMERAS:-rig}" in
+  rig) calibration=(--mode rig --rig "$out/rig.json") ;;
+  colmap) calibration=(--rig-instants 3) ;;
+  *) echo "dome.sh: DOME_CAMERAS is rig or colmap, not ${DOME_CAMERAS}" >&2; exit 2 ;;
+esac
+"$bin" run --video "${cameras[@]}" --mask-folder "$out/sim/masks" "${calibration[@]}" \
   --holdout-cameras "${DOME_HOLDOUT:-cam3,cam6,cam9}" --workspace "$out/ws" "$@"
 echo "dome: run took $(( $(date +%s) - start )) s"
 "$bin" status "$out/ws"

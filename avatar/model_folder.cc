@@ -10,7 +10,7 @@ fs::path LatestModelFolder(const fs::path& workspace) {
   for (const AvatarModel& model : kAvatarModels) {
     const fs::path dir = model.Dir(workspace);
     std::error_code ec;
-    const auto written = fs::last_write_time(dir / "config.json", ec);
+    const auto written = fs::last_write_time(dir / std::string(model.marker), ec);
     if (ec) continue;
     if (latest.empty() || written > newest) {
       latest = dir;

@@ -21,6 +21,7 @@ struct AvatarModel {
   std::string_view default_mask;  // what --mask auto trains it with: "mesh" or "ingest"
   std::string_view export_format = {};  // exported models: the `export --formats` name that makes it; "" if trained
   std::string_view made_from = {};      // exported models: the trained model's name they are made from
+  std::string_view marker = "config.json";  // the file in Dir() that says the model is there
 
   std::string Name() const { return std::string(name); }
   bool Trained() const { return export_format.empty(); }
@@ -28,6 +29,11 @@ struct AvatarModel {
     return workspace / (Trained() ? "models" : "export") / std::string(folder);
   }
   bool Is(std::string_view other) const { return other == name; }
+  // Whether `workspace` holds the model (its marker file in Dir()).
+  bool In(const fs::path& workspace) const {
+    std::error_code ec;
+    return fs::is_regular_file(Dir(workspace) / std::string(marker), ec);
+  }
   // The command that makes it in `workspace`, for a message.
   std::string MadeBy(const fs::path& workspace) const {
     return Trained() ? "headforge train --workspace " + workspace.string() + " --model " + Name()
@@ -48,7 +54,7 @@ inline constexpr AvatarModel kGaussianBlendshapes{
     "gaussian-blendshapes", "blendshapes",
     "linear Gaussian blendshapes distilled from a trained gaussian-style avatar: for every Gaussian a neutral "
     "state and one offset per tracked expression, posed by a weighted sum (any engine can draw them)",
-    "mesh", "blendshapes", kGaussianStyle.name};
+    "mesh", "blendshapes", kGaussianStyle.name, "blendshapes.json"};
 // What `train --model` trains.
 inline constexpr AvatarModel kAvatarModels[] = {kGaussianStyle, kGanAvatar};
 // What `export` makes from a trained model; `render --model` draws these too.

@@ -3,6 +3,7 @@
 
 #include <cstdio>
 
+#include "avatar/model_table.h"
 #include "avatar/torch_runtime.h"
 #include "calibration/colmap_tool.h"
 #include "core/paths.h"
@@ -49,6 +50,18 @@ int StatusCommand(const std::vector<std::string>& args) {
       std::snprintf(wall, sizeof(wall), "%.2f s", r.wall_time_s);
     std::printf("%-10s %-12s %10s  %-20s  %s\n", r.name.c_str(), status.c_str(), wall,
                 r.finished_at.c_str(), summary.c_str());
+  }
+  // The models render can draw, trained and exported (the model table's).
+  std::vector<const AvatarModel*> present;
+  for (const AvatarModel& m : kAvatarModels)
+    if (m.In(workspace->root())) present.push_back(&m);
+  for (const AvatarModel& m : kExportedModels)
+    if (m.In(workspace->root())) present.push_back(&m);
+  if (!present.empty()) {
+    std::printf("\nmodels (headforge render --model NAME draws one)\n");
+    for (const AvatarModel* m : present)
+      std::printf("%-20s  %s\n", m->Name().c_str(),
+                  fs::relative(m->Dir(workspace->root()), workspace->root()).string().c_str());
   }
   return kExitOk;
 }

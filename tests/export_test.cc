@@ -252,6 +252,12 @@ TEST_F(ExportStage, BlendshapesPoseTheAvatarAsItsNetworksDo) {
   EXPECT_EQ(missing.code, 1) << missing.err;
   EXPECT_NE(missing.err.find("headforge train --workspace " + ws.string() + " --model gan-avatar"), std::string::npos)
       << missing.err;
+  // status lists the models render can draw, trained and exported.
+  const Result status = Headforge({"status", ws.string()});
+  EXPECT_EQ(status.code, 0) << status.err;
+  EXPECT_NE(status.out.find("gaussian-style        models/gaussian_style"), std::string::npos) << status.out;
+  EXPECT_NE(status.out.find("gaussian-blendshapes  export/blendshapes"), std::string::npos) << status.out;
+  EXPECT_EQ(status.out.find("gan-avatar"), std::string::npos) << status.out;
   const Result trained = Headforge({"train", "--workspace", ws.string(), "--model", "gaussian-blendshapes"});
   EXPECT_EQ(trained.code, 2) << trained.err;
   EXPECT_NE(trained.err.find("export --formats blendshapes"), std::string::npos) << trained.err;

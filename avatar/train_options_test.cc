@@ -1,11 +1,14 @@
 // train's options in JSON (a training pack's record, a model's
 // config.json): the blocks written go back to the same options, and the flat
 // record of earlier versions (every field at the top) still reads.
+#include <fstream>
+
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
 
 #include "avatar/avatar_train.h"
+#include "avatar/model_table.h"
 
 namespace headforge {
 namespace {
@@ -107,6 +110,39 @@ TEST(TrainOptionsJson, AFieldTheRecordLacksKeepsItsDefault) {
     EXPECT_EQ(o.gan_avatar.render_resolution, defaults.gan_avatar.render_resolution) << text;
     EXPECT_EQ(o.gaussian_style.decoder.prior_steps, defaults.gaussian_style.decoder.prior_steps) << text;
   }
+}
+
+// The model table's two kinds: what train trains and what export makes.
+TEST(ModelTable, TrainedAndExportedModelsHaveTheirOwnFolders) {
+  const fs::path ws = "/data/ws";
+  EXPECT_EQ(kGaussianStyle.Dir(ws), ws / "models" / "gaussian_style");
+  EXPECT_EQ(kGaussianBlendshapes.Dir(ws), ws / "export" / "blendshapes");
+  EXPECT_TRUE(kGanAvatar.Trained());
+  EXPECT_FALSE(kGaussianBlendshapes.Trained());
+  EXPECT_EQ(FindAvatarModel("gaussian-blendshapes"), nullptr);  // train does not offer it
+  EXPECT_EQ(FindAnyAvatarModel("gaussian-blendshapes"), &kExportedModels[0]);
+  EXPECT_EQ(FindAnyAvatarModel("gan-avatar"), &kAvatarModels[1]);
+  EXPECT_EQ(FindAnyAvatarModel("blendshapes"), nullptr);  // a folder's name is not a model's
+  EXPECT_EQ(AvatarModelNames(), "gaussian-style or gan-avatar");
+  EXPECT_EQ(AvatarModelNames(true), "gaussian-style, gan-avatar or gaussian-blendshapes");
+  EXPECT_EQ(kGaussianBlendshapes.MadeBy(ws), "headforge export --workspace /data/ws --formats blendshapes");
+  EXPECT_EQ(kGanAvatar.MadeBy(ws), "headforge train --workspace /data/ws --model gan-avatar");
+  EXPECT_EQ(kGaussianBlendshapes.made_from, kGaussianStyle.name);
+  // A model is in a workspace when its marker file is.
+  const fs::path tmp = fs::temp_directory_path() / "hf_model_table_test";
+  fs::remove_all(tmp);
+  fs::create_directories(kGaussianBlendshapes.Dir(tmp));
+  EXPECT_FALSE(kGaussianBlendshapes.In(tmp));
+  std::ofstream(kGaussianBlendshapes.Dir(tmp) / "blendshapes.json") << "{}";
+  EXPECT_TRUE(kGaussianBlendshapes.In(tmp));
+  EXPECT_FALSE(kGaussianStyle.In(tmp));
+  fs::remove_all(tmp);
+  // train refuses the exported one, saying what makes it.
+  TrainOptions options;
+  options.model = "gaussian-blendshapes";
+  const Status s = options.Check();
+  EXPECT_EQ(s.code(), Status::Code::kInvalidArgument);
+  EXPECT_NE(s.message().find("export --formats blendshapes"), std::string::npos) << s.message();
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "core/fs.h"
 
@@ -67,22 +68,30 @@ inline const AvatarModel* FindAvatarModel(std::string_view name) {
   return nullptr;
 }
 
+// Every model, the trained ones first, then the exported ones.
+inline std::vector<const AvatarModel*> AllAvatarModels() {
+  std::vector<const AvatarModel*> all;
+  for (const AvatarModel& m : kAvatarModels) all.push_back(&m);
+  for (const AvatarModel& m : kExportedModels) all.push_back(&m);
+  return all;
+}
+
 // Any model called `name`, trained or exported, or null.
 inline const AvatarModel* FindAnyAvatarModel(std::string_view name) {
-  if (const AvatarModel* m = FindAvatarModel(name)) return m;
-  for (const AvatarModel& m : kExportedModels)
-    if (m.name == name) return &m;
+  for (const AvatarModel* m : AllAvatarModels())
+    if (m->name == name) return m;
   return nullptr;
 }
 
 // "gaussian-style or gan-avatar": the trained models' names for a message
 // (with the exported ones too: "gaussian-style, gan-avatar or gaussian-blendshapes").
 inline std::string AvatarModelNames(bool exported = false) {
+  const std::vector<const AvatarModel*> all = AllAvatarModels();
+  const size_t n = exported ? all.size() : std::size(kAvatarModels);
   std::string out;
-  const size_t n = std::size(kAvatarModels) + (exported ? std::size(kExportedModels) : 0);
   for (size_t i = 0; i < n; ++i) {
     if (i > 0) out += i + 1 == n ? " or " : ", ";
-    out += i < std::size(kAvatarModels) ? kAvatarModels[i].name : kExportedModels[i - std::size(kAvatarModels)].name;
+    out += all[i]->name;
   }
   return out;
 }

@@ -346,7 +346,7 @@ Status WriteDrive(ExportJob* job) {
   std::error_code ec;
   if (!fs::exists(shapes / "blendshapes.json", ec)) {
     const fs::path earlier = kGaussianBlendshapes.Dir(job->workspace);
-    if (!fs::exists(earlier / "blendshapes.json", ec))
+    if (!kGaussianBlendshapes.In(job->workspace))
       return Status::NotFound("export: the drive page poses the Gaussian blendshapes, and there are none: export "
                               "--formats blendshapes drive");
     fs::copy(earlier, shapes, fs::copy_options::recursive | fs::copy_options::overwrite_existing, ec);

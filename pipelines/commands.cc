@@ -135,10 +135,10 @@ Status ResolveModelName(const std::string& workspace, std::string* model, const 
   const AvatarModel* entry = FindAnyAvatarModel(*model);
   if (!entry) return Status::Ok();
   const fs::path dir = entry->Dir(workspace);
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec))
-    return Status::NotFound(who + ": the workspace has no " + entry->Name() + " model (no " + dir.string() +
-                            "); " + entry->MadeBy(workspace) + " makes it");
+  if (!entry->In(workspace))
+    return Status::NotFound(who + ": the workspace has no " + entry->Name() + " model (no " +
+                            (dir / std::string(entry->marker)).string() + "); " + entry->MadeBy(workspace) +
+                            " makes it");
   *model = dir.string();
   return Status::Ok();
 }

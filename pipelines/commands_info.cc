@@ -53,10 +53,8 @@ int StatusCommand(const std::vector<std::string>& args) {
   }
   // The models render can draw, trained and exported (the model table's).
   std::vector<const AvatarModel*> present;
-  for (const AvatarModel& m : kAvatarModels)
-    if (m.In(workspace->root())) present.push_back(&m);
-  for (const AvatarModel& m : kExportedModels)
-    if (m.In(workspace->root())) present.push_back(&m);
+  for (const AvatarModel* m : AllAvatarModels())
+    if (m->In(workspace->root())) present.push_back(m);
   if (!present.empty()) {
     std::printf("\nmodels (headforge render --model NAME draws one)\n");
     for (const AvatarModel* m : present)

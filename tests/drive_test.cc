@@ -369,7 +369,7 @@ TEST_F(DrivePage, AVideoAndTheWebcamDriveIt) {
   // machine; that they reach the solve does not.
   int code = 0;
   const nlohmann::json webcam =
-      OpenDrivePage(reference_, "drive_webcam", "--webcam '" + (out / "camera.y4m").string() + "' --seconds 8", &code);
+      OpenDrivePage(reference_, "drive_webcam", "--webcam '" + (out / "camera.y4m").string() + "' --seconds 4", &code);
   EXPECT_EQ(code, 0) << webcam.dump().substr(0, 2000);
   EXPECT_EQ(webcam.value("mode", ""), "webcam");
   EXPECT_GE(webcam.value("solves", nlohmann::json::array()).size(), 3u);

@@ -248,7 +248,7 @@ TEST_F(TrainStage, RenderDrawsAnyFrameFromAnyCamera) {
 TEST_F(TrainStage, AModelOlderThanTheTrackingIsSaidToBe) {
   ASSERT_EQ(first_.code, 0) << first_.err;
   const fs::path ws = CopyOf(reference_, Scratch("retracked"));
-  const Result track = Headforge({"track", "--workspace", ws.string(), "--force"});
+  const Result track = Headforge({"track", "--workspace", ws.string(), "--force", "--overlay=false"});
   ASSERT_EQ(track.code, 0) << track.err;
   const Result status = Headforge({"status", ws.string()});
   EXPECT_NE(status.out.find("train      out of date"), std::string::npos) << status.out;

@@ -37,8 +37,8 @@ fs::path Scratch(const std::string& name) {
 std::vector<std::string> TrainArgs(const fs::path& ws) {
   return {"train", "--workspace", ws.string(), "--model", "gan-avatar", "--train-size", "32",
           "--render-resolution", "16", "--samples", "8", "--fine-samples", "8", "--batch", "2",
-          "--triplane-resolution", "16", "--steps", "60", "--log-every", "5", "--checkpoint-every", "5",
-          "--r1-every", "2", "--eval-every", "0", "--preview-every", "30", "--max-minutes", "0", "--threads", "1",
+          "--triplane-resolution", "16", "--steps", "40", "--log-every", "5", "--checkpoint-every", "5",
+          "--r1-every", "2", "--eval-every", "0", "--preview-every", "20", "--max-minutes", "0", "--threads", "1",
           "--mapping-samples", "24", "--mapping-steps", "10", "--reconstruction-steps", "20"};
 }
 
@@ -59,11 +59,11 @@ TEST_F(GanAvatarTrain, TrainsAndWritesItsModel) {
   const fs::path model = reference_ / kModelDir;
   for (const char* file : {"model.pt", "config.json", "stats.jsonl", "eval.json"})
     EXPECT_TRUE(fs::exists(model / file)) << file;
-  EXPECT_EQ(CountFiles(model / "previews"), 2u);  // steps 30 and 60
+  EXPECT_EQ(CountFiles(model / "previews"), 2u);  // steps 20 and 40
   std::vector<nlohmann::json> stats = StatsLines(model / "stats.jsonl");
-  ASSERT_EQ(stats.size(), 14u);  // a line every 5 steps, then two of the mapping's
+  ASSERT_EQ(stats.size(), 10u);  // a line every 5 steps, then two of the mapping's
   std::vector<nlohmann::json> mapping(stats.end() - 2, stats.end());
-  stats.resize(12);
+  stats.resize(8);
   EXPECT_EQ(mapping[0]["mapping_step"], 5);
   EXPECT_EQ(mapping[1]["mapping_step"], 10);
   for (const auto& line : mapping) EXPECT_TRUE(std::isfinite(line["mapping_loss"].get<double>())) << line;
@@ -96,7 +96,7 @@ TEST_F(GanAvatarTrain, TrainsAndWritesItsModel) {
   EXPECT_EQ(CountFiles(model / "held_out"), 25u);
   EXPECT_TRUE(std::isfinite(eval["mean"]["psnr_masked"].get<double>()));
   // The held-out frames are driven through the mapping; the renders it
-  // learnt from were tracked (garbage at 60 steps, but each one fitted).
+  // learnt from were tracked (garbage at 40 steps, but each one fitted).
   EXPECT_NE(eval["latent"].get<std::string>().find("expression mapping"), std::string::npos) << eval["latent"];
   EXPECT_EQ(eval["mapping"]["renders"], 24);
   EXPECT_EQ(eval["mapping"]["tracked"], 24);
@@ -182,7 +182,7 @@ TEST_F(GanAvatarTrain, APackTrainsTheGanAndTheWorkspaceAddsTheMapping) {
   // the same held-out scores for the mean latent.
   std::vector<nlohmann::json> gan = StatsLines(out / "stats.jsonl");
   const std::vector<nlohmann::json> expected = StatsLines(reference_ / kModelDir / "stats.jsonl");
-  ASSERT_EQ(gan.size(), 12u);
+  ASSERT_EQ(gan.size(), 8u);
   for (size_t i = 0; i < gan.size(); ++i) EXPECT_EQ(gan[i]["loss_g"], expected[i]["loss_g"]) << i;
   EXPECT_EQ(eval["mean"]["psnr_masked"], expected_eval["mean_latent"]["psnr_masked"]);
 

@@ -229,11 +229,13 @@ TEST(ModelChoice, AWalkAroundHoldsOutFramesRoundTheCircleAndAStillHeadOneState) 
 }
 
 // The gaussian-style avatar from a synchronised rig (three of rig_8cam's
-// cameras, 20 instants, placed by a rig file of the simulator's cameras):
-// every camera's views train on their instant's tracking, and a camera held
-// out whole (the simulator's cam4, 8.6 deg from the face, between cam2 and
-// cam5 at -25.7 and +25.7 deg, which train) scores higher after 150 steps
-// than after one (measured: 20.6 and 28.5 dB over the head).
+// cameras, the first 10 of the 20 instants SimulatedTrack.Rig8Cam
+// simulates, placed by a rig file of the simulator's cameras): every
+// camera's views train on their instant's tracking, and a camera held out
+// whole (the simulator's cam4, 8.6 deg from the face, between cam2 and cam5
+// at -25.7 and +25.7 deg, which train) scores higher after 150 steps than
+// after one (measured: 20.4 and 27.8 dB over the head; 20.7 and 27.8 with
+// all 20 instants, 6 s more).
 TEST(ModelChoice, ARigTrainsTheGaussianAvatarAndAHeldOutCameraScoresAboveAnUntrainedOne) {
   const fs::path sim = SharedSimulation("rig_8cam", 20);
   const fs::path dir = Scratch("rig");
@@ -260,7 +262,7 @@ TEST(ModelChoice, ARigTrainsTheGaussianAvatarAndAHeldOutCameraScoresAboveAnUntra
   const fs::path ws = dir / "ws";
   std::vector<std::string> args = {"run", "--until", "track", "--workspace", ws.string(), "--overlay=false",
                                    "--mode", "rig", "--rig", (dir / "rig.json").string(), "--mask-folder",
-                                   (dir / "masks").string(), "--video"};
+                                   (dir / "masks").string(), "--max-frames", "10", "--video"};
   for (const std::string& name : names) args.push_back((sim / name).string());
   const Result tracked = Headforge(args);
   ASSERT_EQ(tracked.code, 0) << tracked.err;
@@ -284,11 +286,12 @@ TEST(ModelChoice, ARigTrainsTheGaussianAvatarAndAHeldOutCameraScoresAboveAnUntra
       sum += v["psnr_masked"].get<double>();
       ++n;
     }
-    EXPECT_EQ(n, 20) << "every instant of the held-out camera is scored";
+    EXPECT_EQ(n, 10) << "every instant of the held-out camera is scored";
     EXPECT_GT(others, 0);
     return n > 0 ? sum / n : 0.0;
   };
   const double untrained = held_camera_psnr(1), trained = held_camera_psnr(150);
+  std::printf("held-out camera over the head: %.2f dB after one step, %.2f dB after 150\n", untrained, trained);
   EXPECT_GT(trained, untrained + 3) << "untrained " << untrained << " dB, trained " << trained << " dB";
 }
 

@@ -86,12 +86,13 @@ inline const AvatarModel* FindAnyAvatarModel(std::string_view name) {
 // "gaussian-style or gan-avatar": the trained models' names for a message
 // (with the exported ones too: "gaussian-style, gan-avatar or gaussian-blendshapes").
 inline std::string AvatarModelNames(bool exported = false) {
-  const std::vector<const AvatarModel*> all = AllAvatarModels();
-  const size_t n = exported ? all.size() : std::size(kAvatarModels);
+  std::vector<const AvatarModel*> named;
+  for (const AvatarModel* m : AllAvatarModels())
+    if (exported || m->Trained()) named.push_back(m);
   std::string out;
-  for (size_t i = 0; i < n; ++i) {
-    if (i > 0) out += i + 1 == n ? " or " : ", ";
-    out += all[i]->name;
+  for (size_t i = 0; i < named.size(); ++i) {
+    if (i > 0) out += i + 1 == named.size() ? " or " : ", ";
+    out += named[i]->name;
   }
   return out;
 }

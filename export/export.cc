@@ -343,8 +343,9 @@ Status WriteBlendshapes(ExportJob* job) {
 // the export before, kept (the stage replaces the whole export folder).
 Status WriteDrive(ExportJob* job) {
   const fs::path shapes = job->out_dir / std::string(kGaussianBlendshapes.folder);
+  const std::string marker(kGaussianBlendshapes.marker);
   std::error_code ec;
-  if (!fs::exists(shapes / "blendshapes.json", ec)) {
+  if (!fs::exists(shapes / marker, ec)) {
     const fs::path earlier = kGaussianBlendshapes.Dir(job->workspace);
     if (!kGaussianBlendshapes.In(job->workspace))
       return Status::NotFound("export: the drive page poses the Gaussian blendshapes, and there are none: export "
@@ -354,7 +355,7 @@ Status WriteDrive(ExportJob* job) {
     for (const auto& entry : fs::directory_iterator(shapes))
       job->out.files.push_back(std::string(kGaussianBlendshapes.folder) + "/" + entry.path().filename().string());
     if (fs::exists(job->model_dir / "model.pt", ec) &&
-        fs::last_write_time(job->model_dir / "model.pt", ec) > fs::last_write_time(earlier / "blendshapes.json", ec))
+        fs::last_write_time(job->model_dir / "model.pt", ec) > fs::last_write_time(earlier / marker, ec))
       HF_LOG(Warning) << "export: the blendshapes in " << earlier.string() << " are older than the trained model; "
                       << "export --formats blendshapes drive fits them to it again";
     HF_LOG(Info) << "export: drive: the blendshapes of the export before, kept";

@@ -262,7 +262,6 @@ Status Workspace::BeginStage(const std::string& stage, const std::string& finger
              fs::is_directory(*staging, ec);
   if (!*resumed) HF_RETURN_IF_ERROR(RemoveAll(*staging));  // leftovers of an interrupted attempt
   HF_RETURN_IF_ERROR(RemoveAll(root_ / kFailedDir / stage));  // an earlier failure's files
-  HF_RETURN_IF_ERROR(EnsureDirectory(*staging));
   StageRecord* r = Mutable(stage);
   // Made from other upstream outputs, its outputs will be new ones even with
   // the same fingerprint: CommitStage numbers them afresh.
@@ -273,7 +272,11 @@ Status Workspace::BeginStage(const std::string& stage, const std::string& finger
   r->started_at = NowIso8601();
   r->finished_at.clear();
   r->message.clear();
-  return Save();
+  // The record says running before the staging folder exists, so that a run
+  // killed in between is seen as interrupted, never as a pending stage with
+  // a staging folder.
+  HF_RETURN_IF_ERROR(Save());
+  return EnsureDirectory(*staging);
 }
 
 Status Workspace::CommitStage(const std::string& stage, const std::vector<std::string>& outputs,

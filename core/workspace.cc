@@ -276,7 +276,14 @@ Status Workspace::BeginStage(const std::string& stage, const std::string& finger
   // killed in between is seen as interrupted, never as a pending stage with
   // a staging folder.
   HF_RETURN_IF_ERROR(Save());
-  return EnsureDirectory(*staging);
+  if (Status made = EnsureDirectory(*staging); !made.ok()) {
+    r->status = StageStatus::kFailed;
+    r->finished_at = NowIso8601();
+    r->message = made.message();
+    (void)Save();  // the error below is the one to report
+    return made;
+  }
+  return Status::Ok();
 }
 
 Status Workspace::CommitStage(const std::string& stage, const std::vector<std::string>& outputs,

@@ -159,6 +159,29 @@ TEST_F(WorkspaceTest, ManifestPersistsAndInterruptedRunIsDetected) {
   EXPECT_EQ(stages[1].status, StageStatus::kPending);
 }
 
+// The record says running before the staging folder is made, so that a run
+// killed between the two reads as interrupted; a staging folder that cannot
+// be made fails the stage, with the reason.
+TEST_F(WorkspaceTest, AStageIsRecordedRunningBeforeItsStagingFolderIsMade) {
+  std::unique_ptr<Workspace> ws;
+  ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadWrite, &ws).ok());
+  // The staging folders' place a link to nowhere: nothing is there to
+  // remove, and no stage's folder can be made.
+  fs::create_symlink(root_ / "nowhere" / "at all", Workspace::StagingPath(root_, "x").parent_path());
+  fs::path staging;
+  bool resumed = true;
+  const Status begun = ws->BeginStage("ingest", "f", {}, false, &staging, &resumed);
+  ASSERT_FALSE(begun.ok());
+  ASSERT_NE(ws->Find("ingest"), nullptr);
+  EXPECT_EQ(ws->Find("ingest")->status, StageStatus::kFailed);
+  EXPECT_EQ(ws->Find("ingest")->message, begun.message());
+  std::unique_ptr<Workspace> reader;
+  ws.reset();
+  ASSERT_TRUE(Workspace::Open(root_, Workspace::Mode::kReadOnly, &reader).ok());
+  EXPECT_EQ(reader->Find("ingest")->status, StageStatus::kFailed);
+  EXPECT_FALSE(reader->WasInterrupted("ingest"));
+}
+
 // A resumable stage whose run died is handed its staging folder back, with the
 // checkpoint it wrote, when the fingerprint is unchanged; a changed
 // fingerprint, or a stage that is not resumable, starts from an empty folder.

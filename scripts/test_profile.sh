@@ -9,6 +9,8 @@
 #          run it with nothing else running
 # as tab-separated lines on stdout, the dearest first, and a total.
 #   scripts/test_profile.sh [REGEX]   only the entries whose names match
+#                                     (a shared workspace they need and the
+#                                     selection lacks is made inside them)
 # Takes about as long as the suite on one core (some 25 minutes here).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

@@ -277,10 +277,8 @@ Status Workspace::BeginStage(const std::string& stage, const std::string& finger
   // a staging folder.
   HF_RETURN_IF_ERROR(Save());
   if (Status made = EnsureDirectory(*staging); !made.ok()) {
-    r->status = StageStatus::kFailed;
-    r->finished_at = NowIso8601();
-    r->message = made.message();
-    (void)Save();  // the error below is the one to report
+    std::string message = made.message();
+    (void)FailStage(stage, &message, 0.0);  // the error below is the one to report
     return made;
   }
   return Status::Ok();

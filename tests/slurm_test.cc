@@ -168,7 +168,7 @@ nlohmann::json Settled(const fs::path& root, std::chrono::seconds limit) {
   const bool settled = WaitFor([&] {
     status = BatchStatus(root);
     return status.value("settled", false);
-  }, std::chrono::duration_cast<std::chrono::seconds>(std::max(end - Clock::now(), Clock::duration(0))),
+  }, std::max(std::chrono::duration_cast<std::chrono::seconds>(end - Clock::now()), std::chrono::seconds(0)),
      std::chrono::seconds(2));
   EXPECT_TRUE(settled) << "the batch did not settle in " << limit.count() << " s: " << status.dump(1)
                        << Output({"squeue", "--states=all", "--array"});

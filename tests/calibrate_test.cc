@@ -57,6 +57,59 @@ TEST(Calibrate, IngestKeepsAMovingCamerasFramesWhole) {
   EXPECT_EQ(mask.size(), cv::Size(320, 320));
 }
 
+// scenes/head_turn.toml (a fixed camera, a plain backdrop, the head turning
+// +-40 degrees) made small: 256 px, 5 frames a second (25 frames).
+std::string SmallHeadTurn() {
+  std::string text;
+  EXPECT_TRUE(ReadFileToString(fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / "head_turn.toml", &text).ok());
+  auto replace = [&](const std::string& from, const std::string& to) {
+    const size_t at = text.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    if (at != std::string::npos) text.replace(at, from.size(), to);
+  };
+  replace("fps = 25", "fps = 5");
+  replace("width = 512", "width = 256");
+  replace("height = 512", "height = 256");
+  replace("focal = 1100.0", "focal = 550.0");
+  return text;
+}
+
+// A head that turns freely before a fixed camera moves hair, ears and
+// shoulders across the frame; ingest's auto crop and calibrate's auto mode
+// must still judge the camera fixed (the background is measured outside
+// the person's matte), crop round the head and give head-pose cameras.
+TEST(Calibrate, ATurningHeadBeforeAPlainWallIsAFixedCamera) {
+  const fs::path dir = Scratch("head_turn");
+  IngestedCapture capture;
+  nlohmann::json truth;
+  IngestSummary summary;
+  SimulateAndIngest(SmallHeadTurn(), dir, &capture, &truth, {}, "auto", &summary);
+  EXPECT_EQ(summary.crop, "sequence");
+  ASSERT_EQ(capture.num_frames(), 25);
+  // The network's matte holds the turned heads too: hair and ears are not
+  // taken for background.
+  EXPECT_GE(summary.with_landmarks, 20);
+  BackgroundMotion motion;
+  ASSERT_TRUE(MeasureBackgroundMotion(capture, "cam0", &motion).ok());
+  std::printf("head turn background: %s\n", motion.Describe().c_str());
+  EXPECT_FALSE(motion.Moving(kMovingCameraPx));
+  NullProgress progress;
+  CalibrateOptions options;  // auto
+  CameraSet cameras;
+  CalibrateSummary result;
+  const Status status = RunCalibrate(options, capture, Model(), dir / "out", &progress, &cameras, &result);
+  ASSERT_TRUE(status.ok()) << status.message();
+  EXPECT_EQ(result.mode, "head-pose");
+  EXPECT_NE(result.reason.find("fixed camera"), std::string::npos) << result.reason;
+  // What the matte is for: measured without it (the whole frame above the
+  // mouth), the turning hair and ears read as a moving background.
+  fs::remove_all(dir / "workspace" / "masks");
+  BackgroundMotion unmasked;
+  ASSERT_TRUE(MeasureBackgroundMotion(capture, "cam0", &unmasked).ok());
+  std::printf("head turn without the matte: %s\n", unmasked.Describe().c_str());
+  EXPECT_TRUE(unmasked.Moving(kMovingCameraPx));
+}
+
 TEST(Calibrate, ColmapRegistersEveryOrbitFrameAccurately) {
   const fs::path dir = Scratch("orbit");
   IngestedCapture capture;

@@ -222,7 +222,11 @@ Status LoadTrainingData(const TrainOptions& options, const fs::path& workspace, 
   if (data->mask == "hull")
     HF_LOG(Info) << "train: masks made to agree across the views (--mask hull): " << data->hull_stats.agreeing << " of "
                  << data->hull_stats.views << " training views' masks agreed on the shape; "
-                 << data->hull_stats.replaced << " view(s) whose mask did not took its silhouette whole";
+                 << data->hull_stats.replaced << " view(s) whose mask did not took its silhouette whole"
+                 << (data->hull_stats.dropped_points > 0
+                         ? "; " + std::to_string(data->hull_stats.dropped_points) +
+                               " grid points apart from the head dropped"
+                         : std::string());
   return Status::Ok();
 }
 

@@ -18,6 +18,8 @@ Status HullOptions::Check() const {
     return Status::InvalidArgument("hull masks: the votes must be in (0, 1]");
   if (!(agree >= 0 && agree <= 1) || !(agree_spread >= 0 && agree_spread <= 1))
     return Status::InvalidArgument("hull masks: agree and agree_spread must be in [0, 1]");
+  if (!(min_piece >= 0 && min_piece <= 1))
+    return Status::InvalidArgument("hull masks: min_piece must be in [0, 1]");
   if (min_views < 1 || edge_px < 0)
     return Status::InvalidArgument("hull masks: min_views must be positive and edge_px zero or more");
   return Status::Ok();
@@ -132,6 +134,50 @@ std::vector<std::array<double, 3>> Surface(const Grid& grid, const std::vector<u
   return surface;
 }
 
+// Drops the 6-connected pieces of the kept points under `min_share` of the
+// largest and returns how many points it dropped: what a few views' mattes
+// agree on apart from the person (a strip of floor at the frame's edge,
+// seen by three views whose mattes took it) is small beside the head, where
+// the bust, which a thin neck may leave apart at the grid's size, is not.
+int64_t DropSmallPieces(const Grid& grid, double min_share, std::vector<uint8_t>* kept) {
+  const int nx = grid.nx(), ny = grid.ny(), nz = grid.nz();
+  std::vector<int32_t> piece(kept->size(), -1);
+  std::vector<int64_t> sizes;
+  std::vector<size_t> stack;
+  for (size_t start = 0; start < kept->size(); ++start) {
+    if (!(*kept)[start] || piece[start] >= 0) continue;
+    const int32_t label = int32_t(sizes.size());
+    int64_t size = 0;
+    piece[start] = label;
+    stack.push_back(start);
+    while (!stack.empty()) {
+      const size_t at = stack.back();
+      stack.pop_back();
+      ++size;
+      const int i = int(at % size_t(nx)), j = int((at / size_t(nx)) % size_t(ny)), k = int(at / (size_t(nx) * ny));
+      const int neighbours[6][3] = {{i - 1, j, k}, {i + 1, j, k}, {i, j - 1, k}, {i, j + 1, k}, {i, j, k - 1}, {i, j, k + 1}};
+      for (const auto& n : neighbours) {
+        if (n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] >= nx || n[1] >= ny || n[2] >= nz) continue;
+        const size_t next = grid.At(n[0], n[1], n[2]);
+        if ((*kept)[next] && piece[next] < 0) {
+          piece[next] = label;
+          stack.push_back(next);
+        }
+      }
+    }
+    sizes.push_back(size);
+  }
+  if (sizes.size() < 2) return 0;
+  const double least = min_share * double(*std::max_element(sizes.begin(), sizes.end()));
+  int64_t dropped = 0;
+  for (size_t p = 0; p < kept->size(); ++p)
+    if ((*kept)[p] && double(sizes[size_t(piece[p])]) < least) {
+      (*kept)[p] = 0;
+      ++dropped;
+    }
+  return dropped;
+}
+
 // IoU of a mask (>= 128) and a silhouette.
 double Agreement(const cv::Mat& mask, const cv::Mat& silhouette) {
   const cv::Mat a = mask >= 128;
@@ -159,6 +205,7 @@ Status HullMasks(const std::vector<SplatCamera>& cameras, const std::vector<cv::
   // for the shape itself (a lenient vote keeps points outside it that only
   // the views seeing them edge-on rule out).
   std::vector<uint8_t> kept = grid.Vote(masks, voters, options.vote, options.min_views);
+  int64_t dropped = DropSmallPieces(grid, options.min_piece, &kept);
   // Its silhouette is wider than the shape's, so each mask is judged against
   // the others' agreement with it: within `agree_spread` of their median.
   const std::vector<std::array<double, 3>> lenient = Surface(grid, kept);
@@ -173,7 +220,10 @@ Status HullMasks(const std::vector<SplatCamera>& cameras, const std::vector<cv::
     if (agreement[i] >= median - options.agree_spread) agreeing.push_back(voters[i]);
   if (int(agreeing.size()) >= options.min_views) {
     std::vector<uint8_t> strict = grid.Vote(masks, agreeing, options.strict_vote, options.min_views);
-    if (std::count(strict.begin(), strict.end(), 1) > 0) kept = std::move(strict);
+    if (std::count(strict.begin(), strict.end(), 1) > 0) {
+      kept = std::move(strict);
+      dropped = DropSmallPieces(grid, options.min_piece, &kept);
+    }
   }
   const std::vector<std::array<double, 3>> surface = Surface(grid, kept);
   const int64_t kept_points = std::count(kept.begin(), kept.end(), 1);
@@ -181,6 +231,7 @@ Status HullMasks(const std::vector<SplatCamera>& cameras, const std::vector<cv::
     stats->views = int(voters.size());
     stats->agreeing = int(agreeing.size());
     stats->kept_points = kept_points;
+    stats->dropped_points = dropped;
     stats->grid_points = int64_t(kept.size());
   }
   if (kept_points == 0)

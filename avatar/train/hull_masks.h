@@ -1,7 +1,7 @@
 // Person masks made to agree across calibrated views of one still shape (a
 // camera carried round a head held still): each view's matte votes on a grid
 // of points round the head, the points most views keep form the shape (its
-// visual hull by vote), and each view's mask becomes that shape's silhouette
+// visual hull by vote, without small pieces apart from it), and each view's mask becomes that shape's silhouette
 // with the matte's own edge where the two agree. A matte that took the
 // background beside the head, or lost the face, in a few views is put right
 // by the others. Torch-free: OpenCV and Eigen.
@@ -39,6 +39,9 @@ struct HullOptions {
   // takes the silhouette whole: its matte failed there.
   double agree_spread = 0.05;
   double agree = 0.9;
+  // Pieces of the shape (6-connected grid points) smaller than this share of
+  // the largest are dropped: a head and its bust are one or two large pieces.
+  double min_piece = 0.05;
 
   Status Check() const;
 };
@@ -48,6 +51,7 @@ struct HullStats {
   int agreeing = 0;          // of them, those whose masks agreed with the lenient vote's shape
   int replaced = 0;          // views whose mask gave way to the silhouette whole (HullOptions::agree)
   int64_t kept_points = 0;   // the grid points kept
+  int64_t dropped_points = 0;  // voted in, but in a piece under min_piece of the largest, and dropped
   int64_t grid_points = 0;
 };
 

@@ -100,5 +100,42 @@ TEST(HullMasks, MasksThatDisagreeInAFewViewsComeBackAsTheShape) {
   EXPECT_NE(none.message().find("no point"), std::string::npos) << none.message();
 }
 
+// Every view's matte also holds a small thing apart from the sphere (3 cm
+// across, 1.5 cm above it): it is voted in, and dropped as a piece apart
+// from the shape and under 5 % of its size.
+TEST(HullMasks, WhatIsApartFromTheHeadIsDropped) {
+  std::vector<SplatCamera> cameras;
+  std::vector<cv::Mat> masks;
+  std::vector<int> voters;
+  constexpr double kAbove = 0.13, kSmall = 0.015;  // its centre's height and radius
+  for (int i = 0; i < 24; ++i) {
+    cameras.push_back(RingCamera(15.0 * i));
+    masks.push_back(TrueMask());
+    const double v = (kSide - 1) / 2.0 - kFocal * kAbove / kDistance;
+    cv::circle(masks.back(), cv::Point(kSide / 2, int(std::lround(v))), int(std::lround(kFocal * kSmall / kDistance)),
+               cv::Scalar(255), cv::FILLED);
+    voters.push_back(i);
+  }
+  const cv::Mat truth = TrueMask();
+  // The rows above the sphere's disc, where the small one's lies.
+  const int sphere_top = int((kSide - 1) / 2.0 - kFocal * kRadius / std::sqrt(kDistance * kDistance - kRadius * kRadius));
+  const cv::Rect above(0, 0, kSide, sphere_top - 2);
+  EXPECT_GT(cv::countNonZero(masks[0](above)), 100);
+  HullOptions options;
+  options.half_width = 0.15, options.bottom = -0.15, options.top = 0.16;
+  std::vector<cv::Mat> agreed;
+  HullStats stats;
+  ASSERT_TRUE(HullMasks(cameras, masks, voters, options, &agreed, &stats).ok());
+  // The small sphere's grid points, within its own hull's excess.
+  const double small = 4.0 / 3.0 * M_PI * std::pow(kSmall / options.voxel, 3);
+  std::printf("dropped %lld grid points (the small sphere: %.0f)\n", static_cast<long long>(stats.dropped_points), small);
+  EXPECT_GT(stats.dropped_points, 0.9 * small);
+  EXPECT_LT(stats.dropped_points, 2.5 * small);
+  for (size_t i = 0; i < agreed.size(); ++i) {
+    EXPECT_EQ(cv::countNonZero(agreed[i](above)), 0) << "view " << i;
+    EXPECT_GT(Iou(agreed[i], truth), 0.94) << "view " << i;
+  }
+}
+
 }  // namespace
 }  // namespace headforge

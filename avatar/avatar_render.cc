@@ -25,6 +25,7 @@
 #include "avatar/torch_runtime.h"
 #include "avatar/train/device.h"
 #include "avatar/train/tensor_image.h"
+#include "capture/capture_io.h"
 #include "core/image_io.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -394,6 +395,128 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
     out[k].psnr_full = mean.psnr_full;
   }
   *scores = std::move(out);
+  return Status::Ok();
+}
+
+namespace {
+
+// `other`'s capture lines up with `own`'s: the same cameras, frame sizes and
+// crops of the source (so a mask of one is a mask of the other's frame).
+Status CheckSameCrop(const IngestedCapture& own, const IngestedCapture& other, const fs::path& other_dir) {
+  for (const IngestedCamera& a : own.cameras) {
+    const IngestedCamera* b = nullptr;
+    for (const IngestedCamera& c : other.cameras)
+      if (c.name == a.name) b = &c;
+    if (!b) return Status::InvalidArgument("--score-masks: " + other_dir.string() + " has no camera " + a.name);
+    const bool same = a.width == b->width && a.height == b->height && a.source_width == b->source_width &&
+                      a.source_height == b->source_height && std::abs(a.crop_x0 - b->crop_x0) < 1e-3 &&
+                      std::abs(a.crop_y0 - b->crop_y0) < 1e-3 && std::abs(a.crop_scale / b->crop_scale - 1) < 1e-6;
+    if (!same)
+      return Status::InvalidArgument("--score-masks: " + other_dir.string() + "'s " + a.name +
+                                     " was ingested with another crop or size than this workspace's (" +
+                                     std::to_string(b->width) + "x" + std::to_string(b->height) + " against " +
+                                     std::to_string(a.width) + "x" + std::to_string(a.height) +
+                                     "): ingest the same video with the same --crop and --resolution");
+  }
+  return Status::Ok();
+}
+
+const IngestedFrame* FindFrame(const IngestedCapture& capture, const std::string& camera, int index) {
+  for (const IngestedCamera& c : capture.cameras)
+    if (c.name == camera)
+      for (const IngestedFrame& f : c.frames)
+        if (f.index == index) return &f;
+  return nullptr;
+}
+
+const IngestedCamera* FindCamera(const IngestedCapture& capture, const std::string& camera) {
+  for (const IngestedCamera& c : capture.cameras)
+    if (c.name == camera) return &c;
+  return nullptr;
+}
+
+}  // namespace
+
+Status ScoreHeldOutRegions(const fs::path& workspace, const std::string& face_model, const RegionScoreOptions& options,
+                           std::vector<RegionScore>* scores) {
+  if (options.band_px < 0) return Status::InvalidArgument("--band must be 0 or more pixels");
+  IngestedCapture own, other;
+  HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace, &own));
+  const fs::path masks_dir = options.masks_from.empty() ? workspace : fs::path(options.masks_from);
+  if (!options.masks_from.empty()) {
+    HF_RETURN_IF_ERROR(ReadIngestedCapture(masks_dir, &other).WithContext("--score-masks"));
+    HF_RETURN_IF_ERROR(CheckSameCrop(own, other, masks_dir));
+  }
+  UseTensorThreads();
+  torch::NoGradGuard no_grad;
+  DrawableAvatar avatar;
+  HF_RETURN_IF_ERROR(LoadDrawableAvatar(workspace, options.model, face_model, torch::kCPU, 0, true, 0.5, &avatar));
+  const AvatarDataset& data = avatar.data;
+  if (data.test.empty()) return Status::DataError("score regions: the workspace has no held-out frames");
+  const IngestedCapture& reference = options.masks_from.empty() ? own : other;
+  if (!options.write_dir.empty()) HF_RETURN_IF_ERROR(EnsureDirectory(options.write_dir));
+  const std::string whose = options.masks_from.empty() ? "its masks" : "the masks of " + masks_dir.filename().string();
+  std::vector<std::string> names = {"the workspace's masks (eval.json's figure)", "the face (the 68 landmarks' hull)"};
+  if (!options.masks_from.empty()) names.push_back(whose);
+  if (options.band_px > 0) names.push_back(std::to_string(options.band_px) + " px each side of " + whose + "' edge");
+  std::vector<std::vector<ViewScores>> per_region(names.size());
+  const torch::Tensor background = torch::full({3}, avatar.background);
+  for (const AvatarView& view : data.test) {
+    const torch::Tensor render = avatar.draw(view.condition, view.view);
+    const cv::Size size(view.view.width, view.view.height);
+    // The reference masks at the training size, and the frame shown through them.
+    const fs::path mask_path = reference.MaskPath(view.camera, view.frame);
+    cv::Mat mask = cv::imread(mask_path.string(), cv::IMREAD_GRAYSCALE);
+    if (mask.empty()) return Status::DataError("score regions: cannot read " + mask_path.string());
+    cv::resize(mask, mask, size, 0, 0, cv::INTER_AREA);
+    const torch::Tensor cover = MaskToTensor(mask);
+    const torch::Tensor shown = view.image * cover + background.view({3, 1, 1}) * (1 - cover);
+    std::vector<cv::Mat> regions;
+    regions.push_back(cv::Mat());  // the view's own mask, as eval scores it
+    cv::Mat face = cv::Mat::zeros(size, CV_8U);
+    const IngestedFrame* frame = FindFrame(own, view.camera, view.frame);
+    const IngestedCamera* camera = FindCamera(own, view.camera);
+    if (frame && camera && frame->landmarks) {
+      const double scale = double(size.width) / camera->width;
+      std::vector<cv::Point> points, hull;
+      for (const cv::Point2f& p : *frame->landmarks)
+        points.emplace_back(int(std::lround((p.x + 0.5) * scale - 0.5)), int(std::lround((p.y + 0.5) * scale - 0.5)));
+      cv::convexHull(points, hull);
+      cv::fillConvexPoly(face, hull, cv::Scalar(255));
+    }
+    regions.push_back(face);
+    if (!options.masks_from.empty()) regions.push_back(mask >= 128);
+    if (options.band_px > 0) {
+      const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * options.band_px + 1, 2 * options.band_px + 1});
+      cv::Mat inner, outer;
+      cv::erode(mask >= 128, inner, disc);
+      cv::dilate(mask >= 128, outer, disc);
+      regions.push_back(outer & ~inner);
+    }
+    for (size_t r = 0; r < regions.size(); ++r) {
+      if (r == 0) {
+        per_region[r].push_back(ScoreRender(render, view.image, view.mask, background));
+        continue;
+      }
+      if (cv::countNonZero(regions[r]) == 0) continue;  // no landmarks: no face to score
+      const torch::Tensor where = MaskToTensor(regions[r]);
+      per_region[r].push_back(ScoreRender(render, shown, where, background));
+      if (!options.write_dir.empty()) {
+        char file[64];
+        std::snprintf(file, sizeof(file), "%s_%06d_region%zu.png", view.camera.c_str(), view.frame, r);
+        // render | the frame within the region | the error there x 4
+        const torch::Tensor inside = shown * where + avatar.background * (1 - where);
+        const torch::Tensor error = ((render - shown).abs() * 4 * where).clamp(0, 1);
+        HF_RETURN_IF_ERROR(
+            WriteImageAtomic(fs::path(options.write_dir) / file, TensorToImage(torch::cat({render, inside, error}, 2))));
+      }
+    }
+  }
+  scores->clear();
+  for (size_t r = 0; r < names.size(); ++r) {
+    const ViewScores mean = MeanScores(per_region[r]);
+    scores->push_back({names[r], int(per_region[r].size()), mean.psnr_masked, mean.ssim_masked});
+  }
   return Status::Ok();
 }
 

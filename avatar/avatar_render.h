@@ -78,4 +78,26 @@ struct NovelViewScore {
 Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
                        const fs::path& truth, const fs::path& write_dir, std::vector<NovelViewScore>* scores);
 
+// The held-out frames scored over several regions, so that avatars trained
+// on different masks of one video can be compared on the same pixels: the
+// workspace's own masks (eval.json's figure), the face (the convex hull of
+// the frame's 68 landmarks), and the masks of another workspace ingested from
+// the same video with the same crop (`masks_from`, e.g. another --matte) with
+// a band `band_px` wide on each side of their edge, where a matte's fringe of
+// background shows as a rim. The frame is shown through `masks_from`'s masks
+// (its own without one), grey 0.5 behind, as the avatar is drawn.
+struct RegionScoreOptions {
+  std::string model;       // the model folder ("": the one trained last)
+  std::string masks_from;  // a workspace of the same video and crop ("": this one)
+  int band_px = 6;         // 0: no band
+  std::string write_dir;   // render | frame | error x 4 per view and region mask; "": none
+};
+struct RegionScore {
+  std::string region;  // what it covers
+  int views = 0;
+  double psnr = 0, ssim = 0;
+};
+Status ScoreHeldOutRegions(const fs::path& workspace, const std::string& face_model, const RegionScoreOptions& options,
+                           std::vector<RegionScore>* scores);
+
 }  // namespace headforge

@@ -14,6 +14,8 @@ int RenderCommand(const std::vector<std::string>& args) {
   AddCommonOptions(&options, &common, /*with_workspace=*/true);
   AvatarRenderOptions render;
   std::string out, truth;
+  bool score_regions = false;
+  RegionScoreOptions regions;
   options.Add("render.out", &out, "Output folder (default: WORKSPACE/renders).", "out", OptionSet::Effect::kRuntime);
   options.Add("render.frames", &render.frames,
               "Frames to render: 0,10,20, a range 0-49, every 5th 0-124:5, or all (default: all).", "frames");
@@ -58,6 +60,19 @@ int RenderCommand(const std::vector<std::string>& args) {
               "(scenes/talking_static_novel.toml); the held-out frames from each of its cameras against its "
               "renders, render | truth | error images into --out.",
               "truth");
+  options.Add("render.score_regions", &score_regions,
+              "Score instead of render: the held-out frames over the workspace's masks (eval.json's figure), over "
+              "the face (the 68 landmarks' hull) and, with --score-masks, over another workspace's masks of the "
+              "same video and a band (--band) each side of their edge, where a mask's fringe of background shows "
+              "as a rim; --out gets render | frame | error images of each region.",
+              "score-regions");
+  options.Add("render.score_masks", &regions.masks_from,
+              "With --score-regions: a workspace ingested from the same video with the same crop (another --matte, "
+              "say) whose masks the frames are shown through and scored over, so that avatars trained on "
+              "different masks compare on the same pixels.",
+              "score-masks");
+  options.Add("render.band", &regions.band_px,
+              "With --score-regions: the band's width in pixels each side of the masks' edge (0: none).", "band");
   const int parsed = ParseOrExit(
       &options, args, "headforge render --workspace DIR [--frames A,B,...] [--yaw DEG] [--pitch DEG] [options]",
       "Renders the avatar trained in the workspace (headforge train) for its tracked frames, or\n"
@@ -73,6 +88,17 @@ int RenderCommand(const std::vector<std::string>& args) {
     return ReportFailure(s);
   const fs::path out_dir = out.empty() ? fs::path(common.workspace) / (truth.empty() ? "renders" : "novel_views")
                                        : fs::path(out);
+  if (score_regions) {
+    regions.model = render.model;
+    if (!out.empty()) regions.write_dir = out;
+    std::vector<RegionScore> scores;
+    if (Status s = ScoreHeldOutRegions(common.workspace, common.Settings().face_model, regions, &scores); !s.ok())
+      return ReportFailure(s);
+    std::printf("| held-out frames over | views | PSNR / SSIM |\n|---|---|---|\n");
+    for (const RegionScore& r : scores)
+      std::printf("| %s | %d | %.2f dB / %.3f |\n", r.region.c_str(), r.views, r.psnr, r.ssim);
+    return kExitOk;
+  }
   if (!truth.empty()) {
     const fs::path model_dir = render.model;  // empty: the model trained last
     std::vector<NovelViewScore> scores;

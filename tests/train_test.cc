@@ -299,6 +299,54 @@ TEST_F(TrainStage, HeldOutFramesAreScoredAgainstTheSimulatorsTruth) {
   EXPECT_LT(psnr, 60.0);
 }
 
+// `render --score-regions`: the held-out frames over the workspace's own
+// masks give eval.json's figure; over masks grown by 6 px (a matte that took
+// a fringe of the backdrop, which the avatar never painted) they score lower,
+// as does the band round those masks' edge; the face scores above the whole
+// head. Masks of another crop are refused before anything is drawn.
+TEST_F(TrainStage, HeldOutFramesAreScoredOverOtherMasksAndTheirEdge) {
+  ASSERT_EQ(first_.code, 0) << first_.err;
+  const fs::path grown = CopyOf(TrackedTalkingStatic(), Scratch("grown_masks"));
+  const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, {13, 13});
+  for (const auto& entry : fs::directory_iterator(grown / "masks" / "cam0")) {
+    cv::Mat mask = cv::imread(entry.path().string(), cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(mask.empty()) << entry.path();
+    cv::dilate(mask, mask, disc);
+    ASSERT_TRUE(cv::imwrite(entry.path().string(), mask));
+  }
+  const fs::path out = Scratch("regions");
+  const Result r = Headforge({"render", "--workspace", reference_.string(), "--score-regions", "--score-masks",
+                              grown.string(), "--band", "4", "--out", out.string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::printf("%s", r.out.c_str());
+  auto psnr = [&](const std::string& region) {
+    const size_t at = r.out.find("| " + region);
+    EXPECT_NE(at, std::string::npos) << region << "\n" << r.out;
+    if (at == std::string::npos) return 0.0;
+    const size_t views = r.out.find("| 25 | ", at);
+    EXPECT_NE(views, std::string::npos) << r.out;
+    return std::stod(r.out.substr(views + 7));
+  };
+  const double own = psnr("the workspace's masks"), face = psnr("the face"), other = psnr("the masks of hf_train_grown_masks |"),
+               band = psnr("4 px each side");
+  nlohmann::json eval;
+  ASSERT_TRUE(ReadJson(reference_ / kModelDir / "eval.json", &eval).ok());
+  EXPECT_NEAR(own, eval["mean"]["psnr_masked"].get<double>(), 0.005);
+  EXPECT_GT(face, own);
+  EXPECT_LT(other, own - 1.0);
+  EXPECT_LT(band, own - 1.0);  // the edge is where masks and frame disagree most
+  EXPECT_EQ(CountFiles(out), 25u * 3);  // the face, the grown masks, the band
+  // Masks of another crop do not line up with the frames.
+  nlohmann::json capture;
+  ASSERT_TRUE(ReadJson(grown / "capture.json", &capture).ok());
+  capture["cameras"][0]["crop"]["x0"] = capture["cameras"][0]["crop"]["x0"].get<double>() + 8;
+  ASSERT_TRUE(WriteJsonAtomic(grown / "capture.json", capture, 1).ok());
+  const Result moved = Headforge({"render", "--workspace", reference_.string(), "--score-regions", "--score-masks",
+                                  grown.string()});
+  EXPECT_EQ(moved.code, 2) << moved.err;
+  EXPECT_NE(moved.err.find("was ingested with another crop"), std::string::npos) << moved.err;
+}
+
 // `headforge export` on the trained workspace, once for the tests below.
 
 void EditJson(const fs::path& file, const std::function<void(nlohmann::json*)>& edit) {

@@ -81,7 +81,9 @@ void ExpectSameView(const AvatarView& a, const AvatarView& b) {
   EXPECT_EQ(a.has_landmarks, b.has_landmarks);
   EXPECT_EQ(a.unreliable, b.unreliable);
   ASSERT_EQ(a.uv_map.defined(), b.uv_map.defined());
-  if (a.uv_map.defined()) EXPECT_TRUE(torch::equal(a.uv_map, b.uv_map));
+  if (a.uv_map.defined()) {
+    EXPECT_TRUE(torch::equal(a.uv_map, b.uv_map));
+  }
 }
 
 TEST(DatasetPack, ADatasetComesBackExactlyWithItsOptions) {

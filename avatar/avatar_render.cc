@@ -359,15 +359,15 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
         const auto [azimuth, elevation] = AzimuthElevation(novel);
         out[k].yaw_deg = azimuth - azimuth0;
         out[k].pitch_deg = elevation - elevation0;
-        // A camera the workspace calibrated at this instant is drawn through
-        // its own pose (where align's scale is off, the truth's placement
-        // relative to the training camera would put it at another distance);
-        // any other through the truth's, relative to the training camera.
+        // The truth's lens (its frames are whole, where the workspace's
+        // views may be a crop of them), posed: a camera the workspace
+        // calibrated at this instant through its own pose (where align's
+        // scale is off, the truth's placement relative to the training camera
+        // would put it at another distance); any other through the truth's,
+        // relative to the training camera.
         SplatCamera camera = lenses[k];
-        if (const AvatarView* own = FindView(data, out[k].camera, view.time_s, 0.5 / fps))
-          camera = own->view;
-        else
-          SetCameraPose(novel * world_from_head, &camera);
+        const AvatarView* own = FindView(data, out[k].camera, view.time_s, 0.5 / fps);
+        SetCameraPose(own ? CameraPose(own->view) : novel * world_from_head, &camera);
         const torch::Tensor render = avatar.draw(view.condition, camera);
         const fs::path image_path = truth / cam.at("input").get<std::string>() / file;
         const fs::path mask_path = truth / "masks" / out[k].camera / file;

@@ -295,7 +295,13 @@ TEST_F(TrainStage, HeldOutFramesAreScoredAgainstTheSimulatorsTruth) {
   const size_t psnr_at = r.out.find("| 25 | ") + 7;
   const double psnr = std::stod(r.out.substr(psnr_at));
   std::printf("held-out frames against the simulator's full frames: %.2f dB over the head\n", psnr);
-  EXPECT_GT(psnr, 15.0);
+  // The training camera through the truth's lens and the workspace's pose:
+  // it differs from the workspace's own view by calibrate's focal length
+  // (2-3 % off here), not by the crop ingest made of the frames (drawn
+  // through the cropped view's lens the truth's whole frames scored 17 dB).
+  nlohmann::json eval;
+  ASSERT_TRUE(ReadJson(reference_ / kModelDir / "eval.json", &eval).ok());
+  EXPECT_GT(psnr, eval["mean"]["psnr_masked"].get<double>() - 4.0);
   EXPECT_LT(psnr, 60.0);
 }
 

@@ -29,12 +29,15 @@
 namespace headforge {
 namespace {
 
-// scenes/small_orbit.toml: 24 frames 15 degrees apart at 320 px.
-std::string SmallOrbit() {
+// A scene file of the repository's scenes/.
+std::string SceneFile(const std::string& name) {
   std::string text;
-  EXPECT_TRUE(ReadFileToString(fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / "small_orbit.toml", &text).ok());
+  EXPECT_TRUE(ReadFileToString(fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / name, &text).ok()) << name;
   return text;
 }
+
+// scenes/small_orbit.toml: 24 frames 15 degrees apart at 320 px.
+std::string SmallOrbit() { return SceneFile("small_orbit.toml"); }
 
 // Ingest's default crop keeps a moving camera's frames whole for COLMAP: it
 // crops around the head, sees the background move, and writes them again.
@@ -60,8 +63,7 @@ TEST(Calibrate, IngestKeepsAMovingCamerasFramesWhole) {
 // scenes/head_turn.toml (a fixed camera, a plain backdrop, the head turning
 // +-40 degrees) made small: 256 px, 5 frames a second (25 frames).
 std::string SmallHeadTurn() {
-  std::string text;
-  EXPECT_TRUE(ReadFileToString(fs::path(HEADFORGE_TEST_SOURCE_DIR) / "scenes" / "head_turn.toml", &text).ok());
+  std::string text = SceneFile("head_turn.toml");
   auto replace = [&](const std::string& from, const std::string& to) {
     const size_t at = text.find(from);
     EXPECT_NE(at, std::string::npos) << from;

@@ -458,7 +458,8 @@ Status ScoreHeldOutRegions(const fs::path& workspace, const std::string& face_mo
   const std::string whose = options.masks_from.empty() ? "its masks" : "the masks of " + masks_dir.filename().string();
   std::vector<std::string> names = {"the workspace's masks (eval.json's figure)", "the face (the 68 landmarks' hull)"};
   if (!options.masks_from.empty()) names.push_back(whose);
-  if (options.band_px > 0) names.push_back(std::to_string(options.band_px) + " px each side of " + whose + "' edge");
+  if (options.band_px > 0)
+    names.push_back("a band " + std::to_string(options.band_px) + " px each side of the edge of " + whose);
   std::vector<std::vector<ViewScores>> per_region(names.size());
   const torch::Tensor background = torch::full({3}, avatar.background);
   for (const AvatarView& view : data.test) {

@@ -334,7 +334,7 @@ TEST_F(TrainStage, HeldOutFramesAreScoredOverOtherMasksAndTheirEdge) {
     return std::stod(r.out.substr(views + 7));
   };
   const double own = psnr("the workspace's masks"), face = psnr("the face"), other = psnr("the masks of hf_train_grown_masks |"),
-               band = psnr("4 px each side");
+               band = psnr("a band 4 px each side");
   nlohmann::json eval;
   ASSERT_TRUE(ReadJson(reference_ / kModelDir / "eval.json", &eval).ok());
   EXPECT_NEAR(own, eval["mean"]["psnr_masked"].get<double>(), 0.005);

@@ -298,6 +298,29 @@ const AvatarView* FindView(const AvatarDataset& data, const std::string& camera,
   return nullptr;
 }
 
+// `view`'s lens (at the training size of the workspace's frame of
+// `camera_name`, which may be a crop of the source) as a lens of the
+// source's whole frame at `whole`'s size (the truth's lens there):
+// training pixel p_t = (p_source + 0.5 - crop_x0) * crop_scale * s - 0.5,
+// s the training size over the frame's.
+Status LensOnWholeFrame(const IngestedCapture& capture, const SplatCamera& view, const std::string& camera_name,
+                        const SplatCamera& whole, SplatCamera* out) {
+  const IngestedCamera* cam = nullptr;
+  for (const IngestedCamera& c : capture.cameras)
+    if (c.name == camera_name) cam = &c;
+  if (!cam || cam->width <= 0 || cam->source_width <= 0 || !cam->fixed_crop)
+    return Status::DataError("novel views: the workspace's camera " + camera_name +
+                             " has no fixed crop of its source to carry its lens through");
+  const double a = cam->crop_scale * double(view.width) / cam->width;                     // source -> training
+  const double l = double(whole.width) / cam->source_width;                               // source -> whole
+  *out = whole;
+  out->fx = view.fx * l / a;
+  out->fy = view.fy * l / a;
+  out->cx = ((view.cx + 0.5) / a + cam->crop_x0) * l - 0.5;
+  out->cy = ((view.cy + 0.5) / a + cam->crop_y0) * l - 0.5;
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
@@ -314,8 +337,10 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
   if (!write_dir.empty()) HF_RETURN_IF_ERROR(EnsureDirectory(write_dir));
   const std::string trained_on = data.test.front().camera;
   const torch::Tensor background = torch::full({3}, avatar.background);
+  IngestedCapture capture;
+  HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace, &capture));
   std::vector<NovelViewScore> out;
-  std::vector<std::vector<ViewScores>> per_camera;
+  std::vector<std::vector<ViewScores>> per_camera, per_camera_truth_lens;
   try {
     const double fps = gt.at("fps").get<double>();
     const nlohmann::json& frames = gt.at("frames");
@@ -336,6 +361,7 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
       out.back().camera = cam.at("name").get<std::string>();
     }
     per_camera.resize(lenses.size());
+    per_camera_truth_lens.resize(lenses.size());
     for (const AvatarView& view : data.test) {
       if (view.camera != trained_on) continue;
       const int index = int(std::lround(view.time_s * fps));
@@ -359,15 +385,19 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
         const auto [azimuth, elevation] = AzimuthElevation(novel);
         out[k].yaw_deg = azimuth - azimuth0;
         out[k].pitch_deg = elevation - elevation0;
-        // The truth's lens (its frames are whole, where the workspace's
-        // views may be a crop of them), posed: a camera the workspace
-        // calibrated at this instant through its own pose (where align's
-        // scale is off, the truth's placement relative to the training camera
-        // would put it at another distance); any other through the truth's,
-        // relative to the training camera.
+        // A camera the workspace calibrated at this instant through its own
+        // calibration (where align's scale is off, the truth's placement
+        // relative to the training camera would put it at another distance),
+        // its lens carried onto the truth's whole frame; any other through
+        // the truth's lens and pose, relative to the training camera.
         SplatCamera camera = lenses[k];
         const AvatarView* own = FindView(data, out[k].camera, view.time_s, 0.5 / fps);
-        SetCameraPose(own ? CameraPose(own->view) : novel * world_from_head, &camera);
+        if (own) {
+          HF_RETURN_IF_ERROR(LensOnWholeFrame(capture, own->view, out[k].camera, lenses[k], &camera));
+          SetCameraPose(CameraPose(own->view), &camera);
+        } else {
+          SetCameraPose(novel * world_from_head, &camera);
+        }
         const torch::Tensor render = avatar.draw(view.condition, camera);
         const fs::path image_path = truth / cam.at("input").get<std::string>() / file;
         const fs::path mask_path = truth / "masks" / out[k].camera / file;
@@ -379,6 +409,12 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
         cv::resize(mask, mask, cv::Size(camera.width, camera.height), 0, 0, cv::INTER_AREA);
         const torch::Tensor target = ImageToTensor(image), cover = MaskToTensor(mask);
         per_camera[k].push_back(ScoreRender(render, target, cover, background));
+        if (own) {
+          SplatCamera truth_lens = lenses[k];
+          SetCameraPose(CameraPose(own->view), &truth_lens);
+          per_camera_truth_lens[k].push_back(
+              ScoreRender(avatar.draw(view.condition, truth_lens), target, cover, background));
+        }
         if (!write_dir.empty())
           HF_RETURN_IF_ERROR(WriteImageAtomic(write_dir / (out[k].camera + "_" + file),
                                               TensorToImage(ComparisonStrip(render, target, cover, avatar.background))));
@@ -393,6 +429,10 @@ Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, con
     out[k].psnr_masked = mean.psnr_masked;
     out[k].ssim_masked = mean.ssim_masked;
     out[k].psnr_full = mean.psnr_full;
+    out[k].calibrated = !per_camera_truth_lens[k].empty();
+    const ViewScores through_truth = MeanScores(per_camera_truth_lens[k]);
+    out[k].truth_lens_psnr_masked = through_truth.psnr_masked;
+    out[k].truth_lens_ssim_masked = through_truth.ssim_masked;
   }
   *scores = std::move(out);
   return Status::Ok();

@@ -69,11 +69,18 @@ Status RenderAvatarFrames(const fs::path& workspace, const std::string& face_mod
 // truth's intrinsics at the training resolution, and scored over the truth's
 // head mask (grey 0.5 behind it in both images) and over the frame. Either
 // model; `model_dir` empty: the one trained last.
+// A camera the workspace calibrated at that instant (the training camera, a
+// rig's others) is drawn through its own calibration, pose and lens, the
+// lens carried through ingest's crop onto the truth's whole frame; and again
+// through the truth's lens at that pose (`truth_lens`), where calibrate's
+// focal error shows.
 struct NovelViewScore {
   std::string camera;
   double yaw_deg = 0, pitch_deg = 0;  // its centre round the head, from the training camera's
   int views = 0;
   double psnr_masked = 0, ssim_masked = 0, psnr_full = 0;
+  bool calibrated = false;  // drawn through the workspace's calibration of it
+  double truth_lens_psnr_masked = 0, truth_lens_ssim_masked = 0;  // calibrated: through the truth's lens
 };
 Status ScoreNovelViews(const fs::path& workspace, const fs::path& model_dir, const std::string& face_model,
                        const fs::path& truth, const fs::path& write_dir, std::vector<NovelViewScore>* scores);

@@ -202,6 +202,8 @@ Status ScoreNovel(const CommonOptions& common, const Job& job, const fs::path& d
   for (const NovelViewScore& n : novel) {
     cams.push_back({{"camera", n.camera}, {"yaw_deg", n.yaw_deg}, {"pitch_deg", n.pitch_deg}, {"views", n.views},
                     {"psnr_masked", n.psnr_masked}, {"ssim_masked", n.ssim_masked}, {"psnr", n.psnr_full}});
+    if (n.calibrated)
+      cams.back()["truth_lens"] = {{"psnr_masked", n.truth_lens_psnr_masked}, {"ssim_masked", n.truth_lens_ssim_masked}};
     char line[256];
     std::snprintf(line, sizeof(line), "| %s | %s | %+.0f° / %+.0f° | %d | %.2f dB / %.3f | %.2f dB |", job.what.c_str(),
                   n.camera.c_str(), n.yaw_deg, n.pitch_deg, n.views, n.psnr_masked, n.ssim_masked, n.psnr_full);

@@ -58,7 +58,9 @@ int RenderCommand(const std::vector<std::string>& args) {
   options.Add("render.truth", &truth,
               "Score instead of render: a simulated capture of the workspace's scene with more cameras "
               "(scenes/talking_static_novel.toml); the held-out frames from each of its cameras against its "
-              "renders, render | truth | error images into --out.",
+              "renders, render | truth | error images into --out. A camera the workspace calibrated is drawn "
+              "through its own pose and lens, and scored again through the truth's lens, where the focal "
+              "length's error shows.",
               "truth");
   options.Add("render.score_regions", &score_regions,
               "Score instead of render: the held-out frames over the workspace's masks (eval.json's figure), over "
@@ -105,10 +107,17 @@ int RenderCommand(const std::vector<std::string>& args) {
     if (Status s = ScoreNovelViews(common.workspace, model_dir, common.Settings().face_model, truth, out_dir, &scores);
         !s.ok())
       return ReportFailure(s);
-    std::printf("| camera | yaw / pitch | views | PSNR / SSIM, head | PSNR, frame |\n|---|---|---|---|---|\n");
-    for (const NovelViewScore& n : scores)
-      std::printf("| %s | %+.0f° / %+.0f° | %d | %.2f dB / %.3f | %.2f dB |\n", n.camera.c_str(), n.yaw_deg,
-                  n.pitch_deg, n.views, n.psnr_masked, n.ssim_masked, n.psnr_full);
+    std::printf(
+        "| camera | yaw / pitch | views | PSNR / SSIM, head | PSNR, frame | head, the workspace's pose through the "
+        "truth's lens |\n|---|---|---|---|---|---|\n");
+    for (const NovelViewScore& n : scores) {
+      char truth_lens[64] = "- (not calibrated)";
+      if (n.calibrated)
+        std::snprintf(truth_lens, sizeof(truth_lens), "%.2f dB / %.3f", n.truth_lens_psnr_masked,
+                      n.truth_lens_ssim_masked);
+      std::printf("| %s | %+.0f° / %+.0f° | %d | %.2f dB / %.3f | %.2f dB | %s |\n", n.camera.c_str(), n.yaw_deg,
+                  n.pitch_deg, n.views, n.psnr_masked, n.ssim_masked, n.psnr_full, truth_lens);
+    }
     return kExitOk;
   }
   StderrProgress progress;

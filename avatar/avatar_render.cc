@@ -298,6 +298,12 @@ const AvatarView* FindView(const AvatarDataset& data, const std::string& camera,
   return nullptr;
 }
 
+const IngestedCamera* FindCamera(const IngestedCapture& capture, const std::string& camera) {
+  for (const IngestedCamera& c : capture.cameras)
+    if (c.name == camera) return &c;
+  return nullptr;
+}
+
 // `view`'s lens (at the training size of the workspace's frame of
 // `camera_name`, which may be a crop of the source) as a lens of the
 // source's whole frame at `whole`'s size (the truth's lens there):
@@ -305,12 +311,11 @@ const AvatarView* FindView(const AvatarDataset& data, const std::string& camera,
 // s the training size over the frame's.
 Status LensOnWholeFrame(const IngestedCapture& capture, const SplatCamera& view, const std::string& camera_name,
                         const SplatCamera& whole, SplatCamera* out) {
-  const IngestedCamera* cam = nullptr;
-  for (const IngestedCamera& c : capture.cameras)
-    if (c.name == camera_name) cam = &c;
+  const IngestedCamera* cam = FindCamera(capture, camera_name);
   if (!cam || cam->width <= 0 || cam->source_width <= 0 || !cam->fixed_crop)
     return Status::DataError("novel views: the workspace's camera " + camera_name +
-                             " has no fixed crop of its source to carry its lens through");
+                             " has no one crop of its source to carry its lens through (ingest with --crop "
+                             "sequence or none to score it against a simulation)");
   const double a = cam->crop_scale * double(view.width) / cam->width;                     // source -> training
   const double l = double(whole.width) / cam->source_width;                               // source -> whole
   *out = whole;
@@ -444,9 +449,7 @@ namespace {
 // crops of the source (so a mask of one is a mask of the other's frame).
 Status CheckSameCrop(const IngestedCapture& own, const IngestedCapture& other, const fs::path& other_dir) {
   for (const IngestedCamera& a : own.cameras) {
-    const IngestedCamera* b = nullptr;
-    for (const IngestedCamera& c : other.cameras)
-      if (c.name == a.name) b = &c;
+    const IngestedCamera* b = FindCamera(other, a.name);
     if (!b) return Status::InvalidArgument("--score-masks: " + other_dir.string() + " has no camera " + a.name);
     const bool same = a.width == b->width && a.height == b->height && a.source_width == b->source_width &&
                       a.source_height == b->source_height && std::abs(a.crop_x0 - b->crop_x0) < 1e-3 &&
@@ -466,12 +469,6 @@ const IngestedFrame* FindFrame(const IngestedCapture& capture, const std::string
     if (c.name == camera)
       for (const IngestedFrame& f : c.frames)
         if (f.index == index) return &f;
-  return nullptr;
-}
-
-const IngestedCamera* FindCamera(const IngestedCapture& capture, const std::string& camera) {
-  for (const IngestedCamera& c : capture.cameras)
-    if (c.name == camera) return &c;
   return nullptr;
 }
 

@@ -511,18 +511,11 @@ Status ScoreHeldOutRegions(const fs::path& workspace, const std::string& face_mo
     const torch::Tensor shown = view.image * cover + background.view({3, 1, 1}) * (1 - cover);
     std::vector<cv::Mat> regions;
     regions.push_back(cv::Mat());  // the view's own mask, as eval scores it
-    cv::Mat face = cv::Mat::zeros(size, CV_8U);
     const IngestedFrame* frame = FindFrame(own, view.camera, view.frame);
     const IngestedCamera* camera = FindCamera(own, view.camera);
-    if (frame && camera && frame->landmarks) {
-      const double scale = double(size.width) / camera->width;
-      std::vector<cv::Point> points, hull;
-      for (const cv::Point2f& p : *frame->landmarks)
-        points.emplace_back(int(std::lround((p.x + 0.5) * scale - 0.5)), int(std::lround((p.y + 0.5) * scale - 0.5)));
-      cv::convexHull(points, hull);
-      cv::fillConvexPoly(face, hull, cv::Scalar(255));
-    }
-    regions.push_back(face);
+    regions.push_back(frame && camera && frame->landmarks
+                          ? LandmarkHullMask(*frame->landmarks, size, double(size.width) / camera->width)
+                          : cv::Mat::zeros(size, CV_8U));
     if (!options.masks_from.empty()) regions.push_back(mask >= 128);
     if (options.band_px > 0) {
       const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * options.band_px + 1, 2 * options.band_px + 1});

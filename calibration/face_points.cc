@@ -23,20 +23,6 @@ struct FaceView {
   cv::Mat descriptors;
 };
 
-// The face's outline in a frame: the landmarks' convex hull, grown.
-cv::Mat FaceMask(const Landmarks68& landmarks, cv::Size size, double margin_px) {
-  std::vector<cv::Point2f> points(landmarks.begin(), landmarks.end());
-  std::vector<cv::Point2f> hull;
-  cv::convexHull(points, hull);
-  std::vector<cv::Point> outline;
-  for (const cv::Point2f& p : hull) outline.emplace_back(cvRound(p.x), cvRound(p.y));
-  cv::Mat mask(size, CV_8U, cv::Scalar(0));
-  cv::fillConvexPoly(mask, outline, cv::Scalar(255));
-  const int r = std::max(0, int(std::lround(margin_px)));
-  if (r > 0) cv::dilate(mask, mask, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
-  return mask;
-}
-
 }  // namespace
 
 Status TriangulateFacePoints(const IngestedCapture& capture, const CameraSet& cameras, const std::string& camera,
@@ -63,7 +49,7 @@ Status TriangulateFacePoints(const IngestedCapture& capture, const CameraSet& ca
     v.projection = k * view->cam_from_world.matrix().topRows<3>();
     v.axis = view->cam_from_world.rotation().transpose() * Eigen::Vector3d::UnitZ();
     std::vector<cv::KeyPoint> keypoints;
-    sift->detectAndCompute(image, FaceMask(*frame.landmarks, image.size(), options.margin_px), keypoints,
+    sift->detectAndCompute(image, LandmarkHullMask(*frame.landmarks, image.size(), 1.0, options.margin_px), keypoints,
                            v.descriptors);
     for (const cv::KeyPoint& p : keypoints) v.pixels.push_back(intrinsics->Undistort(Eigen::Vector2d(p.pt.x, p.pt.y)));
     views.push_back(std::move(v));

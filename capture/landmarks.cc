@@ -1,9 +1,13 @@
 #include "capture/landmarks.h"
 
+#include <opencv2/imgproc.hpp>
+
 #include <dlib/image_processing/shape_predictor.h>
 #include <dlib/opencv.h>
 
 #include <algorithm>
+#include <cmath>
+#include <vector>
 
 #include "core/fs.h"
 
@@ -61,6 +65,21 @@ Landmarks68 LandmarkPredictor::Predict(const cv::Mat& bgr, const cv::Rect2f& box
   HF_CHECK(bgr.type() == CV_8UC3);
   dlib::cv_image<dlib::bgr_pixel> view(bgr);
   return Run(impl_->model, view, box);
+}
+
+cv::Mat LandmarkHullMask(const Landmarks68& points, cv::Size size, double scale, double margin_px) {
+  std::vector<cv::Point2f> scaled;
+  for (const cv::Point2f& p : points)
+    scaled.push_back(scale == 1.0 ? p : cv::Point2f(float((p.x + 0.5) * scale - 0.5), float((p.y + 0.5) * scale - 0.5)));
+  std::vector<cv::Point2f> hull;
+  cv::convexHull(scaled, hull);
+  std::vector<cv::Point> outline;
+  for (const cv::Point2f& p : hull) outline.emplace_back(cvRound(p.x), cvRound(p.y));
+  cv::Mat mask(size, CV_8U, cv::Scalar(0));
+  cv::fillConvexPoly(mask, outline, cv::Scalar(255));
+  const int r = std::max(0, int(std::lround(margin_px)));
+  if (r > 0) cv::dilate(mask, mask, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
+  return mask;
 }
 
 cv::Rect2f LandmarkBounds(const Landmarks68& points) {

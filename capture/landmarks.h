@@ -43,6 +43,10 @@ class LandmarkPredictor {
 
 // The tight box around a set of landmarks.
 cv::Rect2f LandmarkBounds(const Landmarks68& points);
+// The landmarks' convex hull filled (255) in a mask of `size`, the points
+// first taken to an image `scale` times the size (pixel centres at
+// integers), then grown by `margin_px`.
+cv::Mat LandmarkHullMask(const Landmarks68& points, cv::Size size, double scale = 1.0, double margin_px = 0.0);
 // True when the landmarks have a face's layout: eyes above the mouth, the
 // subject's right eye left of the left eye, nose between eyes and mouth.
 bool PlausibleFaceLayout(const Landmarks68& points);

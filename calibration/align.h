@@ -39,12 +39,15 @@ struct AlignOptions {
   // keep the fit to the triangulated landmarks.
   std::string refine = "reprojection";
   double refine_robust_px = 2.0;  // Huber scale of that refinement
-  // "points": one camera moving round a still head: fit the face model's
-  // surface, with the subject's identity, to the points triangulated on the
-  // face from the frames (face_points.h), and take the head frame's rotation,
-  // translation and scale from it (surface_fit.h); "off": keep the landmarks'.
+  // "points": fit the face model's surface, with the subject's identity, to
+  // the points triangulated on the face (face_points.h), and take the head
+  // frame's rotation, translation and scale from it (surface_fit.h): one
+  // camera moving round a still head from all its frames; several cameras
+  // from each instant's views, each instant with its own head pose in the
+  // fit. "off": keep the landmarks'.
   std::string surface = "points";
   double surface_noise_mm = 1.0;  // the points' noise in that fit (SurfaceFitOptions)
+  int surface_instants = 60;      // several cameras: the instants the fit uses at most
   // World-frame cameras: fail when the triangulated landmarks miss the model by
   // more than this median (mm), a sign of a broken reconstruction.
   double max_residual_mm = 40.0;

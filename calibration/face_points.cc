@@ -28,28 +28,34 @@ struct FaceView {
 Status TriangulateFacePoints(const IngestedCapture& capture, const CameraSet& cameras, const std::string& camera,
                              const FacePointOptions& options, std::vector<Eigen::Vector3d>* points,
                              FacePointStats* stats) {
-  const CameraIntrinsics* intrinsics = cameras.FindCamera(camera);
-  if (intrinsics == nullptr) return Status::NotFound("face points: no intrinsics for camera " + camera);
-  const IngestedCamera* ingested = nullptr;
-  for (const IngestedCamera& c : capture.cameras)
-    if (c.name == camera) ingested = &c;
+  if (cameras.FindCamera(camera) == nullptr) return Status::NotFound("face points: no intrinsics for camera " + camera);
+  const IngestedCamera* ingested = capture.FindCamera(camera);
   if (ingested == nullptr) return Status::NotFound("face points: camera " + camera + " was not ingested");
-  const Eigen::Matrix3d k = intrinsics->K();
+  std::vector<FaceViewRef> refs;
+  for (const IngestedFrame& frame : ingested->frames) refs.push_back({camera, frame.index});
+  return TriangulateFacePoints(capture, cameras, refs, options, points, stats);
+}
 
+Status TriangulateFacePoints(const IngestedCapture& capture, const CameraSet& cameras,
+                             const std::vector<FaceViewRef>& refs, const FacePointOptions& options,
+                             std::vector<Eigen::Vector3d>* points, FacePointStats* stats) {
   cv::Ptr<cv::SIFT> sift = cv::SIFT::create(0, 3, options.contrast_threshold);
   std::vector<FaceView> views;
-  for (const IngestedFrame& frame : ingested->frames) {
-    const CameraView* view = cameras.FindView(camera, frame.index);
-    if (view == nullptr || !view->registered || !frame.landmarks) continue;
-    const fs::path path = capture.FramePath(camera, frame.index);
+  for (const FaceViewRef& ref : refs) {
+    const CameraIntrinsics* intrinsics = cameras.FindCamera(ref.camera);
+    const IngestedFrame* frame = capture.FindFrame(ref.camera, ref.frame);
+    const CameraView* view = cameras.FindView(ref.camera, ref.frame);
+    if (intrinsics == nullptr || frame == nullptr || view == nullptr || !view->registered || !frame->landmarks)
+      continue;
+    const fs::path path = capture.FramePath(ref.camera, ref.frame);
     const cv::Mat image = cv::imread(path.string(), cv::IMREAD_GRAYSCALE);
     if (image.empty()) return Status::IoError("face points: cannot read " + path.string());
     FaceView v;
-    v.frame = frame.index;
-    v.projection = k * view->cam_from_world.matrix().topRows<3>();
+    v.frame = ref.frame;
+    v.projection = intrinsics->K() * view->cam_from_world.matrix().topRows<3>();
     v.axis = view->cam_from_world.rotation().transpose() * Eigen::Vector3d::UnitZ();
     std::vector<cv::KeyPoint> keypoints;
-    sift->detectAndCompute(image, LandmarkHullMask(*frame.landmarks, image.size(), 1.0, options.margin_px), keypoints,
+    sift->detectAndCompute(image, LandmarkHullMask(*frame->landmarks, image.size(), 1.0, options.margin_px), keypoints,
                            v.descriptors);
     for (const cv::KeyPoint& p : keypoints) v.pixels.push_back(intrinsics->Undistort(Eigen::Vector2d(p.pt.x, p.pt.y)));
     views.push_back(std::move(v));
@@ -94,7 +100,7 @@ Status TriangulateFacePoints(const IngestedCapture& capture, const CameraSet& ca
     }
   }
   out.points = static_cast<int>(points->size());
-  HF_LOG(Info) << "face points: " << out.points << " points from " << out.pairs << " pairs of " << out.views
+  HF_LOG(Debug) << "face points: " << out.points << " points from " << out.pairs << " pairs of " << out.views
                << " views";
   *stats = out;
   return Status::Ok();

@@ -1,5 +1,5 @@
 // 3D points on the face, triangulated from pairs of registered views of one
-// camera moving round a still head: SIFT features inside each frame's face
+// camera moving round a still head (or of a rig's cameras at one instant): SIFT features inside each frame's face
 // (the landmarks' outline, grown by a margin), matched between views that see
 // the face from directions a few to some tens of degrees apart, and
 // triangulated with the calibrated cameras. Structure from motion spends its
@@ -36,11 +36,24 @@ struct FacePointStats {
   int points = 0;  // points triangulated
 };
 
+// One view of the capture: a camera's frame.
+struct FaceViewRef {
+  std::string camera;
+  int frame = 0;
+};
+
 // The points of `camera`'s registered views (frame "world"), in the world
 // frame. Views without landmarks are left out. Fails when a frame cannot be
 // read or the camera has no intrinsics.
 Status TriangulateFacePoints(const IngestedCapture& capture, const CameraSet& cameras, const std::string& camera,
                              const FacePointOptions& options, std::vector<Eigen::Vector3d>* points,
                              FacePointStats* stats);
+
+// The same from the given views, of any cameras: a rig's views of one
+// instant, which see one face from several directions at once. Views not
+// registered, without landmarks or unknown to the capture are left out.
+Status TriangulateFacePoints(const IngestedCapture& capture, const CameraSet& cameras,
+                             const std::vector<FaceViewRef>& views, const FacePointOptions& options,
+                             std::vector<Eigen::Vector3d>* points, FacePointStats* stats);
 
 }  // namespace headforge

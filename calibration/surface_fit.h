@@ -39,6 +39,9 @@ struct SurfaceFitOptions {
   // A larger change from the start is refused: the pairing went astray.
   double max_turn_deg = 15.0;
   double max_scale_change = 0.15;
+  // Keep the head frame's scale (cameras whose unit is known: a rig file in
+  // metres); the identity still fits the face's size.
+  bool hold_scale = false;
 };
 
 struct SurfaceFitResult {
@@ -59,5 +62,14 @@ struct SurfaceFitResult {
 // max_turn_deg or max_scale_change.
 Status FitFaceSurface(const FaceModel& model, const std::vector<Eigen::Vector3d>& world_points,
                       const SurfaceFitOptions& options, Sim3* head_from_world, SurfaceFitResult* result);
+
+// The same over groups of points, each seen with the head at its own pose (a
+// rig's instants): one identity and one scale (the starting frames must share
+// it), a rotation and translation per group. More of the face's surface pins
+// the identity, and with it each group's frame. The result's turn and scale
+// change, and the limits, are those of the first group's frame.
+Status FitFaceSurfaceGroups(const FaceModel& model, const std::vector<std::vector<Eigen::Vector3d>>& groups,
+                            const SurfaceFitOptions& options, std::vector<Sim3>* head_from_world,
+                            SurfaceFitResult* result);
 
 }  // namespace headforge

@@ -102,6 +102,20 @@ fs::path IngestedCapture::MaskPath(const std::string& camera, int index) const {
   return workspace / "masks" / camera / FrameFileName(index);
 }
 
+const IngestedCamera* IngestedCapture::FindCamera(const std::string& name) const {
+  for (const IngestedCamera& c : cameras)
+    if (c.name == name) return &c;
+  return nullptr;
+}
+
+const IngestedFrame* IngestedCapture::FindFrame(const std::string& camera, int index) const {
+  const IngestedCamera* c = FindCamera(camera);
+  if (c == nullptr) return nullptr;
+  for (const IngestedFrame& f : c->frames)
+    if (f.index == index) return &f;
+  return nullptr;
+}
+
 Status WriteIngestedCapture(const IngestedCapture& capture, const fs::path& dir) {
   nlohmann::json landmarks = {{"version", IngestedCapture::kVersion},
                               {"format", "ibug68"},

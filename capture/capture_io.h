@@ -86,6 +86,9 @@ struct IngestedCapture {
 
   fs::path FramePath(const std::string& camera, int index) const;
   fs::path MaskPath(const std::string& camera, int index) const;
+  // nullptr when the capture has no such camera, or the camera no such frame.
+  const IngestedCamera* FindCamera(const std::string& name) const;
+  const IngestedFrame* FindFrame(const std::string& camera, int index) const;
   int num_frames() const { return cameras.empty() ? 0 : static_cast<int>(cameras[0].frames.size()); }
 };
 

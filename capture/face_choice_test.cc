@@ -61,7 +61,9 @@ TEST(FaceChoice, TheSameFaceBackElsewhereAfterAGapIsFollowedStrayAndImplausibleO
   for (size_t i = 0; i < 40; ++i) {
     const bool seen = i < 15 || i >= 30;
     EXPECT_EQ(choice.faces[i] != nullptr, seen) << i;
-    if (seen) EXPECT_TRUE(choice.faces[i]->plausible) << i;
+    if (seen) {
+      EXPECT_TRUE(choice.faces[i]->plausible) << i;
+    }
   }
   EXPECT_EQ(choice.followed_frames, 25);
   EXPECT_EQ(choice.others, 0);  // the stray pair is too short to be worth a word

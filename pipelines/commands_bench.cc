@@ -158,21 +158,21 @@ Row RunSetting(const std::string& scene, const Setting& s, const IngestedCapture
   if (status.ok()) status = RunAlign(AlignOptions(), capture, cameras, model, &aligned);
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (status.ok()) status = EvaluateWorldCameras(cameras, capture, truth, &aligned.head_from_world, &row.world);
-  if (status.ok()) {
-    // Several cameras watching a moving head: align's head frame is the
-    // head at its reference instant, so it is scored there; at the other
-    // instants the head has moved (track's head motion follows it).
-    CameraSet scored = aligned.cameras;
+  // Several cameras watching a moving head: align's head frame is the head
+  // at its reference instant, so it is scored there; at the other instants
+  // the head has moved (track's head motion follows it).
+  auto at_reference = [&aligned](CameraSet scored) {
     if (aligned.reference_frame >= 0)
       scored.views.erase(std::remove_if(scored.views.begin(), scored.views.end(),
                                         [&](const CameraView& v) { return v.frame != aligned.reference_frame; }),
                          scored.views.end());
-    status = EvaluateHeadCameras(scored, capture, truth, &row.head);
-  }
+    return scored;
+  };
+  if (status.ok()) status = EvaluateHeadCameras(at_reference(aligned.cameras), capture, truth, &row.head);
   if (status.ok() && aligned.surface_points > 0) {
     // What the surface fit bought: the landmarks' head frame, before the fit.
     CameraErrors head, world;
-    const CameraSet landmarks_only = ToHeadFrame(cameras, aligned.landmarks_head_from_world);
+    const CameraSet landmarks_only = at_reference(ToHeadFrame(cameras, aligned.landmarks_head_from_world));
     status = EvaluateHeadCameras(landmarks_only, capture, truth, &head);
     if (status.ok()) status = EvaluateWorldCameras(cameras, capture, truth, &aligned.landmarks_head_from_world, &world);
     row.surface_points = aligned.surface_points;

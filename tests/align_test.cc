@@ -677,5 +677,60 @@ TEST(SurfaceFit, RefusesTooFewPointsAndLeavesTheFrame) {
   EXPECT_NE(limited.message().find("would scale the head frame"), std::string::npos) << limited.message();
 }
 
+TEST(SurfaceFit, GroupsOfPointsAtTheirOwnPosesShareOneFace) {
+  // A rig's instants: eight groups of 400 points on one face (each too few
+  // for a fit alone, which is refused), the head turned by up to 10.5 deg and
+  // moved some millimetres between them, every group's start 3.7 deg off
+  // (the landmarks' frame). Fitted together, with one identity and one scale
+  // and a pose per group, every group's frame comes back within 0.5 deg and
+  // the scale within 2%; the first group's turn is the one reported.
+  constexpr int kGroups = 8;
+  const SkinPoints skin = SampleSkinPoints(400 * kGroups, 0.7, 11);
+  std::vector<std::vector<Eigen::Vector3d>> groups(kGroups);
+  std::vector<Sim3> truths(kGroups), starts(kGroups);
+  for (int g = 0; g < kGroups; ++g) {
+    Sim3 motion;  // the head's move in the world between instants
+    motion.rotation = Eigen::AngleAxisd((g - 3.5) * 3.0 * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    motion.translation = Eigen::Vector3d(0.004 * g, -0.002 * g, 0.001);
+    for (size_t k = size_t(g); k < skin.world.size(); k += kGroups) groups[size_t(g)].push_back(motion * skin.world[k]);
+    Sim3& truth = truths[size_t(g)];  // head_from_world after the move
+    truth.scale = skin.truth.scale;
+    truth.rotation = skin.truth.rotation * motion.rotation.transpose();
+    truth.translation = skin.truth.translation - truth.scale * (truth.rotation * motion.translation);
+    starts[size_t(g)] = Disturbed(truths[size_t(g)], 2.0, 1.0, 1.0);
+    starts[size_t(g)].scale = starts[0].scale;
+  }
+  auto angle_deg = [](const Sim3& a, const Sim3& b) {
+    return Eigen::AngleAxisd(a.rotation * b.rotation.transpose()).angle() * 180 / M_PI;
+  };
+  SurfaceFitResult result;
+  Sim3 alone = starts[0];
+  EXPECT_FALSE(FitFaceSurface(Model(), groups[0], SurfaceFitOptions(), &alone, &result).ok());
+
+  std::vector<Sim3> fitted = starts;
+  const Status status = FitFaceSurfaceGroups(Model(), groups, SurfaceFitOptions(), &fitted, &result);
+  ASSERT_TRUE(status.ok()) << status.message();
+  for (int g = 0; g < kGroups; ++g) {
+    std::printf("group %d: %.2f -> %.2f deg\n", g, angle_deg(starts[size_t(g)], truths[size_t(g)]),
+                angle_deg(fitted[size_t(g)], truths[size_t(g)]));
+    EXPECT_LT(angle_deg(fitted[size_t(g)], truths[size_t(g)]), 0.5) << g;
+    EXPECT_NEAR(fitted[size_t(g)].scale / truths[size_t(g)].scale, 1.0, 0.02) << g;
+    EXPECT_DOUBLE_EQ(fitted[size_t(g)].scale, fitted[0].scale);
+  }
+  EXPECT_NEAR(result.turn_deg, angle_deg(fitted[0], starts[0]), 1e-6);
+  EXPECT_NEAR(result.points, 400 * kGroups, 200);
+
+  // A known unit holds the scale; starts of different scales are refused.
+  SurfaceFitOptions held;
+  held.hold_scale = true;
+  std::vector<Sim3> metric = starts;
+  ASSERT_TRUE(FitFaceSurfaceGroups(Model(), groups, held, &metric, &result).ok());
+  EXPECT_DOUBLE_EQ(metric[0].scale, starts[0].scale);
+  EXPECT_LT(angle_deg(metric[0], truths[0]), 0.5);
+  std::vector<Sim3> mixed = starts;
+  mixed[3].scale *= 1.1;
+  EXPECT_FALSE(FitFaceSurfaceGroups(Model(), groups, SurfaceFitOptions(), &mixed, &result).ok());
+}
+
 }  // namespace
 }  // namespace headforge

@@ -706,6 +706,13 @@ void ApplySurfaceFit(const AlignOptions& options, const IngestedCapture& capture
     groups.push_back(std::move(points));
     starts.push_back(start);
   }
+  // The head frame is the reference instant's: its own points must pin its
+  // pose (the other instants' pin the identity and the scale).
+  constexpr size_t kFewestAtReference = 100;
+  if (fitted.ok() && per_frame && (groups.empty() || groups[0].size() < kFewestAtReference))
+    fitted = Status::DataError("surface fit: the reference instant's views give " +
+                               std::to_string(groups.empty() ? 0 : groups[0].size()) +
+                               " points on the face (need " + std::to_string(kFewestAtReference) + ")");
   SurfaceFitOptions fit;
   fit.noise_mm = options.surface_noise_mm;
   fit.hold_scale = cameras.metres_per_unit > 0;

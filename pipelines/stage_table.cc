@@ -50,12 +50,12 @@ const std::vector<StageEntry>& StageTable() {
     t[2].description =
         "Aligns the reconstruction to the face model's metric head frame: triangulates the\n"
         "landmarks, fits a similarity by Umeyama's method in RANSAC, then fits the face model to\n"
-        "points triangulated on the skin (one camera round a still head, or a rig's instants);\n"
+        "points triangulated on the skin (one camera round a still head; a rig's instants with\n"
+        "--align-rig-surface);\n"
         "residuals in mm.";
     t[2].reads = {"capture.json", "landmarks.json", "cameras.json", "frames/"};
     t[2].writes = {"alignment.json", "cameras_head.json"};
     t[2].uses_face_model = true;
-    t[2].version = 2;  // 2: the surface fit on rigs too, over their instants
     t[2].make = MakeAlignJob;
 
     t[3].name = "track";

@@ -298,11 +298,6 @@ const AvatarView* FindView(const AvatarDataset& data, const std::string& camera,
   return nullptr;
 }
 
-const IngestedCamera* FindCamera(const IngestedCapture& capture, const std::string& camera) {
-  for (const IngestedCamera& c : capture.cameras)
-    if (c.name == camera) return &c;
-  return nullptr;
-}
 
 // `view`'s lens (at the training size of the workspace's frame of
 // `camera_name`, which may be a crop of the source) as a lens of the
@@ -311,7 +306,7 @@ const IngestedCamera* FindCamera(const IngestedCapture& capture, const std::stri
 // s the training size over the frame's.
 Status LensOnWholeFrame(const IngestedCapture& capture, const SplatCamera& view, const std::string& camera_name,
                         const SplatCamera& whole, SplatCamera* out) {
-  const IngestedCamera* cam = FindCamera(capture, camera_name);
+  const IngestedCamera* cam = capture.FindCamera(camera_name);
   if (!cam || cam->width <= 0 || cam->source_width <= 0 || !cam->fixed_crop)
     return Status::DataError("novel views: the workspace's camera " + camera_name +
                              " has no one crop of its source to carry its lens through (ingest with --crop "
@@ -449,7 +444,7 @@ namespace {
 // crops of the source (so a mask of one is a mask of the other's frame).
 Status CheckSameCrop(const IngestedCapture& own, const IngestedCapture& other, const fs::path& other_dir) {
   for (const IngestedCamera& a : own.cameras) {
-    const IngestedCamera* b = FindCamera(other, a.name);
+    const IngestedCamera* b = other.FindCamera(a.name);
     if (!b) return Status::InvalidArgument("--score-masks: " + other_dir.string() + " has no camera " + a.name);
     const bool same = a.width == b->width && a.height == b->height && a.source_width == b->source_width &&
                       a.source_height == b->source_height && std::abs(a.crop_x0 - b->crop_x0) < 1e-3 &&
@@ -462,14 +457,6 @@ Status CheckSameCrop(const IngestedCapture& own, const IngestedCapture& other, c
                                      "): ingest the same video with the same --crop and --resolution");
   }
   return Status::Ok();
-}
-
-const IngestedFrame* FindFrame(const IngestedCapture& capture, const std::string& camera, int index) {
-  for (const IngestedCamera& c : capture.cameras)
-    if (c.name == camera)
-      for (const IngestedFrame& f : c.frames)
-        if (f.index == index) return &f;
-  return nullptr;
 }
 
 }  // namespace
@@ -511,8 +498,8 @@ Status ScoreHeldOutRegions(const fs::path& workspace, const std::string& face_mo
     const torch::Tensor shown = view.image * cover + background.view({3, 1, 1}) * (1 - cover);
     std::vector<cv::Mat> regions;
     regions.push_back(cv::Mat());  // the view's own mask, as eval scores it
-    const IngestedFrame* frame = FindFrame(own, view.camera, view.frame);
-    const IngestedCamera* camera = FindCamera(own, view.camera);
+    const IngestedFrame* frame = own.FindFrame(view.camera, view.frame);
+    const IngestedCamera* camera = own.FindCamera(view.camera);
     regions.push_back(frame && camera && frame->landmarks
                           ? LandmarkHullMask(*frame->landmarks, size, double(size.width) / camera->width)
                           : cv::Mat::zeros(size, CV_8U));

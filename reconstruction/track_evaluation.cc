@@ -40,9 +40,7 @@ Status EvaluateTracking(const TrackingFile& tracking, const CameraSet& cameras, 
     std::vector<double> angles;
     for (const CameraView& v : cameras.views) {
       if (!v.registered) continue;
-      const IngestedCamera* cam = nullptr;
-      for (const IngestedCamera& c : capture.cameras)
-        if (c.name == v.camera) cam = &c;
+      const IngestedCamera* cam = capture.FindCamera(v.camera);
       if (!cam) return Status::DataError("cameras name a camera the capture does not have: " + v.camera);
       const int source = cam->frames.at(v.frame).source_frame;
       const TrackedFrame* tracked = tracking.Find(v.frame);

@@ -109,6 +109,11 @@ void AddCalibrateOptions(OptionSet* o, CalibrateOptions* c) {
          "Head-pose mode: face-model fits at most, each started from the cameras the last one left, until the "
          "focal length changes by less than 1%.",
          "head-pose-refine-rounds");
+  o->Add("calibrate.head_pose.features", &c->head_pose.features,
+         "Head-pose mode, after the face-model refinement: SIFT features on the head's rigid part (nose, upper cheeks, "
+         "brows), tracked over the frames and bundle-adjusted with each frame's pose, refine the head's motion "
+         "between frames; off keeps the poses from the landmarks.",
+         "head-pose-features");
 }
 
 std::string FocalUncertaintyText(double log_sigma) {

@@ -40,6 +40,9 @@ struct HeadPoseOptions {
   // expression as well (done by the calibrate stage, which has the tracker;
   // skipped when `focal` is given); "off" keeps the fit to the mean face.
   std::string refine = "face-model";
+  // After that refinement: the poses refined by features tracked on the
+  // head's rigid part (feature_poses.h). Not with refine "off".
+  bool features = true;
   int refine_rounds = 6;  // fits at most, until the focal length changes by less than 1%
   // The face mesh's 468 points (where ingest found them) in that refinement,
   // each at this weight against 1 for each of the 68 landmarks; 0 leaves the

@@ -108,6 +108,7 @@ Status CameraSet::Write(const fs::path& path) const {
                          {"notes", notes}, {"cameras", cams},    {"views", views_json},
                          {"registered", registered()}, {"total", views.size()}};
   if (metres_per_unit > 0) root["metres_per_unit"] = metres_per_unit;
+  if (poses_from_features) root["poses_from_features"] = true;
   return WriteJsonAtomic(path, root, 1);
 }
 
@@ -122,6 +123,7 @@ Status CameraSet::Read(const fs::path& path, CameraSet* set) {
     s.frame = root.value("frame", "world");
     s.notes = root.value("notes", "");
     s.metres_per_unit = root.value("metres_per_unit", 0.0);
+    s.poses_from_features = root.value("poses_from_features", false);
     for (const auto& c : root.at("cameras")) {
       const CameraIntrinsics in = CameraIntrinsics::FromJson(c);
       s.cameras.push_back(in);

@@ -57,6 +57,10 @@ struct CameraSet {
   // The world's unit in metres where calibrate knows it (a rig file that says
   // so); 0: unknown (COLMAP's world has no unit).
   double metres_per_unit = 0.0;
+  // Head-pose cameras whose poses features on the head's rigid part refined
+  // (calibration/feature_poses.h): their motion from frame to frame is closer
+  // than the landmarks', and track holds the head by them.
+  bool poses_from_features = false;
 
   const CameraIntrinsics* FindCamera(const std::string& name) const;
   const CameraView* FindView(const std::string& camera, int frame) const;

@@ -36,11 +36,13 @@ const std::vector<StageEntry>& StageTable() {
     t[1].description =
         "Estimates the cameras of the ingested frames: COLMAP structure from motion for a moving\n"
         "camera or several cameras, head-pose cameras for a fixed camera (refined with the face\n"
-        "model), or a rig file.";
+        "model, then by features on the head's rigid part), or a rig file.";
     t[1].reads = {"capture.json", "landmarks.json", "frames/", "masks/"};
     t[1].writes = {"cameras.json", "colmap/ (when COLMAP ran)"};
     t[1].uses_face_model = true;
-    t[1].version = 2;  // 2: head-pose poses refined with the face model at a focal length the user gave
+    // 2: head-pose poses refined with the face model at a focal length the user
+    // gave; 3: head-pose poses refined by features on the head's rigid part.
+    t[1].version = 3;
     t[1].make = MakeCalibrateJob;
 
     t[2].name = "align";

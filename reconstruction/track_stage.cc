@@ -7,6 +7,7 @@
 #include <map>
 #include <numeric>
 
+#include "calibration/feature_poses.h"
 #include "calibration/landmark_embedding.h"
 #include "core/log.h"
 #include "core/video_writer.h"
@@ -203,7 +204,9 @@ void AddTrackOptions(OptionSet* o, TrackStageOptions* t) {
          "from 9.8 to 2.3 deg off; on the lit rig_8cam it cost the smile's weights (docs/tracking.md).",
          "multiview-mesh-weight");
   o->Add("track.refine_head_pose", &t->refine_head_pose,
-         "With head-pose cameras, refine each frame's head pose with the fitted shape (false: hold it).",
+         "With head-pose cameras, refine each frame's head pose with the fitted shape (false: hold it). Cameras "
+         "whose poses calibrate refined by the head's texture (--head-pose-features) are moved by one rotation and "
+         "translation for all frames; --head-motion free refits each frame's.",
          "refine-head-pose");
   o->Add("track.head_motion", &t->head_motion,
          "Each frame's head motion: free, still (held at rest; the cameras carry every change of view: a head that "
@@ -349,6 +352,11 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   const bool still = options.head_motion == "still" || (options.head_motion == "auto" && cameras.mode != "head-pose" &&
                                                         cameras.WalksRoundTheHead());
   fit.fixed_head = still || (cameras.mode == "head-pose" && !options.refine_head_pose && options.head_motion != "free");
+  // Head-pose cameras that features refined carry the head's motion from
+  // frame to frame better than the landmarks would refit it: the fit moves
+  // the head frame once for every frame.
+  fit.one_head_motion =
+      cameras.mode == "head-pose" && cameras.poses_from_features && !fit.fixed_head && options.head_motion != "free";
   fit.samples = capture.samples;
 
   std::vector<TrackingView> views;
@@ -383,7 +391,8 @@ Status RunTrack(const TrackStageOptions& options, const IngestedCapture& capture
   HF_LOG(Info) << "track: " << views.size() << " views of " << num_frames << " frames, " << options.fit.identity_modes
                << " identity modes, " << model.num_expressions() << " expressions"
                << (still ? ", the head held still (one camera carried round it; --head-motion free fits its motion)"
-                   : fit.fixed_head ? ", head held by the head-pose cameras" : "");
+                   : fit.fixed_head ? ", head held by the head-pose cameras"
+                   : fit.one_head_motion ? ", the head frame moved once for every frame (cameras refined by features)" : "");
   progress->Start("track: fitting", 0);
   TrackResult result;
   LandmarkBasis mesh;
@@ -536,6 +545,20 @@ Status RefineHeadPoseStep(const CalibrateOptions& calibrate, const IngestedCaptu
                          "(the video's horizontal field of view) or --focal PX";
     how = "refined with the face model from focal " +
           std::to_string(static_cast<int>(std::lround(refined.focal_before))) + " px";
+  }
+  if (calibrate.head_pose.features && !capture.cameras.empty()) {
+    progress->Start("calibrate: following the head's texture", 0);
+    FeaturePoseOptions features;
+    features.threads = fit.threads;
+    FeaturePoseStats moved;
+    HF_RETURN_IF_ERROR(RefineHeadPosesWithFeatures(capture, capture.cameras[0].name, features, cameras, &moved));
+    progress->Finish();
+    HF_LOG(Info) << "calibrate: " << (moved.left.empty() ? "head poses refined by " : "features on the rigid face: ")
+                 << moved.Summary();
+    if (moved.frames_moved > 0) {
+      how += "; poses refined by features on the rigid face";
+      cameras->poses_from_features = true;
+    }
   }
   summary->reprojection_px = refined.median_residual_px;
   if (!capture.cameras.empty() && capture.cameras[0].crop_scale > 0)

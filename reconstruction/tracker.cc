@@ -70,6 +70,10 @@ bool TrackOptions::Check(std::string* why) const {
     *why = "weights must be zero or positive (scales positive)";
     return false;
   }
+  if (fixed_head && one_head_motion) {
+    *why = "one_head_motion moves the head that fixed_head holds: not both";
+    return false;
+  }
   if (!(max_focal_change > 1)) {
     *why = "max_focal_change must be above 1";
     return false;
@@ -113,7 +117,20 @@ struct SequenceFit {
   ceres::Solver::Summary summary;
   int dropped_views = 0;
 
+  FrameBlocks one_motion;   // every frame's head motion with TrackOptions::one_head_motion
+
   const LandmarkBasis& BasisOf(size_t v) const { return own_basis[v] ? *own_basis[v] : fit_basis; }
+  // The head motion's blocks that frame f's residuals use.
+  FrameBlocks& MotionBlocks(FrameBlocks& f) { return options.one_head_motion ? one_motion : f; }
+  // Frame f's blocks with the head motion its residuals use.
+  FrameBlocks Posed(size_t f) const {
+    FrameBlocks b = frames[f];
+    if (options.one_head_motion) {
+      std::copy(one_motion.rotation, one_motion.rotation + 3, b.rotation);
+      std::copy(one_motion.translation, one_motion.translation + 3, b.translation);
+    }
+    return b;
+  }
   Eigen::VectorXd Alpha() const { return Eigen::Map<const Eigen::VectorXd>(identity.data(), Eigen::Index(identity.size())); }
 };
 
@@ -176,8 +193,8 @@ void AddMeshResiduals(SequenceFit* fit, size_t v, double oval) {
     if (!(weight > 0) || !view.mesh[i].allFinite()) continue;
     fit->view_blocks[v].push_back(fit->problem.AddResidualBlock(
         LandmarkReprojectionCost::Create(fit->mesh_basis, int(i), view.camera, view.mesh[i], weight),
-        new ceres::HuberLoss(fit->options.robust_scale_px), f.rotation, f.translation, fit->identity.data(),
-        f.expression.data(), &fit->focal_scale));
+        new ceres::HuberLoss(fit->options.robust_scale_px), fit->MotionBlocks(f).rotation,
+        fit->MotionBlocks(f).translation, fit->identity.data(), f.expression.data(), &fit->focal_scale));
   }
 }
 
@@ -217,8 +234,8 @@ Status AddLandmarkResiduals(SequenceFit* fit) {
       if (!(weight > 0)) continue;
       fit->view_blocks[v].push_back(fit->problem.AddResidualBlock(
           LandmarkReprojectionCost::Create(fit->BasisOf(v), i, view.camera, pixel, weight),
-          new ceres::HuberLoss(options.robust_scale_px), f.rotation, f.translation, fit->identity.data(),
-          f.expression.data(), &fit->focal_scale));
+          new ceres::HuberLoss(options.robust_scale_px), fit->MotionBlocks(f).rotation,
+          fit->MotionBlocks(f).translation, fit->identity.data(), f.expression.data(), &fit->focal_scale));
       f.observed = true;
       ++observations;
     }
@@ -280,7 +297,8 @@ void AddPriorsAndSmoothness(SequenceFit* fit) {
       // weaken the link in proportion.
       const double gap = sampled ? std::max(1, options.samples[size_t(i)] - options.samples[size_t(previous)])
                                  : i - previous;
-      if (!options.fixed_head && (options.rotation_smoothness > 0 || options.translation_smoothness > 0)) {
+      if (!options.fixed_head && !options.one_head_motion &&
+          (options.rotation_smoothness > 0 || options.translation_smoothness > 0)) {
         problem.AddResidualBlock(PoseSmoothnessCost::Create(options.rotation_smoothness / gap,
                                                             options.translation_smoothness / gap),
                                  nullptr, p.rotation, p.translation, f.rotation, f.translation);
@@ -310,7 +328,7 @@ Status SolveDroppingOutlierViews(SequenceFit* fit) {
     for (size_t v = 0; v < views.size(); ++v) {
       if (!fit->used[v]) continue;
       view_median[v] =
-          Median(ViewResiduals(views[v], fit->BasisOf(v), alpha, fit->frames[size_t(views[v].frame)], fit->focal_scale));
+          Median(ViewResiduals(views[v], fit->BasisOf(v), alpha, fit->Posed(size_t(views[v].frame)), fit->focal_scale));
       all_used.push_back(view_median[v]);
     }
     const double limit = std::max(fit->options.flag_residual_px, 3.0 * Median(all_used));
@@ -352,12 +370,12 @@ void CollectFrames(const SequenceFit& fit, TrackResult* out) {
     if (!fit.used[v]) continue;
     const size_t f = size_t(view.frame);
     std::vector<int> indices;
-    const std::vector<double> r = ViewResiduals(view, fit.BasisOf(v), alpha, fit.frames[f], fit.focal_scale, &indices);
+    const std::vector<double> r = ViewResiduals(view, fit.BasisOf(v), alpha, fit.Posed(f), fit.focal_scale, &indices);
     residuals[f].insert(residuals[f].end(), r.begin(), r.end());
     seen[f] += int(indices.size());
     Eigen::MatrixXd seen_points(2, indices.size());
     for (size_t j = 0; j < indices.size(); ++j) seen_points.col(Eigen::Index(j)) = (*view.landmarks)[indices[j]];
-    if (std::abs(YawFromCamera(view.camera, MotionOf(fit.frames[f]))) > options.max_yaw_deg) {
+    if (std::abs(YawFromCamera(view.camera, MotionOf(fit.Posed(f)))) > options.max_yaw_deg) {
       reasons[f] += "profile view; ";
     }
     if (seen_points.cols() >= 3) {
@@ -373,7 +391,7 @@ void CollectFrames(const SequenceFit& fit, TrackResult* out) {
     const FrameBlocks& blocks = fit.frames[size_t(i)];
     TrackedFrame t;
     t.frame = i;
-    t.head_motion = MotionOf(blocks);
+    t.head_motion = MotionOf(fit.options.one_head_motion ? fit.one_motion : blocks);
     t.expression = Eigen::Map<const Eigen::VectorXd>(blocks.expression.data(), e);
     t.landmarks = seen[size_t(i)];
     if (blocks.observed) {
@@ -414,7 +432,7 @@ void InterpolateUnobservedFrames(const SequenceFit& fit, TrackResult* out) {
       mix.translation[d] = (1 - w) * fa.translation[d] + w * fb.translation[d];
     }
     TrackedFrame& t = out->frames[size_t(i)];
-    t.head_motion = MotionOf(mix);
+    t.head_motion = MotionOf(fit.options.one_head_motion ? fit.one_motion : mix);
     t.expression.resize(e);
     for (int j = 0; j < e; ++j) t.expression[j] = (1 - w) * fa.expression[size_t(j)] + w * fb.expression[size_t(j)];
     t.interpolated = true;

@@ -78,6 +78,11 @@ struct TrackOptions {
   // The cameras already carry the head's motion (head-pose calibration):
   // hold each frame's head motion at the identity.
   bool fixed_head = false;
+  // One head motion for every frame (a rigid move of the head frame): the
+  // cameras carry the head's motion from frame to frame, and the fit places
+  // the head frame (head-pose cameras that features refined). Not with
+  // fixed_head.
+  bool one_head_motion = false;
   // Refine the focal length: one zoom-and-dolly factor on every camera's fx,
   // fy and distance along its axis (tracking_costs.h), within
   // [1/max_focal_change, max_focal_change]. Meant for one camera looking at

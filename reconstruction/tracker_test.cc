@@ -539,6 +539,53 @@ TEST(Tracker, HeadHeldByTheCamerasStaysFixed) {
   EXPECT_LT(result.median_residual_px, 0.8);
 }
 
+// Cameras that carry each frame's motion but sit on a head frame turned and
+// shifted by one constant error (head-pose cameras whose motion features
+// refined, their head frame from the landmarks' mean): one head motion for
+// all frames finds that error, the same in every frame, frames without
+// landmarks included.
+TEST(Tracker, OneHeadMotionMovesTheHeadFrameAlikeInEveryFrame) {
+  const Truth truth = MakeTruth(30, 1.0, 15);
+  Eigen::Isometry3d error = Eigen::Isometry3d::Identity();
+  error.linear() = (Eigen::AngleAxisd(2.0 * M_PI / 180, Eigen::Vector3d::UnitX()) *
+                    Eigen::AngleAxisd(-1.0 * M_PI / 180, Eigen::Vector3d::UnitY()))
+                       .toRotationMatrix();
+  error.translation() = Eigen::Vector3d(0.002, -0.003, 0.001);
+  std::vector<TrackingView> views;
+  for (int f = 0; f < 30; ++f) {
+    Truth still = truth;
+    still.motion.assign(30, Eigen::Isometry3d::Identity());
+    TrackingCamera c = CameraAt(0);
+    const Eigen::Isometry3d motion = truth.motion[f];
+    c.translation = c.rotation * motion.translation() + c.translation;
+    c.rotation = c.rotation * motion.linear();
+    TrackingView v = Observe(still, {c}, 0.3, 40 + f)[size_t(f)];
+    // The given camera: cam_from_head * error.
+    v.camera.translation = v.camera.rotation * error.translation() + v.camera.translation;
+    v.camera.rotation = v.camera.rotation * error.linear();
+    views.push_back(v);
+  }
+  views[12].landmarks.reset();
+  TrackOptions options;
+  options.one_head_motion = true;
+  TrackResult result;
+  ASSERT_TRUE(TrackSequence(Basis(), views, 30, options, &result).ok());
+  // given * motion = true: the motion undoes the error.
+  const Eigen::Isometry3d undo = error.inverse();
+  for (const TrackedFrame& f : result.frames) {
+    EXPECT_TRUE(f.head_motion.isApprox(result.frames[0].head_motion, 1e-12)) << f.frame;
+  }
+  const double turn = RotationErrorDeg(result.frames[12].head_motion, undo);
+  const double shift_mm = 1000 * (result.frames[12].head_motion.translation() - undo.translation()).norm();
+  std::printf("one head motion: %.3f deg and %.2f mm from the error it undoes (2.2 deg, 3.7 mm); residual %.2f px\n",
+              turn, shift_mm, result.median_residual_px);
+  EXPECT_LT(turn, 0.3);
+  EXPECT_LT(shift_mm, 2.0);
+  EXPECT_LT(result.median_residual_px, 0.8);
+  options.fixed_head = true;  // holding the head and moving it: refused
+  EXPECT_FALSE(TrackSequence(Basis(), views, 30, options, &result).ok());
+}
+
 TEST(Tracker, FramesWithoutLandmarksAreInterpolatedAndFlagged) {
   const Truth truth = MakeTruth(30, 1.0, 7);
   auto views = Observe(truth, {CameraAt(0)}, 0.5, 8);

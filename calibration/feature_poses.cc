@@ -374,16 +374,42 @@ Status RefineHeadPosesWithFeatures(const IngestedCapture& capture, const std::st
         << " px)";
     out.left = why.str();
   }
+  // The adjusted poses, then the one rigid move of the head frame that takes
+  // them back onto the starting ones on average: the features decide the
+  // motion between frames, the landmarks where the head frame sits.
+  std::vector<size_t> moved;
+  std::vector<Eigen::Isometry3d> adjusted;
+  Eigen::Matrix3d rotation_sum = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d translation_sum = Eigen::Vector3d::Zero();
   for (size_t f = 0; f < frames.size() && out.left.empty(); ++f) {
     if (a.seen[f] < options.min_frame_observations) continue;
-    Eigen::Isometry3d& pose = cameras->views[size_t(frames[f].view)].cam_from_world;
     const Eigen::Vector3d delta(a.poses[f][0], a.poses[f][1], a.poses[f][2]);
-    const Eigen::Vector3d t(a.poses[f][3], a.poses[f][4], a.poses[f][5]);
-    change_deg.push_back(delta.norm() * kDegrees);
-    change_mm.push_back((t - pose.translation()).norm() * 1000.0);
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.linear() = a.r0[f];
     if (delta.norm() > 0) pose.linear() = Eigen::AngleAxisd(delta.norm(), delta.normalized()).toRotationMatrix() * a.r0[f];
-    pose.translation() = t;
-    ++out.frames_moved;
+    pose.translation() = Eigen::Vector3d(a.poses[f][3], a.poses[f][4], a.poses[f][5]);
+    const Eigen::Isometry3d& start = cameras->views[size_t(frames[f].view)].cam_from_world;
+    const Eigen::Isometry3d back = pose.inverse() * start;  // new * back = start
+    rotation_sum += back.rotation();
+    translation_sum += back.translation();
+    moved.push_back(f);
+    adjusted.push_back(pose);
+  }
+  if (!moved.empty()) {
+    Eigen::Isometry3d anchor = Eigen::Isometry3d::Identity();
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(rotation_sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+    d(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1 : 1;
+    anchor.linear() = svd.matrixU() * d * svd.matrixV().transpose();
+    anchor.translation() = translation_sum / double(moved.size());
+    for (size_t i = 0; i < moved.size(); ++i) {
+      Eigen::Isometry3d& pose = cameras->views[size_t(frames[moved[i]].view)].cam_from_world;
+      const Eigen::Isometry3d anchored = adjusted[i] * anchor;
+      change_deg.push_back(Eigen::AngleAxisd(anchored.rotation() * pose.rotation().transpose()).angle() * kDegrees);
+      change_mm.push_back((anchored.translation() - pose.translation()).norm() * 1000.0);
+      pose = anchored;
+      ++out.frames_moved;
+    }
   }
   out.median_change_deg = Median(change_deg);
   out.median_change_mm = Median(change_mm);

@@ -523,13 +523,23 @@ int BenchTrack(const std::vector<std::string>& args) {
   options.Add("bench.json", &json, "Print one JSON document instead of the table.", "json");
   options.Add("bench.out", &out, "Folder for the simulated captures and workspaces (reused).", "out");
   options.Add("bench.seeds", &seeds, "Identity seeds of the subjects (11 is talking_static's own).", "seeds");
+  std::string scene = "talking_static";
+  options.Add("bench.scene", &scene,
+              "The scene (scenes/NAME.toml) of one camera before a moving head: talking_static, head_turn, "
+              "talking_static_busy.",
+              "scene");
+  bool features = true;
+  options.Add("bench.head_pose_features", &features,
+              "Calibrate's head poses refined by features on the head's rigid part (false: from the landmarks alone, "
+              "calibrate before version 3).",
+              "head-pose-features");
   double mesh_weight = 0.4;
   options.Add("bench.mesh_weight", &mesh_weight,
               "A third row per subject: the identity columns and the face mesh at this weight (track's --mesh-weight); "
               "0 leaves it out.",
               "mesh-weight");
-  const int parsed = ParseOrExit(&options, args, "headforge bench track [--json] [--out DIR] [--seeds A,B,...]",
-                                 "Simulates talking_static with each subject, calibrates head-pose cameras and tracks\n"
+  const int parsed = ParseOrExit(&options, args, "headforge bench track [--json] [--out DIR] [--seeds A,B,...] [--scene NAME]",
+                                 "Simulates talking_static (or --scene) with each subject, calibrates head-pose cameras and tracks\n"
                                  "it with the plain landmark points and with the points' identity columns, and\n"
                                  "prints per subject and points: landmark residual, head rotation error (also after\n"
                                  "one constant rotation of the head frame, and that rotation), blendshape MAE.\n"
@@ -543,7 +553,8 @@ int BenchTrack(const std::vector<std::string>& args) {
   const int threads = settings.threads;
   FaceModel model;
   if (Status s = FaceModel::Load(settings.face_model, &model); !s.ok()) return ReportFailure(s);
-  const fs::path scene_file = fs::path(HEADFORGE_SOURCE_DIR) / "scenes" / "talking_static.toml";
+  const fs::path scene_file = fs::path(HEADFORGE_SOURCE_DIR) / "scenes" / (scene + ".toml");
+  if (!fs::exists(scene_file)) return ReportFailure(Status::NotFound("no scene " + scene_file.string()));
   std::vector<std::pair<std::string, std::string>> embeddings = {{"plain", DefaultLandmarkEmbedding()},
                                                                  {"identity columns", IdentityLandmarkEmbedding()}};
   if (mesh_weight > 0) embeddings.push_back({"identity columns and the face mesh", IdentityLandmarkEmbedding()});
@@ -556,7 +567,7 @@ int BenchTrack(const std::vector<std::string>& args) {
   std::map<std::string, std::vector<double>> rotations;
   for (int seed : seeds) {
     const std::string subject = "identity seed " + std::to_string(seed);
-    const fs::path dir = fs::path(out) / ("talking_static_identity_" + std::to_string(seed));
+    const fs::path dir = fs::path(out) / (scene + "_identity_" + std::to_string(seed));
     IngestedCapture capture;
     nlohmann::json truth;
     if (Status s = PrepareScene(scene_file, dir, model, common.data_dir, threads, "sequence", seed, false, &capture, &truth);
@@ -564,6 +575,7 @@ int BenchTrack(const std::vector<std::string>& args) {
       return ReportFailure(s.WithContext(subject));
     CalibrateOptions calibrate;
     calibrate.mode = "head-pose";
+    calibrate.head_pose.features = features;
     CameraSet cameras;
     CalibrateSummary calibrated;
     NullProgress progress;

@@ -245,7 +245,7 @@ TEST(SimulatedTrack, TalkingStatic) {
   // length (2.4% off; 40% from the mean face's landmarks alone).
   ASSERT_GE(s.focal_error, 0.0) << "calibrate did not choose head-pose cameras";
   EXPECT_LT(s.focal_error, 0.05);
-  // The head's rotation: 0.88 deg with the landmark points' identity columns
+  // The head's rotation: 0.87 deg with the landmark points' identity columns
   // (track's default for one camera) placing the head frame once for every
   // frame, over cameras whose motion features on the rigid face refined
   // (1.33 deg with each frame's pose from the landmarks).
@@ -253,7 +253,7 @@ TEST(SimulatedTrack, TalkingStatic) {
   // Most of that is where the head frame sits (a constant rotation of about
   // 1 deg that moves by degrees with sub-millimetre changes in where the
   // detector's points are taken to sit: docs/tracking.md); the head's motion
-  // relative to it is followed within 0.30 deg (0.84 from the landmarks).
+  // relative to it is followed within 0.25 deg (0.84 from the landmarks).
   EXPECT_LT(s.motion_deg, 0.5);
   // One camera: the jaw contour keeps its single-view weight.
   EXPECT_DOUBLE_EQ(s.contour_weight, 0.5);

@@ -19,6 +19,7 @@
 #include "capture/landmarks.h"
 #include "core/log.h"
 #include "core/parallel.h"
+#include "core/statistics.h"
 
 namespace headforge {
 namespace {
@@ -65,12 +66,6 @@ struct Sighting {
   int frame = 0;  // index into the frames
   int feature = 0;
 };
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
 
 int Root(std::vector<int>* parent, int x) {
   while ((*parent)[size_t(x)] != x) {

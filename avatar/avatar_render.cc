@@ -298,7 +298,6 @@ const AvatarView* FindView(const AvatarDataset& data, const std::string& camera,
   return nullptr;
 }
 
-
 // `view`'s lens (at the training size of the workspace's frame of
 // `camera_name`, which may be a crop of the source) as a lens of the
 // source's whole frame at `whole`'s size (the truth's lens there):

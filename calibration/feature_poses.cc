@@ -19,6 +19,7 @@
 #include "capture/landmarks.h"
 #include "core/log.h"
 #include "core/parallel.h"
+#include "core/rotation.h"
 #include "core/statistics.h"
 
 namespace headforge {
@@ -115,19 +116,20 @@ struct PosePriorCost {
 Status DetectFrames(const IngestedCapture& capture, const std::string& camera, const CameraSet& cameras,
                     const FeaturePoseOptions& options, std::vector<FrameFeatures>* frames) {
   const CameraIntrinsics* intrinsics = cameras.FindCamera(camera);
-  std::vector<int> views;
+  std::vector<std::pair<int, const IngestedFrame*>> views;  // a view's index, its frame
   for (int v = 0; v < static_cast<int>(cameras.views.size()); ++v) {
     const CameraView& view = cameras.views[size_t(v)];
     if (view.camera != camera || !view.registered) continue;
     const IngestedFrame* frame = capture.FindFrame(camera, view.frame);
-    if (frame != nullptr && frame->landmarks) views.push_back(v);
+    if (frame != nullptr && frame->landmarks) views.emplace_back(v, frame);
   }
-  std::sort(views.begin(), views.end(),
-            [&](int a, int b) { return cameras.views[size_t(a)].frame < cameras.views[size_t(b)].frame; });
+  std::sort(views.begin(), views.end(), [&](const auto& a, const auto& b) {
+    return cameras.views[size_t(a.first)].frame < cameras.views[size_t(b.first)].frame;
+  });
   frames->assign(views.size(), FrameFeatures());
   std::vector<Status> errors(views.size());
   ParallelFor(static_cast<int>(views.size()), options.threads, [&](int i, int) {
-    const CameraView& view = cameras.views[size_t(views[size_t(i)])];
+    const CameraView& view = cameras.views[size_t(views[size_t(i)].first)];
     const fs::path path = capture.FramePath(camera, view.frame);
     const cv::Mat image = cv::imread(path.string(), cv::IMREAD_GRAYSCALE);
     if (image.empty()) {
@@ -137,11 +139,11 @@ Status DetectFrames(const IngestedCapture& capture, const std::string& camera, c
       return;
     }
     FrameFeatures& f = (*frames)[size_t(i)];
-    f.view = views[size_t(i)];
+    f.view = views[size_t(i)].first;
     std::vector<cv::KeyPoint> keypoints;
     cv::Ptr<cv::SIFT> sift = cv::SIFT::create(0, 3, options.contrast_threshold);
-    sift->detectAndCompute(image, RigidFaceMask(*capture.FindFrame(camera, view.frame)->landmarks, image.size()),
-                           keypoints, f.descriptors);
+    sift->detectAndCompute(image, RigidFaceMask(*views[size_t(i)].second->landmarks, image.size()), keypoints,
+                           f.descriptors);
     for (const cv::KeyPoint& p : keypoints) {
       f.points.push_back(p.pt);
       f.pixels.push_back(intrinsics->Undistort(Eigen::Vector2d(p.pt.x, p.pt.y)));
@@ -392,10 +394,7 @@ Status RefineHeadPosesWithFeatures(const IngestedCapture& capture, const std::st
   }
   if (!moved.empty()) {
     Eigen::Isometry3d anchor = Eigen::Isometry3d::Identity();
-    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(rotation_sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
-    d(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1 : 1;
-    anchor.linear() = svd.matrixU() * d * svd.matrixV().transpose();
+    anchor.linear() = NearestRotation(rotation_sum);  // the chordal mean
     anchor.translation() = translation_sum / double(moved.size());
     for (size_t i = 0; i < moved.size(); ++i) {
       Eigen::Isometry3d& pose = cameras->views[size_t(frames[moved[i]].view)].cam_from_world;

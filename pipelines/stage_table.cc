@@ -74,7 +74,8 @@ const std::vector<StageEntry>& StageTable() {
     t[3].make = MakeTrackJob;
 
     t[4].name = "train";
-    t[4].version = 2;  // 2: a camera carried round a still head trains one expression on agreed (hull) masks
+    t[4].version = 3;  // 2: a camera carried round a still head trains one expression on agreed (hull) masks;
+                       // 3: the hull's strict vote 0.9 (its bust kept)
     t[4].upstream = {"ingest", "calibrate", "align", "track"};
     t[4].summary = "Train the avatar model on the tracked capture.";
     t[4].usage = "headforge train --workspace DIR [--preset draft|standard|high] [options]";

@@ -8,6 +8,7 @@
 
 #include "calibration/mesh_embedding.h"
 #include "avatar/train/dataset_options.h"
+#include "capture/capture_io.h"
 #include "core/camera_set.h"
 #include "core/face_model.h"
 #include "core/json_io.h"
@@ -116,6 +117,41 @@ Status FaceBasis(const DrivePageOptions& options, const TrackingFile& tracking, 
   return Status::Ok();
 }
 
+// The avatar's training frames' tracked weights, weight by weight: their
+// mean and spread (standard deviation), the frames training held out left
+// out as it split them (DatasetOptions' hold-out over the capture's frames).
+// The page's solve pulls each weight toward the mean, the more the narrower
+// its spread (face_drive.js, weightPull).
+Status ExpressionPrior(const fs::path& workspace, const TrackingFile& tracking, const DatasetOptions& trained,
+                       const CameraSet& cameras, nlohmann::json* prior) {
+  IngestedCapture capture;
+  HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace, &capture).WithContext("drive"));
+  const int frames = capture.num_frames();
+  const bool interleaved = trained.holdout_order == "interleaved" ||
+                           (trained.holdout_order == "auto" && cameras.WalksRoundTheHead());
+  const int every = interleaved ? HoldoutStride(trained.holdout) : 0;
+  const int first_held = interleaved ? frames : frames - HeldOutFrames(frames, trained.holdout, false);
+  const size_t k = tracking.expression_names.size();
+  std::vector<double> sum(k, 0.0), squares(k, 0.0);
+  int count = 0;
+  for (const TrackedFrame& f : tracking.frames) {
+    if (f.frame >= first_held || (every > 0 && f.frame % every == every / 2)) continue;
+    for (size_t e = 0; e < k; ++e) {
+      sum[e] += f.expression[Eigen::Index(e)];
+      squares[e] += f.expression[Eigen::Index(e)] * f.expression[Eigen::Index(e)];
+    }
+    ++count;
+  }
+  if (count == 0) return Status::DataError("drive: no tracked frame of the avatar's training frames; run headforge track");
+  std::vector<double> mean(k), spread(k);
+  for (size_t e = 0; e < k; ++e) {
+    mean[e] = sum[e] / count;
+    spread[e] = std::sqrt(std::max(0.0, squares[e] / count - mean[e] * mean[e]));
+  }
+  *prior = {{"frames", count}, {"mean", mean}, {"spread", spread}};
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status WriteDrivePage(const fs::path& out_dir, const DrivePageOptions& options, DrivePageSummary* summary) {
@@ -158,6 +194,7 @@ Status WriteDrivePage(const fs::path& out_dir, const DrivePageOptions& options, 
 
   nlohmann::json basis;
   HF_RETURN_IF_ERROR(FaceBasis(options, tracking, &basis));
+  HF_RETURN_IF_ERROR(ExpressionPrior(options.workspace, tracking, trained, cameras, &basis["expression_prior"]));
   // The face mesh works in the capture's own pixels.
   basis["camera"] = {{"fx", lens.fx}, {"fy", fy}, {"cx", lens.cx}, {"cy", lens.cy},
                      {"width", lens.width}, {"height", lens.height}};

@@ -83,6 +83,35 @@ TEST_F(DrivePage, WritesThePageAndAFaceBasisThatLandsOnTheFaceMesh) {
   ASSERT_EQ(basis["offsets"].size(), 53u);
   EXPECT_EQ(basis["expression_names"], tracking["expression_names"]);
   EXPECT_EQ(basis["oval"].size(), 36u);
+  // The weights' prior: the tracked weights' mean and spread over the frames
+  // the avatar trained on (the capture's last ones held out, as training
+  // holds them out on a fixed camera), recomputed here.
+  {
+    nlohmann::json layout;
+    ASSERT_TRUE(ReadJson(reference_ / "export" / "blendshapes" / "blendshapes.json", &layout).ok());
+    const int frames = int(tracking["frames"].size());
+    const int trained = frames - std::max(1, int(std::lround(layout["data"]["holdout"].get<double>() * frames)));
+    const nlohmann::json& prior = basis["expression_prior"];
+    ASSERT_EQ(prior["frames"], trained);
+    ASSERT_EQ(prior["mean"].size(), 53u);
+    ASSERT_EQ(prior["spread"].size(), 53u);
+    int narrow = 0;
+    for (size_t k = 0; k < 53; ++k) {
+      const std::string name = basis["expression_names"][k];
+      double sum = 0, squares = 0;
+      for (const auto& f : tracking["frames"])
+        if (f["frame"].get<int>() < trained) {
+          const double w = f["expression"][name];
+          sum += w;
+          squares += w * w;
+        }
+      const double mean = sum / trained, spread = std::sqrt(std::max(0.0, squares / trained - mean * mean));
+      EXPECT_NEAR(prior["mean"][k].get<double>(), mean, 1e-9) << name;
+      EXPECT_NEAR(prior["spread"][k].get<double>(), spread, 1e-6) << name;
+      narrow += spread < 0.02;
+    }
+    std::printf("expression prior: %d training frames, %d of 53 weights spread under 0.02\n", trained, narrow);
+  }
   // Where the tracked face model puts the mesh's points, against where the
   // face mesh found them (where ingest had the model): the embedding and
   // the tracking together.

@@ -354,7 +354,8 @@
                                         { rotation: head.rotation, translation: head.translation,
                                           weights: previous ? previous.weights : rest.weights },
                                         { temporalWeights: d.temporalWeights * scale, temporalRotation: 100 * d.temporalRotation,
-                                          temporalTranslation: 100 * d.temporalTranslation, iterations });
+                                          temporalTranslation: 100 * d.temporalTranslation, iterations,
+                                          expressionPrior: data.face.expression_prior || null });
   };
   // One frame's solve. The first frames calibrate: the driver is taken to
   // hold the avatar's rest (its expression and its pose in its camera): the

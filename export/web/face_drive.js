@@ -295,7 +295,8 @@ const HeadforgeFaceDrive = (() => {
 
   function priorCost(s, prior, o) {
     let e = 0;
-    for (let k = 0; k < s.w.length; k++) e += o.ridge * s.w[k] * s.w[k];
+    const pull = o.pull;
+    for (let k = 0; k < s.w.length; k++) e += pull.lambda[k] * (s.w[k] - pull.mean[k]) ** 2;
     if (!prior) return e;
     for (let k = 0; k < s.w.length; k++) e += o.temporalWeights * (s.w[k] - prior.w[k]) ** 2;
     const phi = logRotation(mul3(s.R, transpose3(prior.R)));
@@ -373,8 +374,8 @@ const HeadforgeFaceDrive = (() => {
   function addPriors(s, prior, o, H, g, n) {
     for (let k = 0; k + kPoseUnknowns < n; k++) {
       const j = kPoseUnknowns + k;
-      H[j * n + j] += o.ridge;
-      g[j] += o.ridge * s.w[k];
+      H[j * n + j] += o.pull.lambda[k];
+      g[j] += o.pull.lambda[k] * (s.w[k] - o.pull.mean[k]);
       if (prior) {
         H[j * n + j] += o.temporalWeights;
         g[j] += o.temporalWeights * (s.w[k] - prior.w[k]);
@@ -511,9 +512,31 @@ const HeadforgeFaceDrive = (() => {
     return { R, t, w: new Float64Array(b.K) };
   }
 
+  // The pull on each expression weight: with options.expressionPrior
+  // ({mean: [K], spread: [K]}, the avatar's training frames' tracked weights)
+  // a Gaussian prior, toward the mean and as strong as the spread is narrow,
+  // scaled as if each point's coordinates had priorNoise px of independent
+  // noise (the data term is a mean over the points, so the prior is divided
+  // by their weight); without it, the ridge toward 0. Weights the avatar
+  // never showed are then held near what it did show.
+  function weightPull(o, b) {
+    const K = b.K, p = o.expressionPrior;
+    if (!p) return { mean: new Float64Array(K), lambda: new Float64Array(K).fill(o.ridge) };
+    if (p.mean.length !== K || p.spread.length !== K)
+      throw new Error(`expressionPrior has ${p.mean.length} means and ${p.spread.length} spreads for ${K} weights`);
+    const scale = o.priorNoise * o.priorNoise / b.weightSum;
+    return {
+      mean: Float64Array.from(p.mean),
+      lambda: Float64Array.from(p.spread, (d) => o.ridge + scale / Math.max(d, o.priorMinSpread) ** 2),
+    };
+  }
+
   const kSolveDefaults = {
     ovalWeight: 0.3,             // the face oval's points, against 1 for the others
     ridge: 0.02,                 // px^2 per weight^2: pulls unseen weights to 0
+    expressionPrior: null,       // {mean, spread}: see weightPull
+    priorNoise: 1,               // px: a point's noise for expressionPrior's strength
+    priorMinSpread: 0.02,        // a weight's spread at the least (its pull at the most)
     temporalWeights: 0.05,       // px^2 per (weight - previous)^2
     temporalRotation: 100,       // px^2 per rad^2 of turn from the previous pose
     temporalTranslation: 1000,   // px^2 per m^2 of shift from the previous pose
@@ -538,6 +561,7 @@ const HeadforgeFaceDrive = (() => {
   function solveFace(points, basis, camera, previous, options = {}) {
     const o = Object.assign({}, kSolveDefaults, options);
     const b = packBasis(basis, o.ovalWeight);
+    o.pull = weightPull(o, b);
     const X = new Float64Array(kPoints * 3);
     let prior = null, s, iterations = 0;
     if (previous) {

@@ -23,7 +23,10 @@
 // --truth (a simulated capture's): the page's and track's weights are both
 // compared with the simulator's too, and the bounds apply to the page's
 // error against the truth.
-// Writes DIR/check.json and prints a table; exits 1 when a bound is missed.
+// Writes DIR/check.json (each compared solve's weights and pose among its
+// rows: scripts/web/drive_error_split.cjs splits the drawing's difference
+// from render's between them) and prints a table; exits 1 when a bound is
+// missed.
 const fs = require('fs');
 const path = require('path');
 const { execFileSync } = require('child_process');
@@ -205,7 +208,8 @@ for (const solve of state.solves) {
               turn_vs_track_deg: angleDeg(pageTurn, turn(poses.get(m.frame), poses.get(0))),
               rotation_deg: self ? angleDeg(solve.cam_from_head, poses.get(m.frame)) : null,
               shift_mm: self ? shiftMm(solve.cam_from_head, poses.get(m.frame)) : null,
-              residual_px: solve.residual_px, ms_network: solve.ms_network, ms_solve: solve.ms_solve });
+              residual_px: solve.residual_px, ms_network: solve.ms_network, ms_solve: solve.ms_solve,
+              weights: Array.from(solve.weights), cam_from_head: Array.from(solve.cam_from_head) });
 }
 const mean = (xs) => xs.reduce((s, x) => s + x, 0) / Math.max(1, xs.length);
 const median = (xs) => { const s = [...xs].sort((a, b) => a - b); return s.length ? (s[(s.length - 1) >> 1] + s[s.length >> 1]) / 2 : NaN; };

@@ -141,10 +141,12 @@ async function searchCheck(tf, model, camera, first, lens) {
 }
 
 // solveFace over a sequence of point sets (null: no points, the chain restarts).
-function runSolver(sequence, basis, lens, truth, names) {
+// options: solveFace's (e.g. the basis' expression prior).
+function runSolver(sequence, basis, lens, truth, names, options = {}) {
   const K = names.length, watched = ['jawOpen', 'eyeBlink_L', 'eyeBlink_R'];
   const err = Object.fromEntries(watched.map((n) => [n, []]));
-  const all = [], rot = [], trans = [], ms = [], residual = [], iterations = [];
+  const all = [], rot = [], trans = [], ms = [], residual = [], iterations = [], perWeight = new Float64Array(K);
+  const depth = [];  // the head's distance from the camera against track's (mm)
   let previous = null;
   sequence.forEach((points, f) => {
     if (!points) {
@@ -152,7 +154,7 @@ function runSolver(sequence, basis, lens, truth, names) {
       return;
     }
     const t0 = now();
-    const r = Drive.solveFace(points, basis, lens, previous);
+    const r = Drive.solveFace(points, basis, lens, previous, options);
     const t1 = now();
     if (previous) ms.push(t1 - t0);
     previous = r;
@@ -161,15 +163,26 @@ function runSolver(sequence, basis, lens, truth, names) {
     const tr = truth[f];
     for (const n of watched) err[n].push(Math.abs(r.weights[names.indexOf(n)] - tr.weights[n]));
     let sum = 0;
-    for (let k = 0; k < K; k++) sum += Math.abs(r.weights[k] - (tr.weights[names[k]] || 0));
+    for (let k = 0; k < K; k++) {
+      const e = Math.abs(r.weights[k] - (tr.weights[names[k]] || 0));
+      sum += e;
+      perWeight[k] += e;
+    }
     all.push(sum / K);
     rot.push(Drive.rotationAngleDeg(Drive.mul3(r.rotation, Drive.transpose3(tr.R))));
     trans.push(Math.hypot(...r.translation.map((x, c) => x - tr.t[c])) * 1000);
+    depth.push((r.translation[2] - tr.t[2]) * 1000);
   });
   const out = { frames: rot.length, rotation_deg_median: median(rot), rotation_deg_max: Math.max(...rot),
                 translation_mm_median: median(trans), all_weights_mae: mean(all), residual_px_median: median(residual),
                 iterations_mean: mean(iterations), ms_per_solve_median: median(ms), ms_per_solve_max: Math.max(...ms) };
   for (const n of watched) out[n + '_mae'] = mean(err[n]);
+  // How far the head's distance strays from track's over the frames, from
+  // the first's: the calibration sets the first.
+  out.depth_from_first_mm = { min: Math.min(...depth) - depth[0], max: Math.max(...depth) - depth[0] };
+  // The five weights furthest from track's (mean absolute).
+  out.worst_weights = [...perWeight].map((e, k) => [names[k], e / Math.max(1, rot.length)])
+    .sort((a, b) => b[1] - a[1]).slice(0, 5);
   return out;
 }
 
@@ -200,11 +213,14 @@ function printTable(report) {
   line('network run (ms, 1 crop, median)', t.run_ms_median.toFixed(1));
   line('search, 640x480 (ms, median)', t.search_ms_median.toFixed(0));
   line('search (scale@x,y: px or lost)', t.searches.map((r) => `${r.scale}@${r.x0},${r.y0}: ${r.found ? r.px.toFixed(1) : 'lost'}`).join('  '));
-  console.log('  ' + 'solveFace fed'.padEnd(24) + ['jawOpen', 'blink_L', 'blink_R', 'all53', 'rot deg', 'trans mm', 'resid px', 'iters', 'ms'].map((s) => s.padStart(9)).join(''));
+  console.log('  ' + 'solveFace fed'.padEnd(30) + ['jawOpen', 'blink_L', 'blink_R', 'all53', 'rot deg', 'trans mm', 'resid px', 'iters', 'ms'].map((s) => s.padStart(9)).join(''));
   for (const [name, s] of Object.entries(report.solve)) {
     const v = [s.jawOpen_mae, s.eyeBlink_L_mae, s.eyeBlink_R_mae, s.all_weights_mae, s.rotation_deg_median,
                s.translation_mm_median, s.residual_px_median, s.iterations_mean, s.ms_per_solve_median];
-    console.log('  ' + name.padEnd(24) + v.map((x, i) => x.toFixed(i < 4 ? 3 : 2).padStart(9)).join(''));
+    console.log('  ' + name.padEnd(30) + v.map((x, i) => x.toFixed(i < 4 ? 3 : 2).padStart(9)).join(''));
+    console.log('  ' + ''.padEnd(30) + `distance against track's, from the first frame's: ${s.depth_from_first_mm.min.toFixed(1)} ` +
+                `to ${s.depth_from_first_mm.max.toFixed(1)} mm`);
+    console.log('  ' + ''.padEnd(30) + 'furthest: ' + s.worst_weights.map(([n, e]) => `${n} ${e.toFixed(3)}`).join(', '));
   }
 }
 
@@ -251,6 +267,13 @@ function printTable(report) {
     'JS tracker': runSolver(js, basis, lens, truthSeq, names),
     'JS tracker, calibrated': runSolver(js, calibrated(js), lens, truthSeq, names),
   };
+  // With the avatar's training expressions as the weights' prior (the
+  // page's way, where the basis carries it).
+  if (basis.expression_prior) {
+    const prior = { expressionPrior: basis.expression_prior };
+    report.solve['C++ mesh, calibrated, prior'] = runSolver(cpp, calibrated(cpp), lens, truthSeq, names, prior);
+    report.solve['JS tracker, calibrated, prior'] = runSolver(js, calibrated(js), lens, truthSeq, names, prior);
+  }
   const cold = [];
   for (const f of frames.slice(0, 10)) if (f.mesh) {
     const t0 = now();
@@ -262,7 +285,7 @@ function printTable(report) {
   console.log('  first-frame solve (no previous): ' + report.solve_first_frame_ms_median.toFixed(1) + ' ms median');
   const misses = [];
   for (const [name, s] of Object.entries(report.solve)) {
-    if (!name.endsWith('calibrated')) continue;  // the targets hold for the page's way
+    if (!name.includes('calibrated')) continue;  // the targets hold for the page's way
     for (const w of ['jawOpen', 'eyeBlink_L', 'eyeBlink_R']) if (!(s[w + '_mae'] <= 0.1)) misses.push(`${name}: ${w} ${s[w + '_mae'].toFixed(3)} > 0.1`);
     if (!(s.rotation_deg_median <= 3)) misses.push(`${name}: rotation ${s.rotation_deg_median.toFixed(2)} deg > 3`);
   }

@@ -7,14 +7,17 @@
 //    once more from its mesh: the crop and network alone);
 //  - solveFace, frame by frame with `previous`, fed the C++ mesh points and
 //    the tracker's, against tracking.json: mean absolute error of jawOpen and
-//    the blinks, the head's camera-frame rotation error, and times.
+//    the blinks, the head's camera-frame rotation error and its turn since
+//    the first frame against track's, and times.
 // The solver runs with the basis as exported and with its neutral calibrated
 // on the first frames (calibrateNeutral over --calibration-frames, 10, taken
 // as a neutral face): the page's way, since the face mesh places its points,
 // the lips' and the chin's above all, unlike the 68 points the basis' subject
 // was tracked with. Prints a table, writes --out FILE (JSON) and exits 1 when a target
 // is missed on the calibrated runs (weights <= 0.1 mean absolute error,
-// rotation <= 3 deg median).
+// turn since the first frame <= 3 deg median: the page draws the head's
+// motion since its calibration on the avatar's rest pose, so a constant
+// offset of the camera-frame rotation does not reach the drawing).
 //   node scripts/web/face_drive_check.cjs --workspace WS --basis BASIS.json [--frames N] [--out FILE]
 //        [--calibration-frames 10] [--backend wasm|cpu] [--threads 1]
 // BASIS.json: the drive basis `headforge export --formats drive` writes.
@@ -147,6 +150,8 @@ function runSolver(sequence, basis, lens, truth, names, options = {}) {
   const err = Object.fromEntries(watched.map((n) => [n, []]));
   const all = [], rot = [], trans = [], ms = [], residual = [], iterations = [], perWeight = new Float64Array(K);
   const depth = [];  // the head's distance from the camera against track's (mm)
+  const turn = [];   // the head's turn since the first frame against track's (deg)
+  let firstR = null, firstTruthR = null;
   let previous = null;
   sequence.forEach((points, f) => {
     if (!points) {
@@ -170,10 +175,14 @@ function runSolver(sequence, basis, lens, truth, names, options = {}) {
     }
     all.push(sum / K);
     rot.push(Drive.rotationAngleDeg(Drive.mul3(r.rotation, Drive.transpose3(tr.R))));
+    if (!firstR) [firstR, firstTruthR] = [r.rotation, tr.R];
+    turn.push(Drive.rotationAngleDeg(Drive.mul3(Drive.mul3(r.rotation, Drive.transpose3(firstR)),
+                                                Drive.transpose3(Drive.mul3(tr.R, Drive.transpose3(firstTruthR))))));
     trans.push(Math.hypot(...r.translation.map((x, c) => x - tr.t[c])) * 1000);
     depth.push((r.translation[2] - tr.t[2]) * 1000);
   });
   const out = { frames: rot.length, rotation_deg_median: median(rot), rotation_deg_max: Math.max(...rot),
+                turn_deg_median: median(turn),
                 translation_mm_median: median(trans), all_weights_mae: mean(all), residual_px_median: median(residual),
                 iterations_mean: mean(iterations), ms_per_solve_median: median(ms), ms_per_solve_max: Math.max(...ms) };
   for (const n of watched) out[n + '_mae'] = mean(err[n]);
@@ -213,9 +222,9 @@ function printTable(report) {
   line('network run (ms, 1 crop, median)', t.run_ms_median.toFixed(1));
   line('search, 640x480 (ms, median)', t.search_ms_median.toFixed(0));
   line('search (scale@x,y: px or lost)', t.searches.map((r) => `${r.scale}@${r.x0},${r.y0}: ${r.found ? r.px.toFixed(1) : 'lost'}`).join('  '));
-  console.log('  ' + 'solveFace fed'.padEnd(30) + ['jawOpen', 'blink_L', 'blink_R', 'all53', 'rot deg', 'trans mm', 'resid px', 'iters', 'ms'].map((s) => s.padStart(9)).join(''));
+  console.log('  ' + 'solveFace fed'.padEnd(30) + ['jawOpen', 'blink_L', 'blink_R', 'all53', 'rot deg', 'turn deg', 'trans mm', 'resid px', 'iters', 'ms'].map((s) => s.padStart(9)).join(''));
   for (const [name, s] of Object.entries(report.solve)) {
-    const v = [s.jawOpen_mae, s.eyeBlink_L_mae, s.eyeBlink_R_mae, s.all_weights_mae, s.rotation_deg_median,
+    const v = [s.jawOpen_mae, s.eyeBlink_L_mae, s.eyeBlink_R_mae, s.all_weights_mae, s.rotation_deg_median, s.turn_deg_median,
                s.translation_mm_median, s.residual_px_median, s.iterations_mean, s.ms_per_solve_median];
     console.log('  ' + name.padEnd(30) + v.map((x, i) => x.toFixed(i < 4 ? 3 : 2).padStart(9)).join(''));
     console.log('  ' + ''.padEnd(30) + `distance against track's, from the first frame's: ${s.depth_from_first_mm.min.toFixed(1)} ` +
@@ -287,7 +296,9 @@ function printTable(report) {
   for (const [name, s] of Object.entries(report.solve)) {
     if (!name.includes('calibrated')) continue;  // the targets hold for the page's way
     for (const w of ['jawOpen', 'eyeBlink_L', 'eyeBlink_R']) if (!(s[w + '_mae'] <= 0.1)) misses.push(`${name}: ${w} ${s[w + '_mae'].toFixed(3)} > 0.1`);
-    if (!(s.rotation_deg_median <= 3)) misses.push(`${name}: rotation ${s.rotation_deg_median.toFixed(2)} deg > 3`);
+    // The page places the head's motion since its calibration on the
+    // avatar's rest, so its turn since the first frame is what it draws.
+    if (!(s.turn_deg_median <= 3)) misses.push(`${name}: turn since the first frame ${s.turn_deg_median.toFixed(2)} deg > 3`);
   }
   report.misses = misses;
   if (args.out) fs.writeFileSync(args.out, JSON.stringify(report, null, 1) + '\n');

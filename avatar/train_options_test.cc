@@ -145,5 +145,32 @@ TEST(ModelTable, TrainedAndExportedModelsHaveTheirOwnFolders) {
   EXPECT_NE(s.message().find("export --formats blendshapes"), std::string::npos) << s.message();
 }
 
+// The hold-out's split: the last frames, or interleaved from the middle of
+// the first stride; HeldOutFrames counts what it holds out.
+TEST(HoldoutSplit, HoldsOutTheLastFramesOrEveryStrideth) {
+  const HoldoutSplit last = SplitFrames(75, 0.2, false);
+  EXPECT_EQ(last.first_test_frame, 60);
+  EXPECT_FALSE(last.HeldOut(59));
+  EXPECT_TRUE(last.HeldOut(60));
+  EXPECT_TRUE(last.HeldOut(74));
+  const HoldoutSplit every = SplitFrames(12, 0.2, true);  // a stride of 5: frames 2, 7
+  EXPECT_EQ(every.every, 5);
+  std::vector<int> held;
+  for (int f = 0; f < 12; ++f)
+    if (every.HeldOut(f)) held.push_back(f);
+  EXPECT_EQ(held, (std::vector<int>{2, 7}));
+  for (const bool interleaved : {false, true})
+    for (const int frames : {5, 12, 75, 150}) {
+      const HoldoutSplit split = SplitFrames(frames, 0.25, interleaved);
+      int count = 0;
+      for (int f = 0; f < frames; ++f) count += split.HeldOut(f);
+      EXPECT_EQ(count, HeldOutFrames(frames, 0.25, interleaved)) << frames << (interleaved ? " interleaved" : " last");
+    }
+  EXPECT_TRUE(HoldoutInterleaved("interleaved", false));
+  EXPECT_TRUE(HoldoutInterleaved("auto", true));
+  EXPECT_FALSE(HoldoutInterleaved("auto", false));
+  EXPECT_FALSE(HoldoutInterleaved("last", true));
+}
+
 }  // namespace
 }  // namespace headforge

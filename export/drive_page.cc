@@ -126,16 +126,13 @@ Status ExpressionPrior(const fs::path& workspace, const TrackingFile& tracking, 
                        const CameraSet& cameras, nlohmann::json* prior) {
   IngestedCapture capture;
   HF_RETURN_IF_ERROR(ReadIngestedCapture(workspace, &capture).WithContext("drive"));
-  const int frames = capture.num_frames();
-  const bool interleaved = trained.holdout_order == "interleaved" ||
-                           (trained.holdout_order == "auto" && cameras.WalksRoundTheHead());
-  const int every = interleaved ? HoldoutStride(trained.holdout) : 0;
-  const int first_held = interleaved ? frames : frames - HeldOutFrames(frames, trained.holdout, false);
+  const HoldoutSplit split = SplitFrames(capture.num_frames(), trained.holdout,
+                                         HoldoutInterleaved(trained.holdout_order, cameras.WalksRoundTheHead()));
   const size_t k = tracking.expression_names.size();
   std::vector<double> sum(k, 0.0), squares(k, 0.0);
   int count = 0;
   for (const TrackedFrame& f : tracking.frames) {
-    if (f.frame >= first_held || (every > 0 && f.frame % every == every / 2)) continue;
+    if (split.HeldOut(f.frame)) continue;
     for (size_t e = 0; e < k; ++e) {
       sum[e] += f.expression[Eigen::Index(e)];
       squares[e] += f.expression[Eigen::Index(e)] * f.expression[Eigen::Index(e)];

@@ -192,16 +192,11 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   if (options.holdout_order != "auto" && options.holdout_order != "last" && options.holdout_order != "interleaved")
     return Status::InvalidArgument("--holdout-order must be auto, last or interleaved, not '" + options.holdout_order +
                                    "'");
-  const bool interleaved =
-      options.holdout_order == "interleaved" ||
-      (options.holdout_order == "auto" && cameras.WalksRoundTheHead());
+  const bool interleaved = HoldoutInterleaved(options.holdout_order, cameras.WalksRoundTheHead());
   const int held = HeldOutFrames(frames, options.holdout, interleaved);
-  if (interleaved) {
-    out.holdout_every = HoldoutStride(options.holdout);
-    out.first_test_frame = frames;
-  } else {
-    out.first_test_frame = frames - held;
-  }
+  const HoldoutSplit split = SplitFrames(frames, options.holdout, interleaved);
+  out.first_test_frame = split.first_test_frame;
+  out.holdout_every = split.every;
   if (frames - held < options.min_train_frames)
     return Status::DataError("the capture has " + std::to_string(frames) + " frames: the model needs at least " +
                              std::to_string(options.min_train_frames) + " to train on besides the " +

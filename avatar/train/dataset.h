@@ -96,9 +96,7 @@ struct AvatarDataset {
   // "face", "head_and_neck", ...; empty for a model without them).
   std::map<std::string, std::pair<int, int>> mesh_parts;
 
-  bool HeldOut(int frame) const {
-    return frame >= first_test_frame || (holdout_every > 0 && frame % holdout_every == holdout_every / 2);
-  }
+  bool HeldOut(int frame) const { return HoldoutSplit{first_test_frame, holdout_every}.HeldOut(frame); }
   // The frame latent `view` is drawn with in training: its own, or frame 0's
   // when every view shows one state of the head.
   int64_t TrainingLatent(const AvatarView& view) const { return one_state ? 0 : view.frame; }

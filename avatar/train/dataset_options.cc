@@ -51,4 +51,19 @@ int HeldOutFrames(int frames, double holdout, bool interleaved) {
   return held;
 }
 
+bool HoldoutInterleaved(const std::string& holdout_order, bool walks_round_the_head) {
+  return holdout_order == "interleaved" || (holdout_order == "auto" && walks_round_the_head);
+}
+
+HoldoutSplit SplitFrames(int frames, double holdout, bool interleaved) {
+  HoldoutSplit split;
+  if (interleaved) {
+    split.every = HoldoutStride(holdout);
+    split.first_test_frame = frames;
+  } else {
+    split.first_test_frame = frames - HeldOutFrames(frames, holdout, false);
+  }
+  return split;
+}
+
 }  // namespace headforge

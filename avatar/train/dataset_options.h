@@ -67,4 +67,18 @@ int HeldOutFrames(int frames, double holdout, bool interleaved);
 // The interleaved hold-out's stride: round(1 / holdout), 2 at least.
 int HoldoutStride(double holdout);
 
+// Which of a capture's frames training holds out: every frame from
+// first_test_frame on and, with `every` > 0 (interleaved), every frame f
+// with f % every == every / 2.
+struct HoldoutSplit {
+  int first_test_frame = 0;
+  int every = 0;
+  bool HeldOut(int frame) const { return frame >= first_test_frame || (every > 0 && frame % every == every / 2); }
+};
+// The split HeldOutFrames counts: the last ones, or interleaved.
+HoldoutSplit SplitFrames(int frames, double holdout, bool interleaved);
+// Whether the hold-out is interleaved: --holdout-order interleaved, or auto
+// on a capture whose camera walks round the head (CameraSet::WalksRoundTheHead).
+bool HoldoutInterleaved(const std::string& holdout_order, bool walks_round_the_head);
+
 }  // namespace headforge

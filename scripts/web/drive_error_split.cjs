@@ -44,6 +44,13 @@ const tracking = readJson(path.join(ws, 'tracking.json'));
 const names = readJson(path.join(ws, 'export', 'drive', 'face_basis.json')).expression_names;
 const cameras = readJson(path.join(ws, 'cameras_head.json'));
 const lens = cameras.cameras[0].name;
+const median = (xs) => { const s = [...xs].sort((a, b) => a - b); return (s[(s.length - 1) >> 1] + s[s.length >> 1]) / 2; };
+const viewOf = (frame) => cameras.views.find((v) => v.camera === lens && v.frame === frame).cam_from_world;
+// Track's camera-from-head pose of a tracking frame record: V M, 3 x 4.
+const trackPose = (f) => {
+  const V = viewOf(f.frame), M = f.head_motion;
+  return [0, 1, 2].map((i) => [0, 1, 2, 3].map((j) => [0, 1, 2, 3].reduce((s, k) => s + V[i][k] * M[k][j], 0)));
+};
 
 // head_motion for the page's camera-from-head pose P (row-major 3 x 4) seen
 // through view V (4 x 4): V^-1 P.
@@ -81,16 +88,14 @@ const pageWeights = (f, r) => names.forEach((n, k) => { f.expression[n] = r.weig
 // part: 'turn' keeps track's place of the head (its origin in the camera),
 // 'place' keeps track's turn; otherwise the page's whole pose.
 const pagePose = (f, r, part) => {
-  const view = cameras.views.find((v) => v.camera === lens && v.frame === f.frame);
   const P = Array.from(r.cam_from_head);
   if (part) {
-    const V = view.cam_from_world, M = f.head_motion;  // track's: cam_from_head = V M
-    const T = [0, 1, 2].map((i) => [0, 1, 2, 3].map((j) => [0, 1, 2, 3].reduce((s, k) => s + V[i][k] * M[k][j], 0)));
+    const T = trackPose(f);
     for (let i = 0; i < 3; ++i)
       for (let j = 0; j < 4; ++j)
         if ((part === 'turn') === (j === 3)) P[4 * i + j] = T[i][j];
   }
-  f.head_motion = headMotion(view.cam_from_world, P);
+  f.head_motion = headMotion(viewOf(f.frame), P);
 };
 (async () => {
   fs.mkdirSync(out, { recursive: true });
@@ -113,22 +118,18 @@ const pagePose = (f, r, part) => {
   // The page's head against track's in the camera, over every compared
   // solve (mm; x right, y down, z away).
   const shift = rows.map((r) => {
-    const f = tracking.frames.find((t) => t.frame === r.frame), M = f.head_motion;
-    const V = cameras.views.find((v) => v.camera === lens && v.frame === r.frame).cam_from_world;
-    return [0, 1, 2].map((i) => 1000 * (r.cam_from_head[4 * i + 3] - [0, 1, 2, 3].reduce((s, k) => s + V[i][k] * M[k][3], 0)));
+    const T = trackPose(tracking.frames.find((t) => t.frame === r.frame));
+    return [0, 1, 2].map((i) => 1000 * (r.cam_from_head[4 * i + 3] - T[i][3]));
   });
-  const med = (xs) => { const s = [...xs].sort((a, b) => a - b); return (s[(s.length - 1) >> 1] + s[s.length >> 1]) / 2; };
   result.shift_mm = ['x', 'y', 'z'].map((axis, c) => ({
-    axis, mean: shift.reduce((s, d) => s + d[c], 0) / shift.length, median_abs: med(shift.map((d) => Math.abs(d[c]))),
+    axis, mean: shift.reduce((s, d) => s + d[c], 0) / shift.length, median_abs: median(shift.map((d) => Math.abs(d[c]))),
     max_abs: Math.max(...shift.map((d) => Math.abs(d[c]))) }));
   for (const [name, image] of Object.entries(variants)) {
     const psnr = [];
     for (const frame of frames)
       psnr.push((await page.evaluate(comparePixels, [image(frame), track(frame),
                                                       path.join(ws, 'masks', lens, `${pad(frame)}.png`)].map(url))).psnr);
-    const sorted = [...psnr].sort((a, b) => a - b), n = sorted.length;
-    result.variants[name] = { psnr, mean: psnr.reduce((s, x) => s + x, 0) / n,
-                              median: (sorted[(n - 1) >> 1] + sorted[n >> 1]) / 2 };
+    result.variants[name] = { psnr, mean: psnr.reduce((s, x) => s + x, 0) / psnr.length, median: median(psnr) };
   }
   await browser.close();
   fs.writeFileSync(path.join(out, 'split.json'), JSON.stringify(result, null, 1));

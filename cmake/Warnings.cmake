@@ -15,8 +15,12 @@ endif()
 # Every test carries a tier label (ctest -L): unit (one module, seconds),
 # integration (the real binary or several stages), colmap (runs COLMAP),
 # train (trains a model), gpu (needs an NVIDIA GPU).
+# FIGURES "Suite.Test:Suite.Other" names the test cases that check an
+# accuracy figure on a benchmark's input rather than a mechanism: they take
+# the label "figure" beside their tier ("integration-figure") and
+# scripts/test.sh leaves them out unless asked (--figures).
 function(headforge_add_test name)
-  cmake_parse_arguments(ARG "WHOLE" "" "SOURCES;LIBS;LABELS;ARGS" ${ARGN})
+  cmake_parse_arguments(ARG "WHOLE" "FIGURES" "SOURCES;LIBS;LABELS;ARGS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main headforge_warnings)
   target_compile_definitions(${name} PRIVATE
@@ -35,6 +39,11 @@ function(headforge_add_test name)
   if(ARG_WHOLE)
     add_test(NAME ${name} COMMAND ${name} ${ARG_ARGS})
     set_tests_properties(${name} PROPERTIES LABELS "${label}" ENVIRONMENT "OMP_NUM_THREADS=1")
+  elseif(ARG_FIGURES)
+    gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 TEST_FILTER "-${ARG_FIGURES}"
+      PROPERTIES LABELS "${label}" ENVIRONMENT "OMP_NUM_THREADS=1")
+    gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 TEST_FILTER "${ARG_FIGURES}"
+      PROPERTIES LABELS "${label}-figure" ENVIRONMENT "OMP_NUM_THREADS=1")
   else()
     gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${label}" ENVIRONMENT "OMP_NUM_THREADS=1")
   endif()

@@ -1,7 +1,15 @@
 #!/usr/bin/env bash
-# The test command: installs what is missing, builds, and runs every test.
-#   scripts/test.sh [ctest arguments...]
+# The test command: installs what is missing, builds, and runs the tests.
+#   scripts/test.sh [--figures] [ctest arguments...]
+# Without --figures the tests labelled "figure" (an accuracy figure measured
+# on a benchmark's input, minutes each) are left out, as in CI; with it they
+# run too. Any -L/-LE given is passed on as it is.
 set -euo pipefail
+figures=0
+if [ "${1:-}" = "--figures" ]; then
+  figures=1
+  shift
+fi
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${HEADFORGE_BUILD_DIR:-$root/build}"
 "$root/scripts/install_deps.sh"
@@ -24,4 +32,11 @@ if [ ! -f "$costs" ]; then
   mkdir -p "$(dirname "$costs")"
   cp "$root/tests/ctest_costs.txt" "$costs"
 fi
-ctest --output-on-failure --parallel "$(nproc)" --timeout 900 "$@"
+select=()
+if [ "$figures" = 0 ]; then
+  select=(-LE figure)
+  for a in "$@"; do
+    case "$a" in -L|-LE|--label-regex|--label-exclude) select=() ;; esac
+  done
+fi
+ctest --output-on-failure --parallel "$(nproc)" --timeout 900 "${select[@]}" "$@"

@@ -216,14 +216,14 @@ SimulatedScores ScoreSimulated(const fs::path& root, const std::string& scene, i
 // `headforge run` on the simulated scene; `shared` puts it among the shared
 // workspaces (for a test that only reads it).
 SimulatedScores RunSimulated(const std::string& scene, int frames, const std::vector<std::string>& animated,
-                             bool shared) {
+                             bool shared, const std::vector<std::string>& shared_options = {}) {
   const fs::path capture = SharedSimulation(scene, frames);
   const fs::path root = Scratch(scene);
   fs::create_directories(root);
   fs::create_directory_symlink(capture, root / "capture");
   const std::string name = scene + "_" + std::to_string(frames);
   if (shared) {
-    fs::create_directory_symlink(SharedRun(name + "_run", SimulatedInputs(capture)), root / "ws");
+    fs::create_directory_symlink(SharedRun(name + "_run", SimulatedInputs(capture), shared_options), root / "ws");
   } else {
     // Nothing here reads the overlay videos (GridTrack checks them).
     std::vector<std::string> args = {"run",         "--until",         "track", "--workspace",
@@ -363,11 +363,13 @@ TEST(TruthWorkspace, DrawsTheTrueMeshWhereTheSimulatorDid) {
 // (0.8 s; 160 views, 30 s of the suite where the whole scene took 220),
 // through the default `headforge run`: several videos are ingested whole,
 // COLMAP places the cameras from one instant, align puts them in the head
-// frame, and every frame is fitted from all views jointly.
+// frame, and every frame is fitted from all views jointly. The workspace is
+// shared with the figure test below, which tracks and aligns a copy of it.
 constexpr int kRigFrames = 20;
+const std::vector<std::string> kRigAnimated = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"};
+
 TEST(SimulatedTrack, Rig8Cam) {
-  const std::vector<std::string> animated = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"};
-  const SimulatedScores s = RunSimulated("rig_8cam", kRigFrames, animated, false);
+  const SimulatedScores s = RunSimulated("rig_8cam", kRigFrames, kRigAnimated, true, {"--overlay=false"});
   // The cameras of a frame see the head from 120 deg apart, so each view uses the
   // detector's points as seen from its side (the shipped view grid) and the
   // jaw contour, which each view draws on its own silhouette, weighs 0.05
@@ -390,21 +392,29 @@ TEST(SimulatedTrack, Rig8Cam) {
   // The eight cameras mostly agree: 0 of the 160 views were left out.
   EXPECT_LE(s.dropped_views, 8);
   EXPECT_DOUBLE_EQ(s.contour_weight, 0.05);
+}
 
-  // The same workspace tracked again with one set of points for every view
-  // (the plain embedding, measured within 25 deg of frontal): the turned
-  // views' contour and inner points then disagree with the frontal ones.
-  // Over five runs: rotation 1.91-2.53 deg (0.56-1.63 above the default's
-  // on the same cameras), jawOpen 0.081-0.101, mouthSmile_L 0.168-0.259,
-  // residual 1.46-1.50 px (0.01-0.11 above the default's; over the whole
-  // scene 0.17-0.18 above).
-  const fs::path root = fs::temp_directory_path() / "hf_track_rig_8cam";  // RunSimulated's
+// A figure (label "figure", scripts/test.sh --figures): what the rig's
+// defaults are worth. A copy of the workspace above tracked again with one
+// set of points for every view (the plain embedding, measured within 25 deg
+// of frontal): the turned views' contour and inner points then disagree
+// with the frontal ones. Over five runs: rotation 1.91-2.53 deg (0.56-1.63
+// above the default's on the same cameras), jawOpen 0.081-0.101,
+// mouthSmile_L 0.168-0.259, residual 1.46-1.50 px (0.01-0.11 above the
+// default's; over the whole scene 0.17-0.18 above).
+TEST(SimulatedTrack, Rig8CamViewGridAndSurfaceFitFigures) {
+  const fs::path capture = SharedSimulation("rig_8cam", kRigFrames);
+  const fs::path root = Scratch("rig_8cam_figures");
+  fs::create_directories(root);
+  fs::create_directory_symlink(capture, root / "capture");
+  CopyOf(SharedRun("rig_8cam_20_run", SimulatedInputs(capture), {"--overlay=false"}), root / "ws");
+  const SimulatedScores s = ScoreSimulated(root, "rig_8cam", kRigFrames, kRigAnimated);
   const Result track = Headforge({"track", "--workspace", (root / "ws").string(), "--overlay=false",
                                   "--track-landmark-embedding",
                                   (fs::path(HEADFORGE_TEST_SOURCE_DIR) / "data" / "ict_dlib68_landmark_embedding.json").string()});
   ASSERT_EQ(track.code, 0) << track.err;
   const SimulatedScores plain =
-      ScoreSimulated(root, "rig_8cam (one set of points for every view)", kRigFrames, animated);
+      ScoreSimulated(root, "rig_8cam (one set of points for every view)", kRigFrames, kRigAnimated);
   EXPECT_GT(plain.residual_px, s.residual_px);
   EXPECT_GT(plain.rotation_deg, s.rotation_deg + 0.3);
   EXPECT_GT(plain.mae.at("jawOpen"), s.mae.at("jawOpen"));

@@ -6,7 +6,7 @@ if(HEADFORGE_ARCH)
   target_compile_options(headforge_warnings INTERFACE -march=${HEADFORGE_ARCH})
 endif()
 
-# headforge_add_test(NAME [WHOLE] SOURCES... LIBS... LABELS...): one gtest
+# headforge_add_test(NAME [WHOLE] [UNITY] SOURCES... LIBS... LABELS...): one gtest
 # executable registered with ctest, a ctest entry per test case, or one entry
 # for the whole executable with WHOLE (for suites sharing an expensive set-up,
 # and for the unit binaries: a process per test case started each one's
@@ -20,8 +20,14 @@ endif()
 # the label "figure" beside their tier ("integration-figure") and
 # scripts/test.sh leaves them out unless asked (--figures).
 function(headforge_add_test name)
-  cmake_parse_arguments(ARG "WHOLE" "FIGURES" "SOURCES;LIBS;LABELS;ARGS" ${ARGN})
+  cmake_parse_arguments(ARG "WHOLE;UNITY" "FIGURES" "SOURCES;LIBS;LABELS;ARGS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
+  # Test files each keep their own helpers in an anonymous namespace; only
+  # the binaries whose files are many and heavy (UNITY) are compiled in
+  # batches (HEADFORGE_UNITY_BUILD).
+  if(NOT ARG_UNITY)
+    set_target_properties(${name} PROPERTIES UNITY_BUILD OFF)
+  endif()
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main headforge_warnings)
   target_compile_definitions(${name} PRIVATE
     HEADFORGE_TEST_SHARED_DATA="${HEADFORGE_SHARED_DATA}"

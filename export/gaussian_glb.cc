@@ -11,9 +11,6 @@ namespace {
 
 constexpr float kShC0 = 0.28209479177387814f;  // the degree-0 real spherical harmonic
 constexpr size_t kAttributes = 13;            // a blendshape's attributes per Gaussian
-// Offsets at most this large (metres, log-scale units, SH) are left out of
-// the sparse targets: a micrometre.
-constexpr float kMorphEpsilon = 1e-6f;
 
 // The KHR_gaussian_splatting primitive of `splats` in `gltf`'s model.
 Status SplatPrimitive(const AvatarSplats& splats, GltfBuilder* gltf, tinygltf::Primitive* primitive) {
@@ -111,10 +108,10 @@ Status WriteGaussianBlendshapeGlb(const fs::path& path, const AvatarBlendshapes&
       rotation[4 * i + 3] = d[3] / length;  // w
     }
     const int rotations = gltf.Floats(rotation, 4, false, TINYGLTF_TARGET_ARRAY_BUFFER);
-    primitive.targets.push_back({{"POSITION", gltf.SparseVec3(position, kMorphEpsilon)},
+    primitive.targets.push_back({{"POSITION", gltf.SparseVec3(position)},
                                  {"KHR_gaussian_splatting:ROTATION", rotations},
-                                 {"KHR_gaussian_splatting:SCALE", gltf.SparseVec3(scale, kMorphEpsilon)},
-                                 {"KHR_gaussian_splatting:SH_DEGREE_0_COEF_0", gltf.SparseVec3(sh, kMorphEpsilon)}});
+                                 {"KHR_gaussian_splatting:SCALE", gltf.SparseVec3(scale)},
+                                 {"KHR_gaussian_splatting:SH_DEGREE_0_COEF_0", gltf.SparseVec3(sh)}});
   }
   tinygltf::Mesh mesh;
   mesh.name = "gaussian_blendshapes";

@@ -26,7 +26,10 @@ class GltfBuilder {
   // A VEC3 float accessor stored sparsely: zero except the elements whose
   // largest component exceeds `epsilon` in magnitude (morph targets, which
   // move a part of the mesh). Bounds over every element.
-  int SparseVec3(const std::vector<float>& values, float epsilon);
+  int SparseVec3(const std::vector<float>& values, float epsilon = kMorphEpsilon);
+  // Morph offsets at most this large (metres, log-scale units, SH
+  // coefficients) are written as zero: a micrometre.
+  static constexpr float kMorphEpsilon = 1e-6f;
   // An unsigned 32-bit index accessor.
   int Indices(const std::vector<uint32_t>& indices);
   // An image stored in the buffer (PNG bytes).

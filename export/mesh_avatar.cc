@@ -38,8 +38,7 @@ const AtlasSlot kSlots[] = {
     {{"gums_and_tongue"}, 0.75f, 0.5f, 0.25f, 0.25f},
     {{"mouth_socket"}, 0.5f, 0.75f, 0.25f, 0.25f},
 };
-constexpr int kSlotMargin = 4;
-constexpr float kMorphEpsilon = 1e-6f;  // metres: smaller blendshape offsets are written as zero  // texels kept free round each slot so lookups do not bleed
+constexpr int kSlotMargin = 4;  // texels kept free round each slot so lookups do not bleed
 
 struct Atlas {
   cv::Size size;
@@ -347,7 +346,7 @@ Status WriteMeshAvatarGlb(const fs::path& path, const MeshAvatar& avatar) {
   // Each blendshape moves a part of the head: sparse targets hold only the
   // vertices moved by more than a micrometre (about a quarter of them).
   for (const Eigen::Matrix3Xf& target : avatar.targets)
-    primitive.targets.push_back({{"POSITION", gltf.SparseVec3(floats(target), kMorphEpsilon)}});
+    primitive.targets.push_back({{"POSITION", gltf.SparseVec3(floats(target))}});
 
   // The texture: a PNG in the buffer, shown unlit (the frames' light is baked in).
   std::vector<unsigned char> png;

@@ -7,10 +7,11 @@
 
 #include <Eigen/Geometry>
 
+#include "avatar/tensor_test_util.h"
+
 namespace headforge {
 namespace {
 
-const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 
 // Covariance R diag(s^2) R^T of Gaussians [N].
 torch::Tensor Covariance(const torch::Tensor& quats, const torch::Tensor& log_scales) {

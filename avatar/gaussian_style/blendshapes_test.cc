@@ -8,12 +8,12 @@
 #include <cmath>
 
 #include "avatar/splat/splat_test_util.h"
+#include "avatar/tensor_test_util.h"
 #include "core/progress.h"
 
 namespace headforge {
 namespace {
 
-const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 
 TEST(GaussianBlendshapes, TheFitRecoversAnExactlyLinearMap) {
   torch::manual_seed(4);

@@ -67,7 +67,9 @@ TEST(StyleDecoder, ZeroAndSaturatedSplatImagesStayFinite) {
     out.abs().mean().backward();
     EXPECT_TRUE(torch::isfinite(splat.grad()).all().item<bool>()) << value;
     for (const torch::Tensor& t : decoder->FusionParameters())
-      if (t.grad().defined()) EXPECT_TRUE(torch::isfinite(t.grad()).all().item<bool>()) << value;
+      if (t.grad().defined()) {
+        EXPECT_TRUE(torch::isfinite(t.grad()).all().item<bool>()) << value;
+      }
     decoder->zero_grad();
   }
 }

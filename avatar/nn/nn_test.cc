@@ -10,11 +10,11 @@
 #include "avatar/nn/modulated_conv.h"
 #include "avatar/nn/stylegan.h"
 #include "avatar/nn/triplane.h"
+#include "avatar/tensor_test_util.h"
 
 namespace headforge::nn {
 namespace {
 
-const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 
 // The gradient of sum(f(x) * r) for a fixed random r, by autograd and by
 // central differences on up to `samples` entries of x.

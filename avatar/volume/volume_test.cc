@@ -9,6 +9,7 @@
 #include <cmath>
 #include <limits>
 
+#include "avatar/tensor_test_util.h"
 #include "avatar/volume/volume_reference.h"
 #include "avatar/volume/volume_render.h"
 
@@ -16,7 +17,6 @@ namespace headforge::volume {
 namespace {
 
 using volume_reference::Vec3;
-const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 
 Rays MakeRays(const std::vector<Vec3>& origins, const std::vector<Vec3>& directions) {
   std::vector<double> o, d;

@@ -28,7 +28,7 @@ fi
 generator=()
 command -v ninja >/dev/null && generator=(-G Ninja)
 cmake -S "$root" -B "$build" "${generator[@]}" -DCMAKE_BUILD_TYPE=Release \
-  -DHEADFORGE_SPLAT_ONLY=ON -DCMAKE_PREFIX_PATH="$prefix"
+  -DHEADFORGE_SPLAT_ONLY=ON -DHEADFORGE_UNITY_BUILD=OFF -DCMAKE_PREFIX_PATH="$prefix"
 if ! grep -q '^HEADFORGE_CUDA_ARCHITECTURES' "$build/CMakeCache.txt"; then
   echo "splat_cuda.sh: the LibTorch found has no CUDA (or no CUDA compiler was found); see the configure output" >&2
   exit 1

@@ -28,7 +28,7 @@ command -v ninja >/dev/null && generator=(-G Ninja)
 tests="${HEADFORGE_CUDA_TESTS:-OFF}"
 benchmarks="${HEADFORGE_CUDA_BENCHMARKS:-OFF}"
 cmake -S "$root" -B "$build" "${generator[@]}" -DCMAKE_BUILD_TYPE=Release -DHEADFORGE_SPLAT_ONLY=ON \
-  -DHEADFORGE_BUILD_TESTS="$tests" -DHEADFORGE_BUILD_BENCHMARKS="$benchmarks" \
+  -DHEADFORGE_UNITY_BUILD=OFF -DHEADFORGE_BUILD_TESTS="$tests" -DHEADFORGE_BUILD_BENCHMARKS="$benchmarks" \
   -DCMAKE_PREFIX_PATH="$prefix" >"$build/configure.log" 2>&1 || {
   cat "$build/configure.log" >&2
   exit 1

@@ -217,6 +217,13 @@ SimulatedScores ScoreSimulated(const fs::path& root, const std::string& scene, i
   return s;
 }
 
+// The simulated scene's first `frames` frames through `headforge run
+// --until track` with `options`, among the shared workspaces.
+fs::path SharedSimulatedRun(const std::string& scene, int frames, const std::vector<std::string>& options) {
+  return SharedRun(scene + "_" + std::to_string(frames) + "_run", SimulatedInputs(SharedSimulation(scene, frames)),
+                   options);
+}
+
 // `headforge run` on the simulated scene; `shared` puts it among the shared
 // workspaces (for a test that only reads it).
 SimulatedScores RunSimulated(const std::string& scene, int frames, const std::vector<std::string>& animated,
@@ -225,9 +232,8 @@ SimulatedScores RunSimulated(const std::string& scene, int frames, const std::ve
   const fs::path root = Scratch(scene);
   fs::create_directories(root);
   fs::create_directory_symlink(capture, root / "capture");
-  const std::string name = scene + "_" + std::to_string(frames);
   if (shared) {
-    fs::create_directory_symlink(SharedRun(name + "_run", SimulatedInputs(capture), shared_options), root / "ws");
+    fs::create_directory_symlink(SharedSimulatedRun(scene, frames, shared_options), root / "ws");
   } else {
     // Nothing here reads the overlay videos (GridTrack checks them).
     std::vector<std::string> args = {"run",         "--until",         "track", "--workspace",
@@ -371,9 +377,10 @@ TEST(TruthWorkspace, DrawsTheTrueMeshWhereTheSimulatorDid) {
 // shared with the figure test below, which tracks and aligns a copy of it.
 constexpr int kRigFrames = 20;
 const std::vector<std::string> kRigAnimated = {"jawOpen", "eyeBlink_L", "eyeBlink_R", "mouthSmile_L", "mouthSmile_R"};
+const std::vector<std::string> kRigRunOptions = {"--overlay=false"};
 
 TEST(SimulatedTrack, Rig8Cam) {
-  const SimulatedScores s = RunSimulated("rig_8cam", kRigFrames, kRigAnimated, true, {"--overlay=false"});
+  const SimulatedScores s = RunSimulated("rig_8cam", kRigFrames, kRigAnimated, true, kRigRunOptions);
   // The cameras of a frame see the head from 120 deg apart, so each view uses the
   // detector's points as seen from its side (the shipped view grid) and the
   // jaw contour, which each view draws on its own silhouette, weighs 0.05
@@ -407,11 +414,10 @@ TEST(SimulatedTrack, Rig8Cam) {
 // mouthSmile_L 0.168-0.259, residual 1.46-1.50 px (0.01-0.11 above the
 // default's; over the whole scene 0.17-0.18 above).
 TEST(SimulatedTrack, Rig8CamViewGridAndSurfaceFitFigures) {
-  const fs::path capture = SharedSimulation("rig_8cam", kRigFrames);
   const fs::path root = Scratch("rig_8cam_figures");
   fs::create_directories(root);
-  fs::create_directory_symlink(capture, root / "capture");
-  CopyOf(SharedRun("rig_8cam_20_run", SimulatedInputs(capture), {"--overlay=false"}), root / "ws");
+  fs::create_directory_symlink(SharedSimulation("rig_8cam", kRigFrames), root / "capture");
+  CopyOf(SharedSimulatedRun("rig_8cam", kRigFrames, kRigRunOptions), root / "ws");
   const SimulatedScores s = ScoreSimulated(root, "rig_8cam", kRigFrames, kRigAnimated);
   const Result track = Headforge({"track", "--workspace", (root / "ws").string(), "--overlay=false",
                                   "--track-landmark-embedding",

@@ -248,7 +248,7 @@ Status ExportAvatarBlendshapes(const fs::path& workspace, const fs::path& model_
   scores->expressions = int(k);
   scores->samples = int(data.train.size()) * (1 + options.perturbed_per_view) + 1;
   const std::vector<ViewScores> network = ScoreHeldOut(data, [&](const AvatarView& view) {
-    return avatar.Pose(data, view.condition, 0, avatar.deform);
+    return avatar.Pose(data, view, 0, avatar.deform);
   });
   auto linear = [&] {
     return ScoreHeldOut(data, [&](const AvatarView& view) { return PoseBlendshapes(shapes, view.condition.slice(0, 0, k)); });

@@ -19,7 +19,7 @@
 namespace headforge {
 
 PosedGaussians GaussianStyleAvatar::Pose(const AvatarDataset& data, const torch::Tensor& condition, int64_t latent,
-                                         bool deform_now) {
+                                         bool deform_now, const torch::Tensor& vertices) {
   const torch::Device device = gaussians.params.means.device();
   if (!model->options().mesh_riding)
     return model->Pose(gaussians, condition.to(device), latent, nullptr, nullptr, deform_now);
@@ -27,10 +27,16 @@ PosedGaussians GaussianStyleAvatar::Pose(const AvatarDataset& data, const torch:
   {
     torch::NoGradGuard no_grad;  // the mesh is data, not trained
     const int64_t e = model->options().expressions;
-    mesh = ComputeTriangleFrames(data.Vertices(condition.slice(0, 0, e)).to(device), data.triangles.to(device),
-                                 gaussians.binding);
+    const torch::Tensor v = vertices.defined() ? vertices : data.Vertices(condition.slice(0, 0, e));
+    mesh = ComputeTriangleFrames(v.to(device), data.triangles.to(device), gaussians.binding);
   }
   return model->Pose(gaussians, condition.to(device), latent, &mesh, &neutral, deform_now);
+}
+
+PosedGaussians GaussianStyleAvatar::Pose(const AvatarDataset& data, const AvatarView& view, int64_t latent,
+                                         bool deform_now) {
+  return Pose(data, view.condition, latent, deform_now,
+              model->options().mesh_riding ? data.Vertices(view) : torch::Tensor());
 }
 
 torch::Tensor RenderRgb(const PosedGaussians& posed, const SplatCamera& camera, const torch::Tensor& background) {

@@ -1,6 +1,8 @@
 #include "avatar/gaussian_style/blendshapes.h"
 
+#include <algorithm>
 #include <cstring>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -58,9 +60,16 @@ GaussianBlendshapes DistilBlendshapes(GaussianStyleAvatar& avatar, const AvatarD
   const torch::Device device = avatar.gaussians.params.means.device();
   std::vector<torch::Tensor> rows;
   torch::Tensor reference;
+  // The samples' meshes a batch at a time: one product for each.
+  constexpr int64_t kMeshBatch = 64;
+  torch::Tensor meshes;
   for (int64_t s = 0; s < inputs.size(0); ++s) {
+    if (s % kMeshBatch == 0) {
+      const torch::Tensor batch = inputs.slice(0, s, std::min(s + kMeshBatch, inputs.size(0)));
+      meshes = data.Vertices(batch.unbind(0));
+    }
     const torch::Tensor condition = torch::cat({inputs[s], out.pose_condition});
-    const PosedGaussians posed = avatar.Pose(data, condition.to(device), 0, avatar.deform);
+    const PosedGaussians posed = avatar.Pose(data, condition.to(device), 0, avatar.deform, meshes[s % kMeshBatch]);
     if (s == 0) {
       reference = posed.quats / posed.quats.norm(2, 1, true).clamp_min(1e-12);
       out.opacities = posed.opacities.cpu();

@@ -321,7 +321,7 @@ void DecoderTrainer::FuseStep(int step, RunningStats* stats) {
   if (slot == 0) order_ = torch::randperm(views, gen_);
   const int64_t index = usable_[size_t(order_[slot].item<int64_t>())];
   const AvatarView& view = data_.train[size_t(index)];
-  PosedGaussians posed = avatar_->Pose(data_, view.condition, data_.TrainingLatent(view), avatar_->deform);
+  PosedGaussians posed = avatar_->Pose(data_, view, data_.TrainingLatent(view), avatar_->deform);
   if (avatar_->pose_corrections.defined()) posed = CorrectPose(posed, avatar_->pose_corrections[index]);
   const SquareCanvas canvas = MakeSquareCanvas(view.view, side_);
   torch::Tensor background = torch::zeros({posed.features.size(1)}, posed.features.options());
@@ -378,7 +378,7 @@ Status DecoderTrainer::WritePreview(const fs::path& dir, int step) {
     const std::vector<AvatarView>& views = data_.test.empty() ? data_.train : data_.test;
     const AvatarView& view = views.front();
     const torch::Tensor grey = torch::full({3}, kDecoderBackground, torch::TensorOptions().device(device_));
-    const PosedGaussians posed = avatar_->Pose(data_, view.condition, 0, avatar_->deform);
+    const PosedGaussians posed = avatar_->Pose(data_, view, 0, avatar_->deform);
     const torch::Tensor splatted = RenderRgb(posed, view.view, grey).clamp(0, 1).cpu();
     const torch::Tensor decoded = avatar_->Draw(posed, view.view, grey).clamp(0, 1).cpu();
     image = torch::cat({splatted, decoded, view.image * view.mask + kDecoderBackground * (1 - view.mask)}, 2);

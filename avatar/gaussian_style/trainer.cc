@@ -215,7 +215,7 @@ void Trainer::Step(int step, RunningStats* stats) {
     if (stage2 && style_.latent_dropout > 0 && torch::rand({1}, gen_).item<double>() < style_.latent_dropout)
       latent = 0;
     if (j % world_ != rank_) continue;
-    PosedGaussians posed = avatar_.Pose(data_, view.condition, latent, stage2);
+    PosedGaussians posed = avatar_.Pose(data_, view, latent, stage2);
     if (pose_corrections_.defined()) posed = CorrectPose(posed, pose_corrections_[index]);
     const SplatRenderResult out = RenderGaussians(posed.means, posed.quats, posed.log_scales, posed.opacities,
                                                   posed.features.slice(1, 0, 3), background, view.view);
@@ -351,7 +351,7 @@ Status Trainer::WritePreview(const fs::path& dir, int step) {
   const AvatarView& view = data_.test.front();
   const torch::Tensor background = torch::full({3}, kEvalBackground, torch::TensorOptions().device(device_));
   const torch::Tensor render =
-      avatar_.Draw(avatar_.Pose(data_, view.condition, 0, deform_now(step)), view.view, background).cpu();
+      avatar_.Draw(avatar_.Pose(data_, view, 0, deform_now(step)), view.view, background).cpu();
   const torch::Tensor target = view.image * view.mask + kEvalBackground * (1 - view.mask);
   char name[32];
   std::snprintf(name, sizeof(name), "step_%06d.png", step);
@@ -512,7 +512,7 @@ std::vector<ViewScores> ScoreViews(GaussianStyleAvatar& avatar, const AvatarData
     // Inference takes frame 0's latent: a held-out frame has none of its own.
     // Training views are scored as trained, with their own.
     const auto start = std::chrono::steady_clock::now();
-    PosedGaussians posed = avatar.Pose(data, view.condition, training_views ? data.TrainingLatent(view) : 0, avatar.deform);
+    PosedGaussians posed = avatar.Pose(data, view, training_views ? data.TrainingLatent(view) : 0, avatar.deform);
     if (training_views && avatar.pose_corrections.defined())
       posed = CorrectPose(posed, avatar.pose_corrections[int64_t(i)]);
     const torch::Tensor render = avatar.Draw(posed, view.view, background).clamp(0, 1).cpu();
@@ -581,7 +581,7 @@ int64_t PruneUnseenGaussians(GaussianStyleAvatar& avatar, const AvatarDataset& d
     const std::vector<torch::Tensor*> from = p.All(), to = open.gaussians.params.All();
     for (size_t k = 0; k < from.size(); ++k) *to[k] = from[k]->index_select(0, unseen);
     if (avatar.gaussians.binding.defined()) open.gaussians.binding = avatar.gaussians.binding.index_select(0, unseen);
-    const PosedGaussians posed = open.Pose(data, view.condition, data.TrainingLatent(view), avatar.deform);
+    const PosedGaussians posed = open.Pose(data, view, data.TrainingLatent(view), avatar.deform);
     const SplatCamera& c = view.view;
     const torch::Tensor rt = torch::tensor(std::vector<double>(c.cam_from_world.begin(), c.cam_from_world.end()))
                                  .view({3, 4})

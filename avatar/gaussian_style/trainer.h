@@ -33,9 +33,14 @@ struct GaussianStyleAvatar {
   torch::Tensor pose_corrections;
 
   // The Gaussians for `condition` [E + 9] with frame latent `latent`; with
-  // mesh riding they ride the mesh of the condition's expressions.
+  // mesh riding they ride the mesh of the condition's expressions:
+  // `vertices` [V, 3] when the caller has it (AvatarDataset::Vertices),
+  // else computed here.
   PosedGaussians Pose(const AvatarDataset& data, const torch::Tensor& condition, int64_t latent,
-                      bool deform_now);
+                      bool deform_now, const torch::Tensor& vertices = torch::Tensor());
+  // The same for one of the dataset's views: its condition, on its frame's
+  // mesh as the dataset holds it.
+  PosedGaussians Pose(const AvatarDataset& data, const AvatarView& view, int64_t latent, bool deform_now);
   // The avatar's image [3, H, W] of `posed` through `camera`: the decoder's
   // (over the grey it was trained on) when there is one, else the splatted
   // RGB over `background` [3].

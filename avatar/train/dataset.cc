@@ -139,6 +139,75 @@ Eigen::VectorXf SharedExpression(const IngestedCapture& capture, const CameraSet
   return shared;
 }
 
+
+Status CheckDatasetOptions(const DatasetOptions& options) {
+  if (options.mask != "auto" && options.mask != "ingest" && options.mask != "mesh" && options.mask != "hull")
+    return Status::InvalidArgument("--mask must be auto, ingest, mesh or hull, not '" + options.mask + "'");
+  if (options.resolution < 16) return Status::InvalidArgument("the training resolution must be at least 16 pixels");
+  if (options.holdout_order != "auto" && options.holdout_order != "last" && options.holdout_order != "interleaved")
+    return Status::InvalidArgument("--holdout-order must be auto, last or interleaved, not '" + options.holdout_order +
+                                   "'");
+  return Status::Ok();
+}
+
+// The tracked subject's mesh: identity shape, expression basis, triangles
+// and the model's named parts.
+void SetSubjectMesh(const FaceModel& model, const TrackingFile& tracking, AvatarDataset* out) {
+  out->expression_names = tracking.expression_names;
+  const Eigen::Matrix3Xf identity = model.Identity(tracking.identity.cast<float>());
+  out->identity_vertices = torch::from_blob(const_cast<float*>(identity.data()), {identity.cols(), 3}).clone();
+  const Eigen::MatrixXf& basis = model.expression_basis();
+  // Eigen is column-major: the transpose's buffer is the row-major [3V, E].
+  const Eigen::MatrixXf basis_t = basis.transpose();
+  out->expression_basis = torch::from_blob(const_cast<float*>(basis_t.data()), {basis.rows(), basis.cols()}).clone();
+  const Eigen::Matrix3Xi& tris = model.triangles();
+  out->triangles = torch::from_blob(const_cast<int*>(tris.data()), {tris.cols(), 3}, torch::kInt32).to(torch::kInt64);
+  for (const auto& [name, region] : model.regions())
+    out->mesh_parts[name] = {region.first_triangle, region.last_triangle};
+}
+
+// A view whose ingested mask is cut to its tracked mesh or that gets a UV
+// map: done once every view's mesh is made (AttachViewVertices).
+struct MeshWork {
+  bool training;
+  size_t index;  // in out.train or out.test
+  cv::Mat mask;  // the ingested mask to cut; empty: no cut
+  bool uv_map;
+};
+
+void CutToMeshes(const FaceModel& model, const DatasetOptions& options, const std::vector<MeshWork>& work,
+                 AvatarDataset* out) {
+  for (const MeshWork& w : work) {
+    AvatarView& view = (w.training ? out->train : out->test)[w.index];
+    if (!w.mask.empty())
+      view.mask = MaskToTensor(MeshCutMask(w.mask, view.vertices, out->identity_vertices, out->triangles, view.view,
+                                           options.mask_hair, options.mask_skin));
+    if (w.uv_map)
+      view.uv_map = RenderUvMap(model, view.vertices, out->identity_vertices, view.view, options.uv_map_side);
+  }
+}
+
+// The hull's masks (--mask hull): the training views vote; every view's
+// mask (`masks`, of the views `views` names as (training, index)) is remade.
+Status AgreeOnHull(const std::vector<std::pair<bool, size_t>>& views, const std::vector<cv::Mat>& masks,
+                   AvatarDataset* out) {
+  std::vector<SplatCamera> cameras;
+  std::vector<int> voters;
+  for (size_t i = 0; i < views.size(); ++i) {
+    const auto [training, index] = views[i];
+    cameras.push_back((training ? out->train : out->test)[index].view);
+    if (training) voters.push_back(int(i));
+  }
+  std::vector<cv::Mat> agreed;
+  HF_RETURN_IF_ERROR(
+      HullMasks(cameras, masks, voters, HullOptions(), &agreed, &out->hull_stats).WithContext("--mask hull"));
+  for (size_t i = 0; i < views.size(); ++i) {
+    const auto [training, index] = views[i];
+    (training ? out->train : out->test)[index].mask = MaskToTensor(agreed[i]);
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 std::vector<int64_t> UsableTrainingViews(const AvatarDataset& data, std::string* note) {
@@ -184,14 +253,9 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   TrackingFile tracking;
   HF_RETURN_IF_ERROR(ReadTrackedWorkspace(workspace, model, &capture, &cameras, &tracking));
   const int frames = capture.num_frames();
-  if (options.mask != "auto" && options.mask != "ingest" && options.mask != "mesh" && options.mask != "hull")
-    return Status::InvalidArgument("--mask must be auto, ingest, mesh or hull, not '" + options.mask + "'");
-  if (options.resolution < 16) return Status::InvalidArgument("the training resolution must be at least 16 pixels");
+  HF_RETURN_IF_ERROR(CheckDatasetOptions(options));
   AvatarDataset out;
   out.num_frames = frames;
-  if (options.holdout_order != "auto" && options.holdout_order != "last" && options.holdout_order != "interleaved")
-    return Status::InvalidArgument("--holdout-order must be auto, last or interleaved, not '" + options.holdout_order +
-                                   "'");
   const bool interleaved = HoldoutInterleaved(options.holdout_order, cameras.WalksRoundTheHead());
   const int held = HeldOutFrames(frames, options.holdout, interleaved);
   const HoldoutSplit split = SplitFrames(frames, options.holdout, interleaved);
@@ -201,17 +265,7 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
     return Status::DataError("the capture has " + std::to_string(frames) + " frames: the model needs at least " +
                              std::to_string(options.min_train_frames) + " to train on besides the " +
                              std::to_string(held) + " held out; ingest a longer video");
-  out.expression_names = tracking.expression_names;
-  const Eigen::Matrix3Xf identity = model.Identity(tracking.identity.cast<float>());
-  out.identity_vertices = torch::from_blob(const_cast<float*>(identity.data()), {identity.cols(), 3}).clone();
-  const Eigen::MatrixXf& basis = model.expression_basis();
-  // Eigen is column-major: the transpose's buffer is the row-major [3V, E].
-  const Eigen::MatrixXf basis_t = basis.transpose();
-  out.expression_basis = torch::from_blob(const_cast<float*>(basis_t.data()), {basis.rows(), basis.cols()}).clone();
-  const Eigen::Matrix3Xi& tris = model.triangles();
-  out.triangles = torch::from_blob(const_cast<int*>(tris.data()), {tris.cols(), 3}, torch::kInt32).to(torch::kInt64);
-  for (const auto& [name, region] : model.regions())
-    out.mesh_parts[name] = {region.first_triangle, region.last_triangle};
+  SetSubjectMesh(model, tracking, &out);
   // A still head that one camera goes round shows one state throughout.
   out.one_state = tracking.head_held_by_cameras && cameras.mode != "head-pose" && capture.cameras.size() == 1;
   Eigen::VectorXf shared_expression;
@@ -228,6 +282,7 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
   // The views' masks before the hull, each with where its view went.
   std::vector<cv::Mat> hull_masks;
   std::vector<std::pair<bool, size_t>> hull_views;  // (training, index)
+  std::vector<MeshWork> mesh_work;
 
   // Names given one by one or comma-separated ("cam3,cam6").
   const std::vector<std::string> held_cameras = SplitCommaList(options.holdout_cameras);
@@ -279,17 +334,13 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       view.condition = torch::cat({torch::from_blob(const_cast<float*>(expression.data()), {expression.size()}).clone(),
                                    PoseCondition(rotation, translation)});
       const bool training = !out.HeldOut(f.index) && !held_camera;
+      if (f.landmarks && view.face_angle_deg <= kLandmarkViewDeg) RegionBoxes(*f.landmarks, *lens, scale, &view);
+      // The mask's cut and the UV map need the frame's tracked mesh: made
+      // below, once the views' meshes are.
       const bool cut_mask = options.images && out.mask == "mesh";
       const bool uv_map = training && options.uv_map_side > 0;
-      // The frame's tracked mesh, for the mask's cut and the UV map.
-      torch::Tensor vertices;
       if (cut_mask || uv_map)
-        vertices = out.Vertices(view.condition.slice(0, 0, int64_t(out.expression_names.size())));
-      if (cut_mask)
-        view.mask = MaskToTensor(MeshCutMask(mask, vertices, out.identity_vertices, out.triangles, view.view,
-                                             options.mask_hair, options.mask_skin));
-      if (f.landmarks && view.face_angle_deg <= kLandmarkViewDeg) RegionBoxes(*f.landmarks, *lens, scale, &view);
-      if (uv_map) view.uv_map = RenderUvMap(model, vertices, out.identity_vertices, view.view, options.uv_map_side);
+        mesh_work.push_back({training, (training ? out.train : out.test).size(), cut_mask ? mask : cv::Mat(), uv_map});
       if (hull) {
         hull_masks.push_back(mask);
         hull_views.emplace_back(training, (training ? out.train : out.test).size());
@@ -299,23 +350,9 @@ Status LoadAvatarDataset(const fs::path& workspace, const FaceModel& model, cons
       out.height = size.height;
     }
   }
-  if (hull) {
-    // The training views vote; every view's mask is remade.
-    std::vector<SplatCamera> hull_cameras;
-    std::vector<int> voters;
-    for (size_t i = 0; i < hull_views.size(); ++i) {
-      const auto [training, index] = hull_views[i];
-      hull_cameras.push_back((training ? out.train : out.test)[index].view);
-      if (training) voters.push_back(int(i));
-    }
-    std::vector<cv::Mat> agreed;
-    HF_RETURN_IF_ERROR(HullMasks(hull_cameras, hull_masks, voters, HullOptions(), &agreed, &out.hull_stats)
-                           .WithContext("--mask hull"));
-    for (size_t i = 0; i < hull_views.size(); ++i) {
-      const auto [training, index] = hull_views[i];
-      (training ? out.train : out.test)[index].mask = MaskToTensor(agreed[i]);
-    }
-  }
+  AttachViewVertices(&out);
+  CutToMeshes(model, options, mesh_work, &out);
+  if (hull) HF_RETURN_IF_ERROR(AgreeOnHull(hull_views, hull_masks, &out));
   if (int(out.train.size()) < options.min_train_frames)
     return Status::DataError("only " + std::to_string(out.train.size()) +
                              " registered views to train on (the model needs " + std::to_string(options.min_train_frames) +

@@ -53,6 +53,11 @@ struct AvatarView {
   // S] uint8, u and v (0..255 over the model's UV range) and covered (255);
   // undefined unless asked for.
   torch::Tensor uv_map;
+  // Its frame's tracked mesh [V, 3] (float32, head frame): the expression of
+  // `condition` on the identity, computed once for every view of the dataset
+  // (AttachViewVertices) instead of at each posing; the views of one frame
+  // share it.
+  torch::Tensor vertices;
 };
 
 // `mask` (CV_8U, 0 / 255) cut to the silhouette of the mesh `vertices` [V,
@@ -105,7 +110,17 @@ struct AvatarDataset {
 
   // The tracked mesh for `expression` [E]: [V, 3].
   torch::Tensor Vertices(const torch::Tensor& expression) const;
+  // The same for the rows of `expressions` [N, E] in one product: [N, V, 3].
+  torch::Tensor Vertices(const std::vector<torch::Tensor>& expressions) const;
+  // The tracked mesh of `view`: its own, or computed from its condition when
+  // it has none.
+  torch::Tensor Vertices(const AvatarView& view) const;
 };
+
+// Sets every view's `vertices` (train, test and validation) that is not set:
+// one matrix product for the frames they show, in frame order, so that a
+// workspace and a pack of it give the same meshes.
+void AttachViewVertices(AvatarDataset* data);
 
 // The training views (indices into data.train) whose tracking the avatar
 // may learn expressions from: those neither interpolated nor flagged

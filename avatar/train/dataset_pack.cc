@@ -147,6 +147,7 @@ Status ReadDatasetPack(const fs::path& path, AvatarDataset* data, nlohmann::json
   } catch (const nlohmann::json::exception& e) {
     return Status::DataError(path.string() + " is a damaged training pack (" + e.what() + "); write it again");
   }
+  AttachViewVertices(&out);
   *data = std::move(out);
   return Status::Ok();
 }

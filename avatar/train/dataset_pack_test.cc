@@ -117,6 +117,60 @@ TEST(DatasetPack, ADatasetComesBackExactlyWithItsOptions) {
   fs::remove_all(dir);
 }
 
+// The identity plus the basis times the view's expression, in doubles, one
+// number at a time: [V, 3].
+torch::Tensor PlainVertices(const AvatarDataset& d, const AvatarView& v) {
+  const int64_t n = d.identity_vertices.size(0), e = int64_t(d.expression_names.size());
+  torch::Tensor out = torch::zeros({n, 3}, torch::kFloat64);
+  for (int64_t i = 0; i < n; ++i)
+    for (int64_t c = 0; c < 3; ++c) {
+      double x = d.identity_vertices[i][c].item<double>();
+      for (int64_t k = 0; k < e; ++k)
+        x += d.expression_basis[3 * i + c][k].item<double>() * v.condition[k].item<double>();
+      out[i][c] = x;
+    }
+  return out;
+}
+
+TEST(DatasetPack, EachViewCarriesItsFramesMeshAndAPackGivesTheSame) {
+  AvatarDataset data = RandomDataset();
+  // A second camera's view of frame 1: the same instant, the same mesh.
+  AvatarView other = data.train[1];
+  other.camera = "cam2";
+  data.train.push_back(other);
+  AttachViewVertices(&data);
+  for (const auto* list : {&data.train, &data.test})
+    for (const AvatarView& v : *list) {
+      ASSERT_TRUE(v.vertices.defined());
+      EXPECT_EQ(v.vertices.sizes(), (std::vector<int64_t>{5, 3}));
+      EXPECT_TRUE(torch::allclose(v.vertices.to(torch::kFloat64), PlainVertices(data, v), 1e-5, 1e-5)) << v.frame;
+      EXPECT_TRUE(torch::allclose(data.Vertices(v.condition.slice(0, 0, 4)), v.vertices, 1e-5, 1e-5));
+      EXPECT_TRUE(data.Vertices(v).is_same(v.vertices));
+    }
+  EXPECT_EQ(data.train[1].vertices.data_ptr(), data.train.back().vertices.data_ptr());
+  EXPECT_NE(data.train[0].vertices.data_ptr(), data.train[1].vertices.data_ptr());
+  // The views' meshes are not in the pack: read back, the same computation
+  // gives the same numbers.
+  const fs::path dir = Scratch("vertices");
+  ASSERT_TRUE(WriteDatasetPack(data, nlohmann::json::object(), dir / "a.pack").ok());
+  AvatarDataset back;
+  nlohmann::json recorded;
+  ASSERT_TRUE(ReadDatasetPack(dir / "a.pack", &back, &recorded).ok());
+  ASSERT_EQ(back.train.size(), data.train.size());
+  for (size_t i = 0; i < data.train.size(); ++i) EXPECT_TRUE(torch::equal(back.train[i].vertices, data.train[i].vertices));
+  for (size_t i = 0; i < data.test.size(); ++i) EXPECT_TRUE(torch::equal(back.test[i].vertices, data.test[i].vertices));
+  fs::remove_all(dir);
+  // A mesh already set stays; one state of the head: one mesh for every view.
+  AvatarDataset still = RandomDataset();
+  still.one_state = true;
+  const torch::Tensor given = torch::zeros({5, 3});
+  still.test[0].vertices = given;
+  AttachViewVertices(&still);
+  EXPECT_TRUE(still.test[0].vertices.is_same(given));
+  for (const AvatarView& v : still.train) EXPECT_EQ(v.vertices.data_ptr(), still.train[0].vertices.data_ptr());
+  EXPECT_TRUE(torch::allclose(still.train[0].vertices.to(torch::kFloat64), PlainVertices(still, still.train[0]), 1e-5, 1e-5));
+}
+
 TEST(DatasetPack, OtherFilesAreRefusedByName) {
   const fs::path dir = Scratch("refused");
   AvatarDataset back;

@@ -3,6 +3,8 @@
 #include <torch/torch.h>
 
 #include <cmath>
+#include <map>
+#include <vector>
 
 #include <Eigen/Geometry>
 
@@ -13,6 +15,44 @@ namespace headforge {
 
 torch::Tensor AvatarDataset::Vertices(const torch::Tensor& expression) const {
   return identity_vertices + torch::matmul(expression_basis, expression.to(expression_basis.dtype())).view({-1, 3});
+}
+
+torch::Tensor AvatarDataset::Vertices(const std::vector<torch::Tensor>& expressions) const {
+  const int64_t n = int64_t(expressions.size());
+  if (n == 0) return torch::empty({0, identity_vertices.size(0), 3}, identity_vertices.options());
+  // [3V, E] x [E, N]: the basis read once for every row, where N products
+  // with one vector each read it N times (16 MB for the ICT model).
+  const torch::Tensor weights = torch::stack(expressions, 1).to(expression_basis.dtype());
+  return identity_vertices.unsqueeze(0) + torch::matmul(expression_basis, weights).t().reshape({n, -1, 3});
+}
+
+torch::Tensor AvatarDataset::Vertices(const AvatarView& view) const {
+  if (view.vertices.defined()) return view.vertices;
+  return Vertices(view.condition.slice(0, 0, int64_t(expression_names.size())));
+}
+
+void AttachViewVertices(AvatarDataset* data) {
+  const int64_t e = int64_t(data->expression_names.size());
+  // A view of each frame still without its mesh; one for all when every
+  // view carries one state of the head.
+  const auto key = [&](const AvatarView& view) { return data->one_state ? 0 : view.frame; };
+  std::map<int, AvatarView*> first;
+  std::vector<AvatarView*> missing;
+  for (auto* list : {&data->train, &data->test, &data->validation})
+    for (AvatarView& view : *list)
+      if (!view.vertices.defined()) {
+        first.emplace(key(view), &view);
+        missing.push_back(&view);
+      }
+  if (missing.empty()) return;
+  std::vector<torch::Tensor> expressions;
+  std::map<int, int64_t> row;
+  for (const auto& [frame, view] : first) {
+    row[frame] = int64_t(expressions.size());
+    expressions.push_back(view->condition.slice(0, 0, e));
+  }
+  const torch::Tensor all = data->Vertices(expressions).contiguous();
+  for (AvatarView* view : missing) view->vertices = all[row.at(key(*view))];
 }
 
 std::string AvatarDataset::HeldOutText() const {

@@ -33,7 +33,7 @@ class DataParallel : public ::testing::Test {
     dir_ = Scratch("data_parallel");
     pack_ = dir_ / "talking.pack";
     packed_ = Headforge({"pack", "--workspace", TrackedTalkingStatic().string(), "--out", pack_.string(),
-                         "--train-size", "48", "--steps", "40", "--canonical-fraction", "0.5", "--init-gaussians",
+                         "--train-size", "48", "--steps", "40", "--canonical-fraction", "0.5", "--triplane-resolution", "16", "--init-gaussians",
                          "1500", "--max-gaussians", "2500", "--densify-from", "10", "--densify-every", "10",
                          "--densify-until", "30", "--eval-every", "0", "--preview-every", "0", "--log-every", "5",
                          "--checkpoint-every", "5", "--max-minutes", "0", "--decoder-steps", "0"});
@@ -275,7 +275,7 @@ TEST_F(DataParallel, HeadforgeTrainOnAWorkspaceTrainsAsRanks) {
                                        "MASTER_PORT=" + std::to_string(port), HEADFORGE_BINARY};
       args.insert(args.end(), command.begin(), command.end());
       args.insert(args.end(), {"--workspace", ws.string(), "--train-size", "48", "--steps", "40",
-                                       "--canonical-fraction", "0.5", "--init-gaussians", "1500", "--max-gaussians",
+                                       "--canonical-fraction", "0.5", "--triplane-resolution", "16", "--init-gaussians", "1500", "--max-gaussians",
                                        "2500", "--densify-from", "10", "--densify-every", "10", "--densify-until",
                                        "30", "--eval-every", "0", "--preview-every", "0", "--log-every", "5",
                                        "--checkpoint-every", "5", "--max-minutes", "0", "--decoder-steps", "0",

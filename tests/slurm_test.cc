@@ -335,7 +335,7 @@ TEST(Slurm, BatchOfCapturesRunsInOrderFailsAloneRequeuesAndSkipsWhatIsDone) {
   // views a step: headforge-train on a pack of alpha's capture, 20 steps at
   // 48 px, then headforge train on a copy of alpha's workspace with the
   // same options.
-  const std::vector<std::string> options = {"--train-size", "48", "--steps", "20", "--init-gaussians", "600",
+  const std::vector<std::string> options = {"--train-size", "48", "--steps", "20", "--triplane-resolution", "16", "--init-gaussians", "600",
                                             "--max-gaussians", "800", "--densify-from", "5", "--densify-every", "5",
                                             "--densify-until", "15", "--eval-every", "0", "--preview-every", "0",
                                             "--log-every", "5", "--checkpoint-every", "10", "--max-minutes", "0",

@@ -257,6 +257,7 @@ Status AnalyseCameras(const IngestOptions& options, const SamplePlan& plan, int 
                       std::vector<Camera>* cameras) {
   Analysers analysers;
   HF_RETURN_IF_ERROR(LandmarkPredictor::Load(options.landmark_model, &analysers.landmarks));
+  analysers.landmarks->set_magnification(options.landmark_magnification);
   for (int w = 0; w < threads; ++w) {
     std::unique_ptr<FaceDetector> detector;
     HF_RETURN_IF_ERROR(FaceDetector::Create(options.detector, &detector));

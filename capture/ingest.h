@@ -53,6 +53,9 @@ struct IngestOptions {
   FaceDetectorOptions detector;
   // dlib 68-point shape predictor file.
   std::string landmark_model;
+  // The predictor reads each face's region enlarged this many times
+  // (LandmarkPredictor::set_magnification): 1 gives whole-pixel points.
+  int landmark_magnification = 1;
   // A folder of the user's own masks (one image per source frame, sorted by
   // name; a sub-folder per camera name when there are several cameras).
   std::string masks;

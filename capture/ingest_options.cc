@@ -27,6 +27,9 @@ Status IngestOptions::Check() const {
   if (resolution > 8192) return Status::InvalidArgument("--frame-size above 8192 is not supported");
   if (crop != "auto" && crop != "sequence" && crop != "frame" && crop != "none")
     return Status::InvalidArgument("--crop must be auto, sequence, frame or none, not '" + crop + "'");
+  if (landmark_magnification < 1 || landmark_magnification > 8)
+    return Status::InvalidArgument("--landmark-magnification must be 1 to 8, not " +
+                                   std::to_string(landmark_magnification));
   if (!(crop_scale >= 1.0 && crop_scale <= 10.0))
     return Status::InvalidArgument("--crop-scale must be in [1, 10]");
   if (blur_ratio < 0.0 || blur_ratio >= 1.0)
@@ -96,6 +99,10 @@ void AddIngestOptions(OptionSet* o, IngestOptions* in) {
          "dlib 68-point landmark model (Debian package libdlib-data; trained on iBUG 300-W, "
          "non-commercial).",
          "landmark-model", OptionSet::Effect::kRuntime);
+  o->Add("ingest.landmark_magnification", &in->landmark_magnification,
+         "The landmark model reads the face's region enlarged this many times, so that its points fall "
+         "on fractions of a pixel instead of whole pixels (1: the frame as it is).",
+         "landmark-magnification");
   o->Add("ingest.masks", &in->masks,
          "Folder of your own masks, one per source frame in name order (a sub-folder per camera "
          "name, cam0, cam1..., for several cameras); replaces the automatic head mask.",

@@ -63,8 +63,31 @@ Landmarks68 Run(const dlib::shape_predictor& model, const dlib::cv_image<dlib::b
 
 Landmarks68 LandmarkPredictor::Predict(const cv::Mat& bgr, const cv::Rect2f& box) const {
   HF_CHECK(bgr.type() == CV_8UC3);
-  dlib::cv_image<dlib::bgr_pixel> view(bgr);
-  return Run(impl_->model, view, box);
+  if (magnification_ == 1) {
+    dlib::cv_image<dlib::bgr_pixel> view(bgr);
+    return Run(impl_->model, view, box);
+  }
+  // The box and half its size round it (where the predictor's features
+  // reach), cut from the image and enlarged; pixel centres map as
+  // x' = m (x - x0 + 0.5) - 0.5.
+  const double m = magnification_;
+  const cv::Rect region = cv::Rect(cvFloor(box.x - 0.5 * box.width), cvFloor(box.y - 0.5 * box.height),
+                                   cvCeil(2 * box.width) + 1, cvCeil(2 * box.height) + 1) &
+                          cv::Rect(0, 0, bgr.cols, bgr.rows);
+  if (region.empty()) {
+    dlib::cv_image<dlib::bgr_pixel> view(bgr);
+    return Run(impl_->model, view, box);
+  }
+  cv::Mat large;
+  cv::resize(bgr(region), large, cv::Size(), m, m, cv::INTER_LINEAR);
+  const auto in = [&](double v, int origin) { return m * (v - origin + 0.5) - 0.5; };
+  const auto out = [&](double v, int origin) { return float((v + 0.5) / m - 0.5 + origin); };
+  const cv::Rect2f scaled(float(in(box.x, region.x)), float(in(box.y, region.y)), float(m * box.width),
+                          float(m * box.height));
+  dlib::cv_image<dlib::bgr_pixel> view(large);
+  Landmarks68 points = Run(impl_->model, view, scaled);
+  for (cv::Point2f& p : points) p = cv::Point2f(out(p.x, region.x), out(p.y, region.y));
+  return points;
 }
 
 cv::Mat LandmarkHullMask(const Landmarks68& points, cv::Size size, double scale, double margin_px) {

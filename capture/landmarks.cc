@@ -63,10 +63,6 @@ Landmarks68 Run(const dlib::shape_predictor& model, const dlib::cv_image<dlib::b
 
 Landmarks68 LandmarkPredictor::Predict(const cv::Mat& bgr, const cv::Rect2f& box) const {
   HF_CHECK(bgr.type() == CV_8UC3);
-  if (magnification_ == 1) {
-    dlib::cv_image<dlib::bgr_pixel> view(bgr);
-    return Run(impl_->model, view, box);
-  }
   // The box and half its size round it (where the predictor's features
   // reach), cut from the image and enlarged; pixel centres map as
   // x' = m (x - x0 + 0.5) - 0.5.
@@ -74,7 +70,7 @@ Landmarks68 LandmarkPredictor::Predict(const cv::Mat& bgr, const cv::Rect2f& box
   const cv::Rect region = cv::Rect(cvFloor(box.x - 0.5 * box.width), cvFloor(box.y - 0.5 * box.height),
                                    cvCeil(2 * box.width) + 1, cvCeil(2 * box.height) + 1) &
                           cv::Rect(0, 0, bgr.cols, bgr.rows);
-  if (region.empty()) {
+  if (magnification_ == 1 || region.empty()) {
     dlib::cv_image<dlib::bgr_pixel> view(bgr);
     return Run(impl_->model, view, box);
   }
